@@ -1,0 +1,141 @@
+"""The ``remarl-fc`` command line.
+
+Commands that report figures take ``--json`` and then print exactly one JSON object on stdout.
+Errors of the project (`remarl_fc.errors.RemarlError`) print one line on stderr and exit 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+from remarl_fc._version import __version__
+from remarl_fc.errors import RemarlError
+
+EXIT_USAGE = 2
+"""Exit status for bad input (also argparse's)."""
+
+Handler = Callable[[argparse.Namespace], int]
+
+
+def _emit(args: argparse.Namespace, payload: dict[str, Any], human: str) -> None:
+    print(json.dumps(payload) if getattr(args, "json", False) else human)
+
+
+def _cmd_scenarios(args: argparse.Namespace) -> int:
+    from sim.scenarios import load_scenario, scenario_names
+
+    rows: list[dict[str, Any]] = []
+    for name in scenario_names():
+        cfg = load_scenario(name)
+        rows.append(
+            {
+                "name": name,
+                "uavs": cfg.uav.count,
+                "obstacles": cfg.obstacles.count,
+                "arena_m": [cfg.arena_length_m, cfg.arena_width_m],
+                "formation": cfg.uav.formation,
+                "dt_s": cfg.dt_s,
+                "uav_speed_m_s": cfg.uav.speed_m_s,
+                "obstacle_speed_m_s": cfg.obstacles.speed_m_s,
+                "d_col_m": cfg.d_col_m,
+                "max_steps": cfg.max_steps,
+                "description": cfg.description,
+            }
+        )
+    lines = [f"{'name':7} {'UAVs':>4} {'obst':>4} {'arena [m]':>11} {'formation':9}  description"]
+    lines += [
+        f"{r['name']:7} {r['uavs']:>4} {r['obstacles']:>4} "
+        f"{r['arena_m'][0]:>5.0f}x{r['arena_m'][1]:<5.0f} {r['formation']:9}  {r['description']}"
+        for r in rows
+    ]
+    _emit(args, {"scenarios": rows}, "\n".join(lines))
+    return 0
+
+
+def _cmd_field(args: argparse.Namespace) -> int:
+    from remarl_fc.plots import draw_field
+    from sim.scenarios import load_scenario
+
+    cfg = load_scenario(args.scenario)
+    out = Path(args.out)
+    snap = draw_field(cfg, out, seed=args.seed)
+    payload = {
+        "scenario": cfg.name,
+        "out": str(out),
+        "levels": snap.levels.tolist(),
+        "uav_m": snap.uav_m.tolist(),
+        "adjusted_m": snap.adjusted_m.tolist(),
+        "obstacle_m": snap.obstacle_m.tolist(),
+        "centre_m": snap.centre_m.tolist(),
+    }
+    _emit(args, payload, f"wrote {out} (scenario {cfg.name}, seed {args.seed})")
+    return 0
+
+
+def _cmd_bench(args: argparse.Namespace) -> int:
+    from remarl_fc.bench import bench_pso
+
+    result = bench_pso(uavs=args.uavs, envs=args.envs, repeats=args.repeats, seed=args.seed)
+    human = (
+        f"PSO, {result['uavs']} UAVs x {result['envs']} env(s): "
+        f"{result['ms_per_call']:.2f} ms per call (p90 {result['ms_p90']:.2f}), "
+        f"{result['evaluations']} cost evaluations; feasible {result['feasible_fraction']:.0%}, "
+        f"mean max shift {result['mean_max_shift_m']:.2f} m"
+    )
+    _emit(args, result, human)
+    return 0
+
+
+def _positive_int(text: str) -> int:
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1, got {value}")
+    return value
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of every command."""
+    parser = argparse.ArgumentParser(
+        prog="remarl-fc",
+        description="Train, evaluate and fly collision-avoidance policies for UAV swarms.",
+    )
+    parser.add_argument("--version", action="version", version=f"remarl-fc {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    p = sub.add_parser("scenarios", help="list the shipped scenarios")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(handler=_cmd_scenarios)
+
+    p = sub.add_parser("field", help="draw a scenario's potential field and contours to a PNG")
+    p.add_argument("--scenario", default="3u2o", help="scenario name or .toml path (default 3u2o)")
+    p.add_argument("--out", default="field.png", help="output image (default field.png)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the obstacle spawn and PSO")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(handler=_cmd_field)
+
+    p = sub.add_parser("bench", help="micro-benchmarks")
+    bench = p.add_subparsers(dest="what", required=True, metavar="WHAT")
+    b = bench.add_parser("pso", help="contour-level PSO: time per call")
+    b.add_argument("--uavs", type=_positive_int, default=10, help="UAVs per swarm (default 10)")
+    b.add_argument("--envs", type=_positive_int, default=1, help="environments per call")
+    b.add_argument("--repeats", type=_positive_int, default=50, help="timed calls")
+    b.add_argument("--seed", type=int, default=0)
+    b.add_argument("--json", action="store_true", help="print one JSON object")
+    b.set_defaults(handler=_cmd_bench)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the command line; returns the exit status."""
+    args = build_parser().parse_args(argv)
+    handler: Handler = args.handler
+    try:
+        return handler(args)
+    except RemarlError as exc:
+        print(f"remarl-fc: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE

@@ -1,0 +1,357 @@
+"""Typed, frozen configuration of the simulator core.
+
+Every default of the model lives here, once. Scenario files (``sim/scenarios/*.toml``) set the
+values that differ per scenario (counts, geometry) and may override any other field; see
+`sim.scenarios`. Angles are radians inside the code; scenario files write them in degrees
+(keys ending in ``_deg``), converted once at load time.
+
+Where the paper gives no number, the default is our choice; `docs/MODEL.md` gives the reason.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+from typing import Literal
+
+ExternalTerm = Literal["gradient", "level-edge"]
+Formation = Literal["line", "wedge", "grid"]
+
+EXTERNAL_TERMS: tuple[ExternalTerm, ...] = ("gradient", "level-edge")
+FORMATIONS: tuple[Formation, ...] = ("line", "wedge", "grid")
+
+
+class FieldValueError(ValueError):
+    """A configuration field holds a bad value; ``field`` names it (for error messages)."""
+
+    def __init__(self, field_name: str, message: str) -> None:
+        super().__init__(f"{field_name}: {message}")
+        self.field = field_name
+        self.reason = message
+
+
+def _require(ok: bool, field_name: str, message: str) -> None:
+    if not ok:
+        raise FieldValueError(field_name, message)
+
+
+def _positive(obj: object, *names: str) -> None:
+    for name in names:
+        value = getattr(obj, name)
+        _require(math.isfinite(value) and value > 0, name, f"must be > 0, got {value!r}")
+
+
+def _non_negative(obj: object, *names: str) -> None:
+    for name in names:
+        value = getattr(obj, name)
+        _require(math.isfinite(value) and value >= 0, name, f"must be >= 0, got {value!r}")
+
+
+@dataclass(frozen=True)
+class FieldConfig:
+    """Potential field Φ = Φ_s + Σ Φ_o (paper Eq. obstaclefield, swarmfield, environmentfield)."""
+
+    d_safe_m: float = 30.0
+    """d_safe: radius of the plateau of each obstacle's field, metres (Eq. obstaclefield).
+
+    1.5·d_col, so the field's strongest edge (at d_safe) lies outside the collision distance."""
+
+    obstacle_range_m: float = 100.0
+    """R_o: influence range of an obstacle's field, metres (Eq. obstaclefield); = sensing range."""
+
+    swarm_range_m: float = 150.0
+    """R_s: influence range of the swarm's field around p*, metres (Eq. swarmfield).
+
+    Large enough that every UAV of the spawn formation lies inside it, so each has a contour."""
+
+    swarm_floor_m: float = 5.0
+    """Distance floor of Φ_s = v_s / max(d, floor)², metres (the paper leaves it unbounded)."""
+
+    swarm_lead_m: float = 40.0
+    """Distance of the virtual centre p* ahead of the swarm centroid along its velocity, metres."""
+
+    continuous: bool = True
+    """Shift each source's field down by its value at its range (I/R²), so Φ is continuous and
+    reaches 0 at R instead of jumping there; ∇Φ is unchanged. False: the paper's literal cut."""
+
+    def __post_init__(self) -> None:
+        _positive(self, "d_safe_m", "obstacle_range_m", "swarm_range_m", "swarm_floor_m")
+        _non_negative(self, "swarm_lead_m")
+        _require(
+            self.d_safe_m < self.obstacle_range_m,
+            "d_safe_m",
+            f"must be < obstacle_range_m ({self.obstacle_range_m}), got {self.d_safe_m}",
+        )
+        _require(
+            self.swarm_floor_m < self.swarm_range_m,
+            "swarm_floor_m",
+            f"must be < swarm_range_m ({self.swarm_range_m}), got {self.swarm_floor_m}",
+        )
+
+
+@dataclass(frozen=True)
+class RewardConfig:
+    """reMARL reward r = −f(S, Φ) + r_form·r_collide (paper Eq. reward and fitness).
+
+    Both contour terms are non-dimensional and lie in [0, 1] per step, so the weights say how
+    much each matters against the Swarming part (also in [0, 1] per step).
+    """
+
+    window_steps: int = 3
+    """K: decision steps in the contour window S, including the arc of the action just taken."""
+
+    samples_per_arc: int = 8
+    """Quadrature points per arc for the external term (composite midpoint rule in arc length)."""
+
+    external: ExternalTerm = "level-edge"
+    """External (image) energy: "level-edge" (edge of the UAV's own level set Φ = φ_i, as in the
+    active-contour method the paper builds on) or "gradient" (the paper's literal ½|∇Φ|²)."""
+
+    edge_width_m: float = 10.0
+    """σ of the level edge exp(−s²/σ²), s the signed distance to the level set, metres."""
+
+    w_internal: float = 1.0
+    """Weight of the internal term mean((a/a_max)²) over the window (Eq. fitness, ½|S''|²)."""
+
+    w_external: float = 1.0
+    """Weight of the external term mean(e(S)) ∈ [0, 1] over the window (Eq. fitness, ½|∇Φ|²)."""
+
+    def __post_init__(self) -> None:
+        _require(
+            isinstance(self.window_steps, int) and self.window_steps >= 1,
+            "window_steps",
+            f"must be an integer >= 1, got {self.window_steps!r}",
+        )
+        _require(
+            isinstance(self.samples_per_arc, int) and self.samples_per_arc >= 1,
+            "samples_per_arc",
+            f"must be an integer >= 1, got {self.samples_per_arc!r}",
+        )
+        _require(
+            self.external in EXTERNAL_TERMS,
+            "external",
+            f"must be one of {', '.join(EXTERNAL_TERMS)}, got {self.external!r}",
+        )
+        _positive(self, "edge_width_m")
+        _non_negative(self, "w_internal", "w_external")
+
+
+@dataclass(frozen=True)
+class PSOConfig:
+    """Contour-level separation by particle swarm optimisation (paper Eq. psocost, pso)."""
+
+    threshold_m: float = 30.0
+    """d̄_U2U: minimum distance between adjusted UAV positions, metres (Eq. psocost; the paper
+    writes d_U2O, the text means UAV–UAV). 1.5·d_col, the spawn spacing guarantee."""
+
+    particles: int = 200
+    """Number of particles, each a candidate position for all N UAVs (2N numbers)."""
+
+    iterations: int = 30
+    """Cost evaluations per particle, the first on the initial particles. The defaults make
+    6,000 evaluations per call, as many as the authors' loop (100 particles × 30 iterations ×
+    2 evaluations), in the same number of iterations."""
+
+    c1: float = 1.5
+    """Cognitive acceleration coefficient c_1 (Eq. pso)."""
+
+    c2: float = 1.5
+    """Social acceleration coefficient c_2 (Eq. pso)."""
+
+    init_noise_m: float = 2.0
+    """Standard deviation of the zero-mean noise added to the current positions to start the
+    particles, metres (the authors' noise had a +20 m bias)."""
+
+    init_speed_m: float = 10.0
+    """Standard deviation of the particles' zero-mean initial velocities, metres per iteration:
+    the exploration radius of the first iterations (a zero start never leaves the start)."""
+
+    def __post_init__(self) -> None:
+        _positive(self, "threshold_m")
+        _non_negative(self, "c1", "c2", "init_noise_m", "init_speed_m")
+        for name in ("particles", "iterations"):
+            value = getattr(self, name)
+            _require(
+                isinstance(value, int) and value >= 1,
+                name,
+                f"must be an integer >= 1, got {value!r}",
+            )
+
+    @property
+    def evaluations(self) -> int:
+        """Cost evaluations per call and environment."""
+        return self.particles * self.iterations
+
+
+@dataclass(frozen=True)
+class UAVConfig:
+    """The swarm: count, speed, turn limit, spawn formation and targets."""
+
+    count: int
+    """N, number of UAVs."""
+
+    speed_m_s: float = 10.0
+    """v_s, constant airspeed of every UAV, m/s."""
+
+    max_turn_rad: float = math.pi / 4
+    """a_max: largest heading change over one decision step, rad (the paper's [−π/4, π/4])."""
+
+    formation: Formation = "wedge"
+    """Spawn layout: "line" (line abreast), "wedge" (apex forward) or "grid" (rows)."""
+
+    spacing_m: float = 40.0
+    """Distance between neighbours in the spawn formation, metres (must be ≥ 1.5·d_col)."""
+
+    rows: int = 2
+    """Number of rows (across the flight direction) of the "grid" formation."""
+
+    center_m: tuple[float, float] = (50.0, 150.0)
+    """Centre of the spawn formation (x along the flight direction, y across), metres."""
+
+    target_x_m: float = 270.0
+    """x of every UAV's target; the target keeps the UAV's spawn y (a straight pre-planned line)."""
+
+    def __post_init__(self) -> None:
+        _require(
+            isinstance(self.count, int) and self.count >= 1,
+            "count",
+            f"must be an integer >= 1, got {self.count!r}",
+        )
+        _positive(self, "speed_m_s", "spacing_m")
+        _require(
+            0 < self.max_turn_rad <= math.pi / 2,
+            "max_turn_rad",
+            f"must be in (0, π/2], got {self.max_turn_rad!r}",
+        )
+        _require(
+            self.formation in FORMATIONS,
+            "formation",
+            f"must be one of {', '.join(FORMATIONS)}, got {self.formation!r}",
+        )
+        _require(
+            isinstance(self.rows, int) and self.rows >= 1, "rows", f"must be >= 1, got {self.rows}"
+        )
+        _require(len(self.center_m) == 2, "center_m", "must be [x, y]")
+        _require(
+            self.target_x_m > self.center_m[0],
+            "target_x_m",
+            f"must be ahead (larger x) of the spawn centre {self.center_m[0]}",
+        )
+
+
+@dataclass(frozen=True)
+class ObstacleConfig:
+    """Obstacles: count, speed, spawn line and the randomness of their approach."""
+
+    count: int
+    """M, number of obstacles."""
+
+    speed_m_s: float = 2.5
+    """v_o, obstacle speed, m/s (0 gives static obstacles)."""
+
+    spawn_x_m: float = 240.0
+    """x of the line on which obstacles spawn, metres."""
+
+    spacing_m: float = 60.0
+    """Distance between neighbouring obstacles on the spawn line, metres."""
+
+    center_y_m: float = 150.0
+    """y of the centre of the obstacle spawn line, metres."""
+
+    lateral_jitter_m: float = 10.0
+    """Half-width of the uniform random shift of each obstacle's spawn y, metres."""
+
+    heading_jitter_rad: float = math.radians(10.0)
+    """Half-width of the uniform random perturbation of the heading toward the swarm, rad."""
+
+    def __post_init__(self) -> None:
+        _require(
+            isinstance(self.count, int) and self.count >= 0,
+            "count",
+            f"must be an integer >= 0, got {self.count!r}",
+        )
+        _non_negative(self, "speed_m_s", "spacing_m", "lateral_jitter_m", "heading_jitter_rad")
+        _require(
+            self.heading_jitter_rad <= math.pi,
+            "heading_jitter_rad",
+            f"must be <= π, got {self.heading_jitter_rad!r}",
+        )
+
+
+@dataclass(frozen=True)
+class SensingConfig:
+    """What a UAV perceives: a forward LiDAR-like sector."""
+
+    range_m: float = 100.0
+    """Sensing range, metres."""
+
+    aperture_rad: float = math.radians(270.0)
+    """Full aperture of the sensed sector, centred on the heading, rad (2π = all around)."""
+
+    max_obstacles: int = 4
+    """m: obstacle rows in the observation (nearest first, masked when fewer are seen)."""
+
+    def __post_init__(self) -> None:
+        _positive(self, "range_m")
+        _require(
+            0 < self.aperture_rad <= 2 * math.pi,
+            "aperture_rad",
+            f"must be in (0, 2π], got {self.aperture_rad!r}",
+        )
+        _require(
+            isinstance(self.max_obstacles, int) and self.max_obstacles >= 1,
+            "max_obstacles",
+            f"must be an integer >= 1, got {self.max_obstacles!r}",
+        )
+
+
+@dataclass(frozen=True)
+class ScenarioConfig:
+    """A complete scenario: geometry, agents, timing, sensing, field, reward and PSO."""
+
+    name: str
+    """Scenario name, e.g. "3u2o"."""
+
+    uav: UAVConfig
+    obstacles: ObstacleConfig
+    description: str = ""
+    """One line for listings."""
+
+    arena_length_m: float = 300.0
+    """w: arena extent along x (the direction of flight), metres."""
+
+    arena_width_m: float = 300.0
+    """l: arena extent along y, metres."""
+
+    dt_s: float = 2.0
+    """Decision step, seconds (20 m of flight at 10 m/s)."""
+
+    max_steps: int = 40
+    """Step limit; the episode is truncated after it."""
+
+    d_col_m: float = 20.0
+    """d_col: collision distance, UAV–UAV and UAV–obstacle, metres (paper Table 2)."""
+
+    sensing: SensingConfig = dataclasses.field(default_factory=SensingConfig)
+    field: FieldConfig = dataclasses.field(default_factory=FieldConfig)
+    reward: RewardConfig = dataclasses.field(default_factory=RewardConfig)
+    pso: PSOConfig = dataclasses.field(default_factory=PSOConfig)
+
+    def __post_init__(self) -> None:
+        _positive(self, "arena_length_m", "arena_width_m", "dt_s", "d_col_m")
+        _require(
+            isinstance(self.max_steps, int) and self.max_steps >= 1,
+            "max_steps",
+            f"must be an integer >= 1, got {self.max_steps!r}",
+        )
+        _require(
+            self.uav.target_x_m <= self.arena_length_m,
+            "uav.target_x_m",
+            f"must lie inside the arena (<= {self.arena_length_m})",
+        )
+
+    @property
+    def step_length_m(self) -> float:
+        """Arc length flown by a UAV in one decision step, metres (v_s·dt)."""
+        return self.uav.speed_m_s * self.dt_s

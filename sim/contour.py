@@ -1,0 +1,189 @@
+"""The active-contour cost f(S, Φ) of a trajectory window S (paper Eq. fitness).
+
+    f(S) = ∫ ½|S''(ρ)|² dρ − ∫ ½|∇Φ(S(ρ))|² dρ        (ρ: arc length)
+
+S is the UAV's last K decision steps, each a constant-turn-rate arc (`sim.kinematics`), the
+newest being the arc of the action just taken. Both integrals are made non-dimensional so each
+lies in [0, 1] per step:
+
+* internal: on an arc of length L that turns by a, |S''| = κ = a/L, so ∫½κ² dρ = ½a²/L exactly
+  (no quadrature). Dividing by its largest value ½a_max²/L and averaging over the K arcs gives
+  mean_k (a_k / a_max)².
+* external: mean over the window, in arc length, of an edge density e(q) ∈ [0, 1]:
+
+  - ``"gradient"``: e = min(|∇Φ|/g_ref, 1)², the paper's literal ½|∇Φ|² scaled by the peak
+    gradient g_ref = 2·v_s/d_safe³ of an obstacle's field (`sim.field.peak_gradient`);
+  - ``"level-edge"``: e = exp(−s²/σ²) with s = (Φ(q) − φ_i)/|∇Φ(q)| the first-order signed
+    distance from q to the UAV's own level set Φ = φ_i: an analytic, smoothed edge map of the
+    field cut at the UAV's level, as in the active-contour method the paper builds on.
+
+Quadrature of the external term: composite midpoint rule in arc length, Q points per arc
+(`RewardConfig.samples_per_arc`), error O((L/Q)²) for a smooth integrand.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from sim.config import FieldConfig, RewardConfig
+from sim.field import FieldSources, peak_gradient, potential_and_gradient
+from sim.kinematics import arc_points
+
+FloatArray = NDArray[np.float64]
+BoolArray = NDArray[np.bool_]
+
+GRADIENT_FLOOR = 1e-12
+"""|∇Φ| below this, in 1/(m²·s), counts as a flat field: no level-set edge there."""
+
+
+@dataclass(frozen=True)
+class ArcWindow:
+    """The contour window S of every UAV: its last K arcs, oldest first, newest last.
+
+    Attributes:
+        start_m: (B, N, K, 2) start point of each arc.
+        heading_rad: (B, N, K) heading at the start of each arc.
+        turn_rad: (B, N, K) heading change over each arc.
+        valid: (B, N, K) False for arcs before the episode started (not yet flown).
+        length_m: arc length of one step, v·dt.
+    """
+
+    start_m: FloatArray
+    heading_rad: FloatArray
+    turn_rad: FloatArray
+    valid: BoolArray
+    length_m: float
+
+    @classmethod
+    def empty(cls, num_envs: int, num_uavs: int, window_steps: int, length_m: float) -> ArcWindow:
+        """A window with no arc flown yet, (B, N, K)."""
+        shape = (num_envs, num_uavs, window_steps)
+        return cls(
+            start_m=np.zeros((*shape, 2)),
+            heading_rad=np.zeros(shape),
+            turn_rad=np.zeros(shape),
+            valid=np.zeros(shape, dtype=bool),
+            length_m=length_m,
+        )
+
+    def push(
+        self, start_m: FloatArray, heading_rad: FloatArray, turn_rad: FloatArray, flown: BoolArray
+    ) -> ArcWindow:
+        """The window after one more step: the oldest arc drops out, the new arc comes last.
+
+        Args:
+            start_m: (B, N, 2) start of the arc just flown.
+            heading_rad: (B, N) heading at its start.
+            turn_rad: (B, N) its heading change.
+            flown: (B, N) False for UAVs that did not fly this step (masked out); their
+                windows are left unchanged.
+        """
+        fl = flown[..., None]
+        return ArcWindow(
+            start_m=np.where(
+                fl[..., None],
+                np.concatenate([self.start_m[:, :, 1:], start_m[:, :, None]], axis=2),
+                self.start_m,
+            ),
+            heading_rad=np.where(
+                fl,
+                np.concatenate([self.heading_rad[..., 1:], heading_rad[..., None]], -1),
+                self.heading_rad,
+            ),
+            turn_rad=np.where(
+                fl, np.concatenate([self.turn_rad[..., 1:], turn_rad[..., None]], -1), self.turn_rad
+            ),
+            valid=np.where(
+                fl, np.concatenate([self.valid[..., 1:], flown[..., None]], -1), self.valid
+            ),
+            length_m=self.length_m,
+        )
+
+
+@dataclass(frozen=True)
+class ContourTerms:
+    """The two non-dimensional terms of f, each in [0, 1]: f = w_int·internal − w_ext·external.
+
+    Attributes:
+        internal: (B, N) mean_k (a_k/a_max)² over the valid arcs of the window.
+        external: (B, N) mean edge density e over the valid arcs of the window.
+    """
+
+    internal: FloatArray
+    external: FloatArray
+
+
+def arc_bending_energy(turn_rad: FloatArray, length_m: float) -> FloatArray:
+    """∫ ½|S''|² dρ over one arc, in 1/m: ½a²/L (closed form).
+
+    >>> float(arc_bending_energy(np.array(np.pi / 4), 20.0).round(6))
+    0.015421
+    """
+    return 0.5 * np.square(turn_rad) / length_m
+
+
+def quadrature_fractions(samples_per_arc: int) -> FloatArray:
+    """Midpoints (j + ½)/Q, j = 0..Q−1, of the Q equal pieces of an arc.
+
+    >>> quadrature_fractions(4).tolist()
+    [0.125, 0.375, 0.625, 0.875]
+    """
+    return (np.arange(samples_per_arc) + 0.5) / samples_per_arc
+
+
+def external_density(
+    points_m: FloatArray,
+    levels: FloatArray | None,
+    src: FieldSources,
+    field_cfg: FieldConfig,
+    reward_cfg: RewardConfig,
+) -> FloatArray:
+    """Edge density e(q) ∈ [0, 1] at points (B, *P, 2) for the configured external term.
+
+    Args:
+        points_m: (B, *P, 2).
+        levels: φ_i broadcastable to (B, *P), required by "level-edge".
+
+    Returns:
+        (B, *P) densities.
+    """
+    phi, grad = potential_and_gradient(points_m, src, field_cfg)
+    gnorm = np.hypot(grad[..., 0], grad[..., 1])
+    if reward_cfg.external == "gradient":
+        return np.square(np.minimum(gnorm / peak_gradient(field_cfg, src.swarm_speed_m_s), 1.0))
+    if levels is None:
+        raise ValueError('the "level-edge" external term needs the UAVs\' contour levels')
+    has_edge = gnorm > GRADIENT_FLOOR
+    signed_m = (phi - levels) / np.where(has_edge, gnorm, 1.0)
+    return np.where(has_edge, np.exp(-np.square(signed_m / reward_cfg.edge_width_m)), 0.0)
+
+
+def contour_terms(
+    window: ArcWindow,
+    levels: FloatArray,
+    src: FieldSources,
+    max_turn_rad: float,
+    field_cfg: FieldConfig,
+    reward_cfg: RewardConfig,
+) -> ContourTerms:
+    """Internal and external terms of f(S, Φ) for every UAV of every environment in one pass.
+
+    Args:
+        window: the K-arc windows, (B, N, K, ...).
+        levels: (B, N) each UAV's contour level φ_i (ignored by the "gradient" term).
+        src: field sources, batched on B.
+        max_turn_rad: a_max, to make the internal term non-dimensional.
+    """
+    valid = window.valid.astype(np.float64)  # (B, N, K)
+    count = np.maximum(valid.sum(axis=-1), 1.0)  # (B, N)
+    internal = (np.square(window.turn_rad / max_turn_rad) * valid).sum(axis=-1) / count
+    fractions = quadrature_fractions(reward_cfg.samples_per_arc)
+    pts = arc_points(
+        window.start_m, window.heading_rad, window.turn_rad, window.length_m, fractions
+    )  # (B, N, K, Q, 2)
+    dens = external_density(pts, levels[:, :, None, None], src, field_cfg, reward_cfg)
+    external = (dens.mean(axis=-1) * valid).sum(axis=-1) / count  # (B, N)
+    return ContourTerms(internal=internal, external=external)

@@ -1,0 +1,37 @@
+"""Errors raised by the simulator core.
+
+These are the roots of the project's error tree; `remarl_fc.errors` documents the whole tree
+and re-exports them, so a user catches ``remarl_fc.errors.RemarlError`` for anything the
+project raises on purpose.
+
+::
+
+    RemarlError
+     └── ConfigError (also a ValueError)
+          └── ScenarioError          a scenario name or file that cannot be used
+"""
+
+from __future__ import annotations
+
+
+class RemarlError(Exception):
+    """Base class of every error remarl-fc raises on purpose."""
+
+
+class ConfigError(RemarlError, ValueError):
+    """A configuration value is missing, of the wrong type or out of range."""
+
+
+class ScenarioError(ConfigError):
+    """A scenario cannot be resolved or loaded.
+
+    Attributes:
+        source: the scenario name or file path involved.
+        key: the offending key (dotted path), if the problem is one value.
+    """
+
+    def __init__(self, message: str, *, source: str, key: str | None = None) -> None:
+        where = f"{source}: {key}: " if key else f"{source}: "
+        super().__init__(where + message)
+        self.source = source
+        self.key = key

@@ -1,0 +1,139 @@
+"""The potential field Φ and its analytic gradient.
+
+Paper Eq. obstaclefield, swarmfield and environmentfield.
+
+Obstacles and the swarm's virtual centre p* are peaks::
+
+    Φ_o(q) = I_o / d_safe²   for |q − p_o| ≤ d_safe         I_o = max(v_o, v_s)
+           = I_o / |q − p_o|²  for d_safe < |q − p_o| ≤ R_o
+           = 0                beyond R_o
+    Φ_s(q) = v_s / max(|q − p*|, d_floor)²  for |q − p*| ≤ R_s, 0 beyond
+    Φ(q)   = Φ_s(q) + Σ_o Φ_o(q)
+
+With ``FieldConfig.continuous`` (the default) each source's field is lowered by its value at
+its range, I/R_o² or v_s/R_s², inside that range: Φ is then continuous and falls to 0 at R
+instead of jumping there (a jump is a spurious contour, a ring that has nothing to do with an
+obstacle's shape); ∇Φ is the same either way.
+
+Units: Φ in 1/(m·s) (a speed over an area), ∇Φ in 1/(m²·s). Every function takes points of
+shape (B, *P, 2) — any number of points per environment — and sources batched on B.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from sim.config import FieldConfig
+
+FloatArray = NDArray[np.float64]
+BoolArray = NDArray[np.bool_]
+
+GRADIENT_EXPONENT = 2.0
+"""Exponent of the inverse-square law of Eq. obstaclefield/swarmfield (|∇(1/d²)| = 2/d³)."""
+
+
+@dataclass(frozen=True)
+class FieldSources:
+    """The sources of Φ in a batch of B environments.
+
+    Attributes:
+        obstacle_pos_m: (B, M, 2) obstacle positions.
+        obstacle_speed_m_s: (B, M) obstacle speeds v_o (0 for static obstacles).
+        centre_m: (B, 2) the swarm's virtual centre p*.
+        swarm_speed_m_s: v_s, the swarm's speed.
+        obstacle_mask: (B, M) True where an obstacle exists (None: all exist).
+    """
+
+    obstacle_pos_m: FloatArray
+    obstacle_speed_m_s: FloatArray
+    centre_m: FloatArray
+    swarm_speed_m_s: float
+    obstacle_mask: BoolArray | None = None
+
+    @property
+    def num_envs(self) -> int:
+        """B, the batch size."""
+        return int(self.centre_m.shape[0])
+
+    def intensity(self) -> FloatArray:
+        """I_o = max(v_o, v_s) per obstacle, (B, M); 0 for masked-out obstacles."""
+        inten = np.maximum(self.obstacle_speed_m_s, self.swarm_speed_m_s)
+        if self.obstacle_mask is not None:
+            inten = np.where(self.obstacle_mask, inten, 0.0)
+        return inten
+
+
+def _expand(source: FloatArray, points: FloatArray) -> FloatArray:
+    """Reshape per-env (B, X) or (B, M, X) arrays so they broadcast against (B, *P, ...)."""
+    extra = points.ndim - 2  # number of point dimensions P
+    return source.reshape(source.shape[:1] + (1,) * extra + source.shape[1:])
+
+
+def obstacle_terms(
+    points_m: FloatArray, src: FieldSources, cfg: FieldConfig
+) -> tuple[FloatArray, FloatArray]:
+    """Each obstacle's Φ_o and ∇Φ_o at the points.
+
+    Args:
+        points_m: (B, *P, 2).
+
+    Returns:
+        (phi (B, *P, M), grad (B, *P, M, 2)).
+    """
+    diff = points_m[..., None, :] - _expand(src.obstacle_pos_m, points_m)  # (B, *P, M, 2)
+    d2 = np.einsum("...i,...i->...", diff, diff)  # (B, *P, M)
+    inten = _expand(src.intensity(), points_m)  # (B, 1.., M)
+    safe2, range2 = cfg.d_safe_m**2, cfg.obstacle_range_m**2
+    inside = d2 <= range2
+    offset = 1.0 / range2 if cfg.continuous else 0.0
+    phi = np.where(inside, inten * (1.0 / np.maximum(d2, safe2) - offset), 0.0)
+    slope = (d2 > safe2) & inside
+    # ∇(I/d²) = −2 I (q − p_o) / d⁴ on the slope; the plateau and the outside are flat.
+    coef = np.where(slope, -GRADIENT_EXPONENT * inten / np.where(slope, d2, 1.0) ** 2, 0.0)
+    return phi, coef[..., None] * diff
+
+
+def swarm_term(
+    points_m: FloatArray, src: FieldSources, cfg: FieldConfig
+) -> tuple[FloatArray, FloatArray]:
+    """The swarm's Φ_s and ∇Φ_s at the points: (phi (B, *P), grad (B, *P, 2))."""
+    diff = points_m - _expand(src.centre_m, points_m)  # (B, *P, 2)
+    d2 = np.einsum("...i,...i->...", diff, diff)
+    floor2, range2 = cfg.swarm_floor_m**2, cfg.swarm_range_m**2
+    inside = d2 <= range2
+    vs = src.swarm_speed_m_s
+    offset = 1.0 / range2 if cfg.continuous else 0.0
+    phi = np.where(inside, vs * (1.0 / np.maximum(d2, floor2) - offset), 0.0)
+    slope = (d2 > floor2) & inside
+    coef = np.where(slope, -GRADIENT_EXPONENT * vs / np.where(slope, d2, 1.0) ** 2, 0.0)
+    return phi, coef[..., None] * diff
+
+
+def potential_and_gradient(
+    points_m: FloatArray, src: FieldSources, cfg: FieldConfig
+) -> tuple[FloatArray, FloatArray]:
+    """Φ and ∇Φ at the points (Eq. environmentfield): (phi (B, *P), grad (B, *P, 2))."""
+    phi_s, grad_s = swarm_term(points_m, src, cfg)
+    if src.obstacle_pos_m.shape[1] == 0:
+        return phi_s, grad_s
+    phi_o, grad_o = obstacle_terms(points_m, src, cfg)
+    return phi_s + phi_o.sum(axis=-1), grad_s + grad_o.sum(axis=-2)
+
+
+def potential(points_m: FloatArray, src: FieldSources, cfg: FieldConfig) -> FloatArray:
+    """Φ at the points: (B, *P)."""
+    return potential_and_gradient(points_m, src, cfg)[0]
+
+
+def peak_gradient(cfg: FieldConfig, swarm_speed_m_s: float) -> float:
+    """|∇Φ_o| just outside d_safe of an obstacle slower than the swarm: 2·v_s/d_safe³, 1/(m²·s).
+
+    The external term of the reward divides |∇Φ| by it to be non-dimensional.
+
+    >>> round(peak_gradient(FieldConfig(d_safe_m=10.0), 10.0), 6)
+    0.02
+    """
+    return GRADIENT_EXPONENT * swarm_speed_m_s / cfg.d_safe_m**3

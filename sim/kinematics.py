@@ -1,0 +1,82 @@
+"""Constant-turn-rate kinematics: one decision step is a circular arc (or a straight segment).
+
+A UAV at position p with heading h that changes its heading by a over a step of arc length
+L = v·dt flies the arc of curvature κ = a/L; the chord of that arc has length L·sinc(a/2) and
+points along h + a/2. This form has no division by a, so straight flight (a = 0) needs no
+special case. Headings are counter-clockwise from +x, radians.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+FloatArray = NDArray[np.float64]
+
+
+def scale_action(action: FloatArray, max_turn_rad: float) -> FloatArray:
+    """Map normalised actions in [−1, 1] to heading changes in [−a_max, a_max], radians.
+
+    The only place where actions are scaled; values outside [−1, 1] are clipped.
+
+    >>> scale_action(np.array([-2.0, 0.5]), np.pi / 4).round(4).tolist()
+    [-0.7854, 0.3927]
+    """
+    return np.clip(action, -1.0, 1.0) * max_turn_rad
+
+
+def wrap_angle(angle_rad: FloatArray) -> FloatArray:
+    """Wrap angles to [−π, π).
+
+    >>> wrap_angle(np.array([3 * np.pi / 2, -np.pi])).round(4).tolist()
+    [-1.5708, -3.1416]
+    """
+    return (angle_rad + np.pi) % (2 * np.pi) - np.pi
+
+
+def _sinc(x: FloatArray) -> FloatArray:
+    """sin(x)/x with the removable singularity filled (numpy's sinc is normalised by π)."""
+    return np.sinc(x / np.pi)
+
+
+def arc_points(
+    start_m: FloatArray,
+    heading_rad: FloatArray,
+    turn_rad: FloatArray,
+    length_m: float,
+    fractions: FloatArray,
+) -> FloatArray:
+    """Points at the given fractions of arc length along each arc.
+
+    Args:
+        start_m: (..., 2) start of each arc.
+        heading_rad: (...,) heading at the start.
+        turn_rad: (...,) heading change over the whole arc.
+        length_m: arc length L.
+        fractions: (Q,) values in [0, 1].
+
+    Returns:
+        (..., Q, 2) points.
+    """
+    u = np.asarray(fractions, dtype=np.float64)
+    half = 0.5 * turn_rad[..., None] * u  # (..., Q)
+    chord = length_m * u * _sinc(half)  # (..., Q)
+    direction = heading_rad[..., None] + half
+    offset = np.stack([chord * np.cos(direction), chord * np.sin(direction)], axis=-1)
+    return start_m[..., None, :] + offset  # (..., Q, 2)
+
+
+def arc_step(
+    start_m: FloatArray, heading_rad: FloatArray, turn_rad: FloatArray, length_m: float
+) -> tuple[FloatArray, FloatArray]:
+    """End position (..., 2) and end heading (...,) of each arc; headings are wrapped."""
+    end = arc_points(start_m, heading_rad, turn_rad, length_m, np.ones(1))[..., 0, :]
+    return end, wrap_angle(heading_rad + turn_rad)
+
+
+def straight_points(
+    start_m: FloatArray, velocity_m_s: FloatArray, dt_s: float, fractions: FloatArray
+) -> FloatArray:
+    """Points of straight, constant-velocity motion at fractions of a step: (..., Q, 2)."""
+    u = np.asarray(fractions, dtype=np.float64)
+    return start_m[..., None, :] + (dt_s * u)[:, None] * velocity_m_s[..., None, :]

@@ -1,0 +1,255 @@
+"""Scenarios as data: TOML files under ``sim/scenarios/``, resolved by name or path.
+
+A scenario file sets what differs from the defaults of `sim.config`; every key it writes is
+checked against the dataclass field of the same name (angles are written in degrees, with keys
+ending in ``_deg``; they are stored in radians, in the field ending in ``_rad``). A typo'd key,
+a wrong type or an out-of-range value is a `ScenarioError` that names the file and the key.
+
+Example file::
+
+    description = "3 UAVs, 2 obstacles (paper, Table 2)"
+
+    [uav]
+    count = 3
+    formation = "wedge"
+
+    [obstacles]
+    count = 2
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import tomllib
+import types
+import typing
+from importlib import resources
+from pathlib import Path
+from typing import Any, get_args, get_origin, get_type_hints
+
+from sim.config import (
+    FieldConfig,
+    FieldValueError,
+    ObstacleConfig,
+    PSOConfig,
+    RewardConfig,
+    ScenarioConfig,
+    SensingConfig,
+    UAVConfig,
+)
+from sim.errors import ScenarioError
+from sim.spawn import SPAWN_SPACING_FACTOR, min_pairwise_distance, swarm_layout
+
+SECTIONS: dict[str, type[Any]] = {
+    "uav": UAVConfig,
+    "obstacles": ObstacleConfig,
+    "sensing": SensingConfig,
+    "field": FieldConfig,
+    "reward": RewardConfig,
+    "pso": PSOConfig,
+}
+"""Scenario file sections and the dataclass each one fills."""
+
+_RAD, _DEG = "_rad", "_deg"
+
+
+def scenario_names() -> list[str]:
+    """Names of the scenarios shipped with the package, sorted by UAV then obstacle count."""
+    names = [
+        p.name.removesuffix(".toml")
+        for p in resources.files("sim").joinpath("scenarios").iterdir()
+        if p.name.endswith(".toml")
+    ]
+    return sorted(names, key=_natural_key)
+
+
+def _natural_key(name: str) -> tuple[int, int, str]:
+    head, _, tail = name.partition("u")
+    try:
+        return (int(head), int(tail.rstrip("o")), name)
+    except ValueError:
+        return (10**9, 0, name)
+
+
+def load_scenario(name_or_path: str | Path, **overrides: Any) -> ScenarioConfig:
+    """Resolve a scenario by shipped name (e.g. "3u2o") or by the path of a TOML file.
+
+    Args:
+        name_or_path: a shipped scenario name, or a path to a ``.toml`` file.
+        **overrides: values that replace the file's, as nested dicts per section
+            (``reward={"external": "gradient"}``) or top-level keys (``max_steps=60``).
+
+    Raises:
+        ScenarioError: unknown name, unreadable file, bad key, type or value.
+    """
+    text, source, name = _read(name_or_path)
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ScenarioError(f"not valid TOML ({exc})", source=source) from exc
+    for key, value in overrides.items():
+        if isinstance(value, dict) and isinstance(data.get(key), dict):
+            data[key] = {**data[key], **value}
+        else:
+            data[key] = value
+    return scenario_from_dict(data, name=name, source=source)
+
+
+def _read(name_or_path: str | Path) -> tuple[str, str, str]:
+    text_name = str(name_or_path)
+    looks_like_path = (
+        isinstance(name_or_path, Path) or text_name.endswith(".toml") or "/" in text_name
+    )
+    if looks_like_path:
+        path = Path(name_or_path)
+        try:
+            return path.read_text(encoding="utf-8"), str(path), path.stem
+        except OSError as exc:
+            raise ScenarioError(
+                f"cannot read scenario file ({exc.strerror or exc})", source=str(path)
+            ) from exc
+    known = scenario_names()
+    if text_name.lower() not in known:
+        raise ScenarioError(
+            f"unknown scenario; known scenarios: {', '.join(known)} "
+            "(or pass the path of a .toml file)",
+            source=text_name,
+        )
+    res = resources.files("sim").joinpath("scenarios").joinpath(f"{text_name.lower()}.toml")
+    return res.read_text(encoding="utf-8"), f"scenario {text_name.lower()}", text_name.lower()
+
+
+def scenario_from_dict(data: dict[str, Any], *, name: str, source: str) -> ScenarioConfig:
+    """Build and validate a `ScenarioConfig` from parsed TOML (see module docstring)."""
+    data = dict(data)
+    sections: dict[str, Any] = {}
+    for section, cls in SECTIONS.items():
+        raw = data.pop(section, {})
+        if not isinstance(raw, dict):
+            raise ScenarioError("must be a table ([section])", source=source, key=section)
+        sections[section] = _build(cls, raw, prefix=f"{section}.", source=source)
+    top: ScenarioConfig = _build(
+        ScenarioConfig,
+        {"name": data.pop("name", name), **data},
+        prefix="",
+        source=source,
+        skip=set(SECTIONS),
+        extra=sections,
+    )
+    _check_geometry(top, source)
+    return top
+
+
+def _build(
+    cls: type[Any],
+    raw: dict[str, Any],
+    *,
+    prefix: str,
+    source: str,
+    skip: set[str] | None = None,
+    extra: dict[str, Any] | None = None,
+) -> Any:
+    hints = get_type_hints(cls)
+    fields = {f.name: f for f in dataclasses.fields(cls) if f.name not in (skip or set())}
+    kwargs: dict[str, Any] = dict(extra or {})
+    for key, value in raw.items():
+        fname = key[: -len(_DEG)] + _RAD if key.endswith(_DEG) else key
+        if fname not in fields or key.endswith(_RAD):
+            allowed = sorted(_file_key(f) for f in fields)
+            raise ScenarioError(
+                f"unknown key; allowed here: {', '.join(allowed)}", source=source, key=prefix + key
+            )
+        kwargs[fname] = _convert(value, hints[fname], source=source, key=prefix + key)
+        if key.endswith(_DEG):
+            kwargs[fname] = math.radians(kwargs[fname])
+    missing = [
+        f
+        for f, spec in fields.items()
+        if f not in kwargs
+        and spec.default is dataclasses.MISSING
+        and spec.default_factory is dataclasses.MISSING
+    ]
+    if missing:
+        raise ScenarioError("required key is missing", source=source, key=prefix + missing[0])
+    try:
+        return cls(**kwargs)
+    except FieldValueError as exc:
+        key = exc.field if "." in exc.field else prefix + _file_key(exc.field)
+        raise ScenarioError(exc.reason, source=source, key=key) from exc
+
+
+def _file_key(field_name: str) -> str:
+    return field_name[: -len(_RAD)] + _DEG if field_name.endswith(_RAD) else field_name
+
+
+def _convert(value: Any, hint: Any, *, source: str, key: str) -> Any:
+    origin = get_origin(hint)
+    if hint is bool:
+        if not isinstance(value, bool):
+            raise ScenarioError(f"must be true or false, got {value!r}", source=source, key=key)
+        return value
+    if hint is float:
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise ScenarioError(f"must be a number, got {value!r}", source=source, key=key)
+        return float(value)
+    if hint is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ScenarioError(f"must be an integer, got {value!r}", source=source, key=key)
+        return value
+    if hint is str or origin is typing.Literal:
+        if not isinstance(value, str):
+            raise ScenarioError(f"must be a string, got {value!r}", source=source, key=key)
+        return value
+    if origin is tuple:
+        args = get_args(hint)
+        if not isinstance(value, list) or len(value) != len(args):
+            raise ScenarioError(
+                f"must be a list of {len(args)} numbers, got {value!r}", source=source, key=key
+            )
+        return tuple(
+            _convert(v, a, source=source, key=key) for v, a in zip(value, args, strict=True)
+        )
+    if isinstance(hint, types.UnionType):  # pragma: no cover - no optional fields yet
+        return value
+    raise ScenarioError(f"cannot be set from a scenario file ({hint})", source=source, key=key)
+
+
+def _check_geometry(cfg: ScenarioConfig, source: str) -> None:
+    layout = swarm_layout(cfg)
+    need = SPAWN_SPACING_FACTOR * cfg.d_col_m
+    closest = min_pairwise_distance(layout.positions_m)
+    if closest < need:
+        raise ScenarioError(
+            f"UAVs spawn {closest:.1f} m apart, below {SPAWN_SPACING_FACTOR}·d_col = {need:.1f} m; "
+            "raise uav.spacing_m or change uav.formation",
+            source=source,
+            key="uav.spacing_m",
+        )
+    pos = layout.positions_m
+    inside = (
+        (pos[:, 0] >= 0)
+        & (pos[:, 0] <= cfg.arena_length_m)
+        & (pos[:, 1] >= 0)
+        & (pos[:, 1] <= cfg.arena_width_m)
+    )
+    if not inside.all():
+        raise ScenarioError(
+            "the spawn formation does not fit in the arena; move uav.center_m, reduce "
+            "uav.spacing_m or enlarge arena_length_m/arena_width_m",
+            source=source,
+            key="uav.center_m",
+        )
+    o = cfg.obstacles
+    half = (o.count - 1) / 2 * o.spacing_m + o.lateral_jitter_m
+    if o.count and not (
+        0 <= o.spawn_x_m <= cfg.arena_length_m
+        and o.center_y_m - half >= 0
+        and o.center_y_m + half <= cfg.arena_width_m
+    ):
+        raise ScenarioError(
+            "obstacles can spawn outside the arena; move obstacles.spawn_x_m/center_y_m or "
+            "reduce obstacles.spacing_m/lateral_jitter_m",
+            source=source,
+            key="obstacles.spawn_x_m",
+        )
