@@ -134,13 +134,13 @@ def _draw_agents(ax: Any, snap: FieldSnapshot, colours: FloatArray, *, with_cont
         ax.plot([x0, x1], [y0, y1], ls=":", color="0.85", lw=0.8)
     ax.scatter(*snap.targets_m.T, marker="x", color="0.85", s=30, label="targets")
     ax.scatter(
-        *snap.uav_m.T, marker="^", c=colours, edgecolors="white", s=60, zorder=5, label="UAVs"
+        *snap.uav_m.T, marker="^", c=colours, edgecolors="black", s=80, zorder=6, label="UAVs"
     )
     ax.quiver(
         *snap.uav_m.T,
         np.cos(snap.headings_rad),
         np.sin(snap.headings_rad),
-        color="white",
+        color=colours,
         scale=25,
         width=0.004,
     )

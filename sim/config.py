@@ -60,7 +60,7 @@ class FieldConfig:
     obstacle_range_m: float = 100.0
     """R_o: influence range of an obstacle's field, metres (Eq. obstaclefield); = sensing range."""
 
-    swarm_range_m: float = 150.0
+    swarm_range_m: float = 200.0
     """R_s: influence range of the swarm's field around p*, metres (Eq. swarmfield).
 
     Large enough that every UAV of the spawn formation lies inside it, so each has a contour."""
@@ -69,7 +69,8 @@ class FieldConfig:
     """Distance floor of Φ_s = v_s / max(d, floor)², metres (the paper leaves it unbounded)."""
 
     swarm_lead_m: float = 40.0
-    """Distance of the virtual centre p* ahead of the swarm centroid along its velocity, metres."""
+    """Distance of the virtual centre p* ahead of the swarm's foremost UAV, metres (p* lies on
+    the line through the centroid along the swarm velocity)."""
 
     continuous: bool = True
     """Shift each source's field down by its value at its range (I/R²), so Φ is continuous and

@@ -42,8 +42,8 @@ def swept_min_distance(relative_m: FloatArray) -> FloatArray:
     Returns:
         (...,) the minimum distance over the whole step.
 
-    >>> swept_min_distance(np.array([[-10.0, 3.0], [10.0, 3.0]]))  # passes 3 m abeam
-    array(3.)
+    >>> float(swept_min_distance(np.array([[-10.0, 3.0], [10.0, 3.0]])))  # passes 3 m abeam
+    3.0
     """
     d0 = relative_m[..., :-1, :]  # (..., T, 2)
     delta = relative_m[..., 1:, :] - d0

@@ -28,6 +28,8 @@ from importlib import resources
 from pathlib import Path
 from typing import Any, get_args, get_origin, get_type_hints
 
+import numpy as np
+
 from sim.config import (
     FieldConfig,
     FieldValueError,
@@ -239,6 +241,15 @@ def _check_geometry(cfg: ScenarioConfig, source: str) -> None:
             "uav.spacing_m or enlarge arena_length_m/arena_width_m",
             source=source,
             key="uav.center_m",
+        )
+    reach = float(np.hypot(*(layout.positions_m - layout.centre_m).T).max())
+    if reach >= cfg.field.swarm_range_m:
+        raise ScenarioError(
+            f"a UAV spawns {reach:.0f} m from the virtual centre, outside the swarm field "
+            f"(R_s = {cfg.field.swarm_range_m:.0f} m), so it has no contour; raise "
+            "field.swarm_range_m",
+            source=source,
+            key="field.swarm_range_m",
         )
     o = cfg.obstacles
     half = (o.count - 1) / 2 * o.spacing_m + o.lateral_jitter_m

@@ -33,7 +33,8 @@ class SwarmLayout:
         headings_rad: (N,) initial headings, toward each UAV's target.
         targets_m: (N, 2) targets, on each UAV's straight pre-planned line.
         velocity_m_s: (2,) the swarm's initial (pre-planned) velocity, v_s along the mean heading.
-        centre_m: (2,) initial virtual centre p*: centroid + lead along the swarm velocity.
+        centre_m: (2,) initial virtual centre p*: on the line through the centroid along the
+            swarm velocity, `FieldConfig.swarm_lead_m` ahead of the foremost UAV.
     """
 
     positions_m: FloatArray
@@ -87,7 +88,9 @@ def swarm_layout(cfg: ScenarioConfig) -> SwarmLayout:
     mean_dir = np.array([np.cos(headings).mean(), np.sin(headings).mean()])
     mean_dir /= np.linalg.norm(mean_dir)
     velocity = cfg.uav.speed_m_s * mean_dir
-    virtual_centre = positions.mean(axis=0) + cfg.field.swarm_lead_m * mean_dir
+    centroid = positions.mean(axis=0)
+    front = float(((positions - centroid) @ mean_dir).max())  # the foremost UAV, along v
+    virtual_centre = centroid + (front + cfg.field.swarm_lead_m) * mean_dir
     return SwarmLayout(positions, headings, targets, velocity, virtual_centre)
 
 

@@ -1,0 +1,72 @@
+import json
+
+import pytest
+
+from remarl_fc import __version__
+from remarl_fc.cli import main
+from sim.scenarios import scenario_names
+
+
+def run(capsys, *argv):
+    code = main(list(argv))
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_version_and_help(capsys):
+    with pytest.raises(SystemExit) as exit_:
+        main(["--version"])
+    assert exit_.value.code == 0
+    assert __version__ in capsys.readouterr().out
+    with pytest.raises(SystemExit):
+        main(["--help"])
+    assert "scenarios" in capsys.readouterr().out
+
+
+def test_scenarios_json_lists_every_shipped_scenario(capsys):
+    code, out, _ = run(capsys, "scenarios", "--json")
+    assert code == 0
+    rows = json.loads(out)["scenarios"]
+    assert [r["name"] for r in rows] == scenario_names()
+    three = next(r for r in rows if r["name"] == "3u2o")
+    assert (three["uavs"], three["obstacles"], three["arena_m"]) == (3, 2, [300.0, 300.0])
+
+
+def test_scenarios_table(capsys):
+    code, out, _ = run(capsys, "scenarios")
+    assert code == 0 and "50u8o" in out and "formation" in out
+
+
+def test_field_draws_a_png_and_reports_levels(capsys, tmp_path):
+    out_png = tmp_path / "sub" / "f.png"
+    code, out, _ = run(capsys, "field", "--scenario", "3u2o", "--out", str(out_png), "--json")
+    assert code == 0
+    payload = json.loads(out)
+    assert out_png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert out_png.stat().st_size > 20_000
+    assert not list(tmp_path.rglob("*.part"))
+    assert len(payload["levels"]) == 3 and all(level > 0 for level in payload["levels"])
+    assert len(payload["obstacle_m"]) == 2
+
+
+def test_field_accepts_a_scenario_file(capsys, tmp_path):
+    path = tmp_path / "duo.toml"
+    path.write_text('[uav]\ncount = 2\nformation = "line"\n[obstacles]\ncount = 0\n')
+    code, out, _ = run(capsys, "field", "--scenario", str(path), "--out", str(tmp_path / "d.png"))
+    assert code == 0 and "duo" in out
+
+
+def test_bad_scenario_is_a_clear_error_with_exit_2(capsys, tmp_path):
+    code, out, err = run(capsys, "field", "--scenario", "9u9o", "--out", str(tmp_path / "x.png"))
+    assert code == 2 and out == ""
+    assert "unknown scenario" in err and "3u2o" in err
+    assert not (tmp_path / "x.png").exists()
+
+
+def test_bench_pso_json(capsys):
+    code, out, _ = run(capsys, "bench", "pso", "--uavs", "4", "--repeats", "3", "--json")
+    assert code == 0
+    result = json.loads(out)
+    assert result["evaluations"] == 6000
+    assert result["ms_per_call"] > 0
+    assert result["feasible_fraction"] == 1.0

@@ -1,0 +1,89 @@
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from sim.config import PSOConfig
+from sim.pso import INFEASIBLE_COST, pso_separate
+from sim.spawn import min_pairwise_distance
+
+
+def run(positions, seed=0, **cfg):
+    return pso_separate(
+        np.asarray(positions, dtype=float), PSOConfig(**cfg), np.random.default_rng(seed)
+    )
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_two_uavs_ten_metres_apart_threshold_twenty(seed):
+    res = run([[[0.0, 0.0], [10.0, 0.0]]], seed=seed, threshold_m=20.0)
+    assert res.feasible.item()
+    assert res.min_distance_m.item() >= 20.0
+    assert min_pairwise_distance(res.positions_m[0]) >= 20.0
+    assert res.max_shift_m.item() == pytest.approx(5.0, rel=0.10)  # known optimum: 5 m
+    assert res.cost.item() == pytest.approx(25.0, rel=0.02)
+
+
+def test_known_optima_solved_independently_in_one_batched_call():
+    # env 0: 2 UAVs 10 m apart along y; env 1: coincident pair needs 15 m each for 30 m;
+    # env 2: already feasible.
+    pos = np.array(
+        [
+            [[0.0, 0.0], [0.0, 10.0]],
+            [[50.0, 50.0], [50.0, 50.0]],
+            [[0.0, 0.0], [100.0, 0.0]],
+        ]
+    )
+    res = run(pos, threshold_m=30.0)
+    assert res.feasible.all()
+    np.testing.assert_allclose(res.max_shift_m[:2], [10.0, 15.0], rtol=0.10)
+    assert res.max_shift_m[2] == 0.0
+
+
+def test_feasible_positions_do_not_move():
+    pos = np.array([[[0.0, 0.0], [40.0, 0.0], [0.0, 40.0], [40.0, 40.0]]])
+    res = run(pos, threshold_m=30.0)
+    assert res.max_shift_m.item() <= 1e-9
+    np.testing.assert_allclose(res.positions_m, pos, atol=1e-9)
+
+
+def test_same_seed_same_result_different_seed_different_search():
+    pos = [[[0.0, 0.0], [12.0, 0.0], [6.0, 8.0]]]
+    a, b, c = run(pos, seed=7), run(pos, seed=7), run(pos, seed=8)
+    np.testing.assert_array_equal(a.positions_m, b.positions_m)
+    assert not np.array_equal(a.positions_m, c.positions_m)
+
+
+def test_inactive_uavs_neither_move_nor_constrain():
+    pos = np.array([[[0.0, 0.0], [5.0, 0.0], [100.0, 0.0]]])
+    active = np.array([[True, False, True]])
+    res = pso_separate(pos, PSOConfig(), np.random.default_rng(0), active)
+    np.testing.assert_array_equal(res.positions_m[0, 1], pos[0, 1])
+    assert res.max_shift_m.item() == 0.0  # the active pair is already 100 m apart
+
+
+def test_single_uav_is_trivially_feasible():
+    res = run([[[3.0, 4.0]]])
+    assert res.feasible.item() and res.max_shift_m.item() == 0.0
+    assert res.min_distance_m.item() == np.inf
+
+
+def test_evaluation_count_is_reported():
+    assert run([[[0.0, 0.0], [1.0, 0.0]]], particles=20, iterations=7).evaluations == 140
+
+
+@settings(max_examples=25)
+@given(
+    n=st.integers(2, 5),
+    seed=st.integers(0, 2**16),
+    spread=st.floats(5.0, 60.0),
+)
+def test_crowded_swarms_become_feasible_without_being_made_worse(n, seed, spread):
+    rng = np.random.default_rng(seed)
+    pos = rng.uniform(0, spread, (1, n, 2))
+    res = pso_separate(pos, PSOConfig(), rng)
+    assert res.feasible.item(), "PSO did not separate a small swarm"
+    assert min_pairwise_distance(res.positions_m[0]) >= 30.0 - 1e-9
+    shift = np.hypot(*(res.positions_m[0] - pos[0]).T).max()
+    assert shift == pytest.approx(res.max_shift_m.item())
+    assert res.cost.item() < INFEASIBLE_COST

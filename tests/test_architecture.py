@@ -1,0 +1,38 @@
+"""Imports point one way, and the flight path never imports torch."""
+
+import ast
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def imported_modules(package: str) -> set[tuple[str, str]]:
+    found = set()
+    for path in (ROOT / package).rglob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Import):
+                found |= {(str(path), a.name.split(".")[0]) for a in node.names}
+            elif isinstance(node, ast.ImportFrom) and node.module:
+                found.add((str(path), node.module.split(".")[0]))
+    return found
+
+
+@pytest.mark.parametrize(
+    ("package", "forbidden"),
+    [("sim", {"torch", "remarl_fc", "policies"}), ("policies", {"remarl_fc"})],
+)
+def test_imports_point_one_way(package, forbidden):
+    bad = sorted(f"{p}: {m}" for p, m in imported_modules(package) if m in forbidden)
+    assert not bad, bad
+
+
+def test_cli_and_sim_import_without_torch():
+    code = (
+        "import sys; import remarl_fc.cli, remarl_fc.plots, remarl_fc.bench, sim, sim.reward; "
+        "assert 'torch' not in sys.modules and 'policies' not in sys.modules"
+    )
+    subprocess.run([sys.executable, "-c", code], check=True)
