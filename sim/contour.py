@@ -24,6 +24,7 @@ Quadrature of the external term: composite midpoint rule in arc length, Q points
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -43,64 +44,50 @@ GRADIENT_FLOOR = 1e-12
 class ArcWindow:
     """The contour window S of every UAV: its last K arcs, oldest first, newest last.
 
+    Each arc is scored once, when it is flown, against the field of that moment (the field moves
+    with the obstacles and the virtual centre: what matters is whether the UAV followed its
+    contour while it flew the arc, not where that contour has gone since).
+
     Attributes:
-        start_m: (B, N, K, 2) start point of each arc.
-        heading_rad: (B, N, K) heading at the start of each arc.
         turn_rad: (B, N, K) heading change over each arc.
+        external: (B, N, K) arc-length mean of the edge density e along each arc, in [0, 1].
         valid: (B, N, K) False for arcs before the episode started (not yet flown).
-        length_m: arc length of one step, v·dt.
     """
 
-    start_m: FloatArray
-    heading_rad: FloatArray
     turn_rad: FloatArray
+    external: FloatArray
     valid: BoolArray
-    length_m: float
 
     @classmethod
-    def empty(cls, num_envs: int, num_uavs: int, window_steps: int, length_m: float) -> ArcWindow:
+    def empty(cls, num_envs: int, num_uavs: int, window_steps: int) -> ArcWindow:
         """A window with no arc flown yet, (B, N, K)."""
         shape = (num_envs, num_uavs, window_steps)
-        return cls(
-            start_m=np.zeros((*shape, 2)),
-            heading_rad=np.zeros(shape),
-            turn_rad=np.zeros(shape),
-            valid=np.zeros(shape, dtype=bool),
-            length_m=length_m,
-        )
+        return cls(np.zeros(shape), np.zeros(shape), np.zeros(shape, dtype=bool))
 
-    def push(
-        self, start_m: FloatArray, heading_rad: FloatArray, turn_rad: FloatArray, flown: BoolArray
-    ) -> ArcWindow:
+    def push(self, turn_rad: FloatArray, external: FloatArray, flown: BoolArray) -> ArcWindow:
         """The window after one more step: the oldest arc drops out, the new arc comes last.
 
         Args:
-            start_m: (B, N, 2) start of the arc just flown.
-            heading_rad: (B, N) heading at its start.
-            turn_rad: (B, N) its heading change.
+            turn_rad: (B, N) heading change of the arc just flown.
+            external: (B, N) its edge score (`arc_external`).
             flown: (B, N) False for UAVs that did not fly this step (masked out); their
                 windows are left unchanged.
         """
         fl = flown[..., None]
+
+        def shifted(old: NDArray[Any], new: NDArray[Any]) -> NDArray[Any]:
+            return np.where(fl, np.concatenate([old[..., 1:], new[..., None]], axis=-1), old)
+
         return ArcWindow(
-            start_m=np.where(
-                fl[..., None],
-                np.concatenate([self.start_m[:, :, 1:], start_m[:, :, None]], axis=2),
-                self.start_m,
-            ),
-            heading_rad=np.where(
-                fl,
-                np.concatenate([self.heading_rad[..., 1:], heading_rad[..., None]], -1),
-                self.heading_rad,
-            ),
-            turn_rad=np.where(
-                fl, np.concatenate([self.turn_rad[..., 1:], turn_rad[..., None]], -1), self.turn_rad
-            ),
-            valid=np.where(
-                fl, np.concatenate([self.valid[..., 1:], flown[..., None]], -1), self.valid
-            ),
-            length_m=self.length_m,
+            turn_rad=shifted(self.turn_rad, turn_rad),
+            external=shifted(self.external, external),
+            valid=shifted(self.valid, flown),
         )
+
+    def reset(self, mask: BoolArray) -> ArcWindow:
+        """The window with the environments selected by ``mask`` (B,) emptied."""
+        keep = ~mask[:, None, None]
+        return ArcWindow(self.turn_rad * keep, self.external * keep, self.valid & keep)
 
 
 @dataclass(frozen=True)
@@ -161,29 +148,37 @@ def external_density(
     return np.where(has_edge, np.exp(-np.square(signed_m / reward_cfg.edge_width_m)), 0.0)
 
 
-def contour_terms(
-    window: ArcWindow,
+def arc_external(
+    start_m: FloatArray,
+    heading_rad: FloatArray,
+    turn_rad: FloatArray,
+    length_m: float,
     levels: FloatArray,
     src: FieldSources,
-    max_turn_rad: float,
     field_cfg: FieldConfig,
     reward_cfg: RewardConfig,
-) -> ContourTerms:
-    """Internal and external terms of f(S, Φ) for every UAV of every environment in one pass.
+) -> FloatArray:
+    """Arc-length mean of the edge density along each arc (midpoint rule): (B, N) in [0, 1].
 
     Args:
-        window: the K-arc windows, (B, N, K, ...).
+        start_m: (B, N, 2) start of each arc; heading_rad, turn_rad: (B, N).
         levels: (B, N) each UAV's contour level φ_i (ignored by the "gradient" term).
-        src: field sources, batched on B.
-        max_turn_rad: a_max, to make the internal term non-dimensional.
     """
-    valid = window.valid.astype(np.float64)  # (B, N, K)
-    count = np.maximum(valid.sum(axis=-1), 1.0)  # (B, N)
-    internal = (np.square(window.turn_rad / max_turn_rad) * valid).sum(axis=-1) / count
     fractions = quadrature_fractions(reward_cfg.samples_per_arc)
-    pts = arc_points(
-        window.start_m, window.heading_rad, window.turn_rad, window.length_m, fractions
-    )  # (B, N, K, Q, 2)
-    dens = external_density(pts, levels[:, :, None, None], src, field_cfg, reward_cfg)
-    external = (dens.mean(axis=-1) * valid).sum(axis=-1) / count  # (B, N)
+    pts = arc_points(start_m, heading_rad, turn_rad, length_m, fractions)  # (B, N, Q, 2)
+    dens = external_density(pts, levels[..., None], src, field_cfg, reward_cfg)  # (B, N, Q)
+    mean: FloatArray = dens.mean(axis=-1)
+    return mean
+
+
+def window_terms(window: ArcWindow, max_turn_rad: float) -> ContourTerms:
+    """Internal and external terms of f(S, Φ) over each UAV's window: (B, N) each.
+
+    The internal term is exact for arcs (see the module docstring); both are means over the
+    valid arcs of the window, so a window that is not full yet is not penalised for its length.
+    """
+    valid = window.valid
+    count = np.maximum(valid.sum(axis=-1), 1)  # (B, N)
+    internal = np.where(valid, np.square(window.turn_rad / max_turn_rad), 0.0).sum(-1) / count
+    external = np.where(valid, window.external, 0.0).sum(axis=-1) / count
     return ContourTerms(internal=internal, external=external)

@@ -18,7 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from sim.config import FieldConfig, PSOConfig, RewardConfig
-from sim.contour import ArcWindow, contour_terms
+from sim.contour import ArcWindow, window_terms
 from sim.field import FieldSources, potential
 from sim.pso import PSOResult, pso_separate
 
@@ -99,29 +99,25 @@ def assign_contour_levels(
 
 def reward(
     window: ArcWindow,
-    levels: FloatArray,
-    src: FieldSources,
     heading_rad: FloatArray,
     pos_m: FloatArray,
     target_m: FloatArray,
     collided: BoolArray,
     max_turn_rad: float,
-    field_cfg: FieldConfig,
     reward_cfg: RewardConfig,
 ) -> RewardTerms:
     """The reMARL reward of every UAV after a step, in one pass.
 
     Args:
-        window: (B, N, K) arc windows that already include the arc just flown.
-        levels: (B, N) contour levels φ_i.
-        src: the field sources after the step.
+        window: (B, N, K) arc windows that already include the arc just flown, each arc scored
+            against the field when it was flown (`sim.contour.arc_external`).
         heading_rad: (B, N) headings after the step.
         pos_m: (B, N, 2) positions after the step.
         target_m: (B, N, 2) targets.
         collided: (B, N) whether each UAV collided during the step.
         max_turn_rad: a_max.
     """
-    terms = contour_terms(window, levels, src, max_turn_rad, field_cfg, reward_cfg)
+    terms = window_terms(window, max_turn_rad)
     contour = -(reward_cfg.w_internal * terms.internal - reward_cfg.w_external * terms.external)
     swarming = swarming_reward(heading_rad, pos_m, target_m, collided)
     return RewardTerms(

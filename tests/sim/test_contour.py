@@ -7,8 +7,9 @@ from sim.config import FieldConfig, RewardConfig
 from sim.contour import (
     ArcWindow,
     arc_bending_energy,
-    contour_terms,
+    arc_external,
     external_density,
+    window_terms,
 )
 from sim.field import FieldSources, potential
 from sim.kinematics import arc_points, arc_step
@@ -26,26 +27,21 @@ def lone_obstacle(at=(0.0, 0.0)):
     )
 
 
-def window_from(start, heading, turns):
-    """A (1, 1, K) window of consecutive arcs."""
-    starts, headings = [], []
-    p, h = np.asarray(start, dtype=float), float(heading)
+def fly(start, heading, turns, level, src, rcfg):
+    """Fly consecutive arcs on a static field; return the (1, 1, K) window of their scores."""
+    window = ArcWindow.empty(1, 1, len(turns))
+    p, h = np.asarray(start, dtype=float).reshape(1, 1, 2), np.full((1, 1), float(heading))
+    lv = np.full((1, 1), level)
     for a in turns:
-        starts.append(p)
-        headings.append(h)
-        p, h = arc_step(p, np.array(h), np.array(a), L)
-    k = len(turns)
-    return ArcWindow(
-        start_m=np.array(starts).reshape(1, 1, k, 2),
-        heading_rad=np.array(headings).reshape(1, 1, k),
-        turn_rad=np.array(turns, dtype=float).reshape(1, 1, k),
-        valid=np.ones((1, 1, k), dtype=bool),
-        length_m=L,
-    )
+        turn = np.full((1, 1), float(a))
+        ext = arc_external(p, h, turn, L, lv, src, FIELD, rcfg)
+        window = window.push(turn, ext, np.ones((1, 1), dtype=bool))
+        p, h = arc_step(p, h, turn, L)
+    return window
 
 
-def cost(window, levels, src, rcfg):
-    t = contour_terms(window, np.array([[levels]]), src, A_MAX, FIELD, rcfg)
+def cost(start, heading, turns, level, src, rcfg):
+    t = window_terms(fly(start, heading, turns, level, src, rcfg), A_MAX)
     return (rcfg.w_internal * t.internal - rcfg.w_external * t.external).item(), t
 
 
@@ -64,11 +60,11 @@ def test_internal_term_is_mean_of_squared_normalised_turns_and_grows_with_turnin
     src = lone_obstacle((1e4, 1e4))
     values = []
     for a in (0.0, 0.1, 0.3, 0.6, A_MAX):
-        _, t = cost(window_from((0, 0), 0.0, [a, a, a]), 0.0, src, rcfg)
+        _, t = cost((0, 0), 0.0, [a, a, a], 0.0, src, rcfg)
         values.append(t.internal.item())
         assert t.internal.item() == pytest.approx((a / A_MAX) ** 2)
     assert values == sorted(values) and values[0] == 0.0 and values[-1] == pytest.approx(1.0)
-    _, mixed = cost(window_from((0, 0), 0.0, [0.0, -A_MAX, A_MAX / 2]), 0.0, src, rcfg)
+    _, mixed = cost((0, 0), 0.0, [0.0, -A_MAX, A_MAX / 2], 0.0, src, rcfg)
     assert mixed.internal.item() == pytest.approx((0 + 1 + 0.25) / 3)
 
 
@@ -76,16 +72,16 @@ def test_internal_term_is_mean_of_squared_normalised_turns_and_grows_with_turnin
 def test_straight_path_far_from_everything_costs_nothing(external):
     rcfg = RewardConfig(external=external)
     src = lone_obstacle((1e4, 1e4))
-    f, t = cost(window_from((0, 0), 0.0, [0.0, 0.0, 0.0]), 0.0, src, rcfg)
+    f, t = cost((0, 0), 0.0, [0.0, 0.0, 0.0], 0.0, src, rcfg)
     assert f == pytest.approx(0.0, abs=1e-12)
     assert t.external.item() == pytest.approx(0.0, abs=1e-12)
 
 
-def circle_window(radius, phase=-np.pi / 2):
+def circle(radius, phase=-np.pi / 2):
     """Three arcs following the circle of the given radius around the origin (counter-clockwise)."""
     a = L / radius
     start = radius * np.array([np.cos(phase), np.sin(phase)])
-    return window_from(start, phase + np.pi / 2, [a, a, a])
+    return start, phase + np.pi / 2, [a, a, a]
 
 
 @pytest.mark.parametrize("external", ["gradient", "level-edge"])
@@ -96,12 +92,12 @@ def test_following_the_level_set_beats_cutting_toward_the_peak_and_staying_far(e
     # the UAV's own level set for "level-edge" (here the circle of radius 45 m).
     radius = FIELD.d_safe_m + 1.0 if external == "gradient" else 45.0
     level = potential(np.array([[[radius, 0.0]]]), src, FIELD).item()
-    follow, _ = cost(circle_window(radius), level, src, rcfg)
+    follow, _ = cost(*circle(radius), level, src, rcfg)
     # Cut toward the peak: from the same start, head straight at the obstacle.
     start = np.array([0.0, -radius - 30.0])
-    cut, _ = cost(window_from(start, np.pi / 2, [0.0, 0.0, 0.0]), level, src, rcfg)
+    cut, _ = cost(start, np.pi / 2, [0.0, 0.0, 0.0], level, src, rcfg)
     # Stay far: a straight pass 95 m abeam.
-    far, _ = cost(window_from((-30.0, -95.0), 0.0, [0.0, 0.0, 0.0]), level, src, rcfg)
+    far, _ = cost((-30.0, -95.0), 0.0, [0.0, 0.0, 0.0], level, src, rcfg)
     assert follow < cut
     assert follow < far
 
@@ -132,35 +128,35 @@ def test_gradient_density_saturates_at_one_on_the_strongest_edge():
 
 def test_quadrature_converges():
     src = lone_obstacle()
-    window = circle_window(40.0)
     level = potential(np.array([[[42.0, 0.0]]]), src, FIELD).item()
-    coarse = contour_terms(window, np.array([[level]]), src, A_MAX, FIELD, RewardConfig())
-    fine = contour_terms(
-        window, np.array([[level]]), src, A_MAX, FIELD, RewardConfig(samples_per_arc=512)
-    )
+    coarse = window_terms(fly(*circle(40.0), level, src, RewardConfig()), A_MAX)
+    fine = window_terms(fly(*circle(40.0), level, src, RewardConfig(samples_per_arc=512)), A_MAX)
     assert coarse.external.item() == pytest.approx(fine.external.item(), rel=2e-2)
 
 
-def test_invalid_arcs_are_ignored():
-    src = lone_obstacle((1e4, 1e4))
-    w = window_from((0, 0), 0.0, [A_MAX, 0.0, 0.0])
-    masked = ArcWindow(w.start_m, w.heading_rad, w.turn_rad, np.array([[[False, True, True]]]), L)
-    t = contour_terms(masked, np.zeros((1, 1)), src, A_MAX, FIELD, RewardConfig())
-    assert t.internal.item() == 0.0
+def test_invalid_arcs_are_ignored_and_a_short_window_is_a_mean():
+    w = ArcWindow(
+        turn_rad=np.array([[[A_MAX, 0.0, A_MAX / 2]]]),
+        external=np.array([[[0.9, 0.2, 0.4]]]),
+        valid=np.array([[[False, True, True]]]),
+    )
+    t = window_terms(w, A_MAX)
+    assert t.internal.item() == pytest.approx((0 + 0.25) / 2)
+    assert t.external.item() == pytest.approx((0.2 + 0.4) / 2)
 
 
 def test_push_appends_the_newest_arc_and_respects_the_flown_mask():
-    w = ArcWindow.empty(num_envs=1, num_uavs=2, window_steps=3, length_m=L)
+    w = ArcWindow.empty(num_envs=1, num_uavs=2, window_steps=3)
     for k in range(4):
         w = w.push(
-            np.full((1, 2, 2), float(k)),
-            np.zeros((1, 2)),
-            np.full((1, 2), 0.1 * k),
-            flown=np.array([[True, k < 1]]),
+            np.full((1, 2), 0.1 * k), np.full((1, 2), 0.01 * k), flown=np.array([[True, k < 1]])
         )
     np.testing.assert_allclose(w.turn_rad[0, 0], [0.1, 0.2, 0.3])
+    np.testing.assert_allclose(w.external[0, 0], [0.01, 0.02, 0.03])
     assert w.valid[0, 0].all()
-    np.testing.assert_allclose(w.start_m[0, 0, -1], [3.0, 3.0])
     # The second UAV flew only the first step: one valid arc, last in the window.
     assert w.valid[0, 1].tolist() == [False, False, True]
     np.testing.assert_allclose(w.turn_rad[0, 1, -1], 0.0)
+    cleared = w.reset(np.array([True]))
+    assert not cleared.valid.any()
+    assert not cleared.turn_rad.any()

@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from sim.config import FieldConfig, PSOConfig, RewardConfig
-from sim.contour import ArcWindow, contour_terms
+from sim.contour import ArcWindow, arc_external, window_terms
 from sim.field import FieldSources, potential
 from sim.kinematics import arc_step
 from sim.reward import assign_contour_levels, reward, swarming_reward
@@ -31,33 +31,22 @@ def test_preplanned_line_points_back_to_the_target_after_a_detour():
     assert parallel.item() < 0.8
 
 
-def random_state(rng, b=3, n=4, k=3, m=2):
-    window = ArcWindow(
-        start_m=rng.uniform(0, 300, (b, n, k, 2)),
-        heading_rad=rng.uniform(-np.pi, np.pi, (b, n, k)),
-        turn_rad=rng.uniform(-A_MAX, A_MAX, (b, n, k)),
-        valid=rng.random((b, n, k)) > 0.2,
-        length_m=L,
-    )
-    src = FieldSources(
-        rng.uniform(0, 300, (b, m, 2)), np.full((b, m), 2.5), rng.uniform(0, 300, (b, 2)), 10.0
-    )
-    return window, src
-
-
 @pytest.mark.parametrize("external", ["gradient", "level-edge"])
 def test_total_is_contour_plus_swarming_with_weights(external):
     rng = np.random.default_rng(0)
-    window, src = random_state(rng)
-    b, n = window.turn_rad.shape[:2]
-    levels = rng.uniform(0, 0.01, (b, n))
+    b, n, k = 3, 4, 3
+    window = ArcWindow(
+        turn_rad=rng.uniform(-A_MAX, A_MAX, (b, n, k)),
+        external=rng.uniform(0, 1, (b, n, k)),
+        valid=rng.random((b, n, k)) > 0.2,
+    )
     heading = rng.uniform(-np.pi, np.pi, (b, n))
     pos = rng.uniform(0, 300, (b, n, 2))
     target = rng.uniform(0, 300, (b, n, 2))
     collided = rng.random((b, n)) > 0.7
     rcfg = RewardConfig(external=external, w_internal=0.7, w_external=1.3)
-    r = reward(window, levels, src, heading, pos, target, collided, A_MAX, FIELD, rcfg)
-    t = contour_terms(window, levels, src, A_MAX, FIELD, rcfg)
+    r = reward(window, heading, pos, target, collided, A_MAX, rcfg)
+    t = window_terms(window, A_MAX)
     np.testing.assert_allclose(r.contour, -(0.7 * t.internal - 1.3 * t.external))
     np.testing.assert_allclose(r.swarming, swarming_reward(heading, pos, target, collided))
     np.testing.assert_allclose(r.total, r.contour + r.swarming)
@@ -66,41 +55,49 @@ def test_total_is_contour_plus_swarming_with_weights(external):
     assert np.all(r.swarming[collided] == 0)
 
 
-def test_batched_call_equals_per_environment_calls():
+@pytest.mark.parametrize("external", ["gradient", "level-edge"])
+def test_arc_scores_batched_equal_per_environment(external):
     rng = np.random.default_rng(1)
-    window, src = random_state(rng)
-    b, n = window.turn_rad.shape[:2]
+    b, n, m = 4, 3, 2
+    start = rng.uniform(0, 300, (b, n, 2))
+    heading = rng.uniform(-np.pi, np.pi, (b, n))
+    turn = rng.uniform(-A_MAX, A_MAX, (b, n))
     levels = rng.uniform(0, 0.01, (b, n))
-    full = contour_terms(window, levels, src, A_MAX, FIELD, RewardConfig())
+    src = FieldSources(
+        rng.uniform(0, 300, (b, m, 2)), np.full((b, m), 2.5), rng.uniform(0, 300, (b, 2)), 10.0
+    )
+    rcfg = RewardConfig(external=external)
+    full = arc_external(start, heading, turn, L, levels, src, FIELD, rcfg)
+    assert np.all((full >= 0) & (full <= 1))
     for e in range(b):
         sl = slice(e, e + 1)
-        w = ArcWindow(
-            window.start_m[sl], window.heading_rad[sl], window.turn_rad[sl], window.valid[sl], L
+        one_src = FieldSources(
+            src.obstacle_pos_m[sl], src.obstacle_speed_m_s[sl], src.centre_m[sl], 10.0
         )
-        s = FieldSources(src.obstacle_pos_m[sl], src.obstacle_speed_m_s[sl], src.centre_m[sl], 10.0)
-        one = contour_terms(w, levels[sl], s, A_MAX, FIELD, RewardConfig())
-        np.testing.assert_allclose(full.external[e], one.external[0])
-        np.testing.assert_allclose(full.internal[e], one.internal[0])
+        one = arc_external(start[sl], heading[sl], turn[sl], L, levels[sl], one_src, FIELD, rcfg)
+        np.testing.assert_allclose(full[e], one[0])
 
 
 def test_reward_sees_the_arc_of_the_action_just_taken():
-    """The newest arc is part of S: two different last actions give different Contour rewards."""
+    """The newest arc is part of S: three different last actions give three Contour rewards."""
     src = FieldSources(
         np.array([[[60.0, 45.0]]]), np.array([[2.5]]), np.array([[500.0, 0.0]]), 10.0
     )
     level = potential(np.array([[[60.0, 0.0]]]), src, FIELD)
     rewards = []
     for last in (-A_MAX, 0.0, A_MAX):
-        w = ArcWindow.empty(1, 1, 3, L)
+        w = ArcWindow.empty(1, 1, 3)
         p, h = np.zeros((1, 1, 2)), np.zeros((1, 1))
         for a in (0.0, 0.0, last):
             turn = np.full((1, 1), a)
-            w = w.push(p, h, turn, np.ones((1, 1), dtype=bool))
+            ext = arc_external(p, h, turn, L, level, src, FIELD, RewardConfig())
+            w = w.push(turn, ext, np.ones((1, 1), dtype=bool))
             p, h = arc_step(p, h, turn, L)
-        t = contour_terms(w, level, src, A_MAX, FIELD, RewardConfig())
+        t = window_terms(w, A_MAX)
         rewards.append((t.internal.item(), t.external.item()))
     assert len(set(rewards)) == 3
-    assert rewards[1][0] == 0.0 and rewards[0][0] == pytest.approx(1 / 3)
+    assert rewards[1][0] == 0.0
+    assert rewards[0][0] == pytest.approx(1 / 3)
 
 
 def test_levels_are_the_field_at_the_pso_adjusted_positions():
