@@ -19,7 +19,9 @@ d_U2O; its text means UAV–UAV spacing). Two departures from the literal formul
 The update is the standard global-best PSO of Eq. pso with the inertia μ ~ U[0, 1] drawn per
 particle and iteration and the usual per-dimension r₁, r₂ ~ U[0, 1] on c₁ and c₂, vectorised
 over particles and over the batch of environments. The first particle of every swarm is the
-current positions themselves, so a feasible configuration is never made worse.
+current positions themselves. Positions that already meet the threshold are their own optimum
+(f_thres = d̄ is its floor and f_shift = 0), so they are returned without a search: the call
+costs almost nothing when there is nothing to separate.
 """
 
 from __future__ import annotations
@@ -48,7 +50,9 @@ class PSOResult:
         max_shift_m: (B,) f_shift of the global best.
         min_distance_m: (B,) minimum pairwise distance of the global best (+inf for N < 2).
         feasible: (B,) whether the global best meets the threshold.
-        evaluations: cost evaluations per environment.
+        searched: (B,) whether PSO ran: positions that already meet the threshold are their
+            own optimum (no shift, f_pso = d̄) and are returned as they are.
+        evaluations: cost evaluations per searched environment.
     """
 
     positions_m: FloatArray
@@ -56,6 +60,7 @@ class PSOResult:
     max_shift_m: FloatArray
     min_distance_m: FloatArray
     feasible: BoolArray
+    searched: BoolArray
     evaluations: int
 
 
@@ -124,9 +129,34 @@ def pso_separate(
     Returns:
         The global best of every environment; see `PSOResult`.
     """
-    q = np.asarray(positions_m, dtype=np.float64).swapaxes(-1, -2)  # (B, 2, N)
-    b, _, n = q.shape
+    q = np.asarray(positions_m, dtype=np.float64)
+    b, n, _ = q.shape
     act = np.ones((b, n), dtype=bool) if active is None else np.asarray(active, dtype=bool)
+    dmin = _min_distance(q, act)
+    search = dmin < cfg.threshold_m
+    positions, cost = q.copy(), np.full(b, cfg.threshold_m)
+    shift, feasible = np.zeros(b), ~search
+    if search.any():
+        found = _search(q[search].swapaxes(-1, -2), act[search], cfg, rng)
+        positions[search] = found.positions_m
+        cost[search], shift[search] = found.cost, found.max_shift_m
+        dmin[search], feasible[search] = found.min_distance_m, found.feasible
+    return PSOResult(positions, cost, shift, dmin, feasible, search, cfg.evaluations)
+
+
+def _min_distance(q: FloatArray, active: BoolArray) -> FloatArray:
+    """Minimum pairwise distance among the active UAVs of each environment, (B,)."""
+    i, j = np.triu_indices(q.shape[1], k=1)
+    diff = q[:, i] - q[:, j]
+    dist = np.hypot(diff[..., 0], diff[..., 1])
+    dist = np.where(active[:, i] & active[:, j], dist, np.inf)
+    smallest: FloatArray = dist.min(axis=-1, initial=np.inf)
+    return smallest
+
+
+def _search(q: FloatArray, act: BoolArray, cfg: PSOConfig, rng: np.random.Generator) -> PSOResult:
+    """The particle swarm itself, on positions (B, 2, N) — coordinate-major."""
+    b, _, n = q.shape
     cost_fn = _Cost(q, act, cfg.threshold_m)
     move = None if act.all() else act[:, None, None, :].astype(np.float64)  # (B, 1, 1, N)
 
@@ -170,6 +200,7 @@ def pso_separate(
     gbest = best[1, :, 0]
 
     return PSOResult(
+        searched=np.ones(b, dtype=bool),
         positions_m=gbest.swapaxes(-1, -2).copy(),
         cost=gcost,
         max_shift_m=gshift,

@@ -1,0 +1,370 @@
+"""The vectorised swarm simulator: state, reset and one pure batched step.
+
+``step(state, actions, rng, cfg) -> (state, StepResult)`` advances B environments of N UAVs and
+M obstacles by one decision step, with no per-agent Python loop:
+
+1. every active UAV flies the constant-turn-rate arc of its action; obstacles fly straight;
+   the virtual centre keeps the swarm's initial velocity;
+2. swept checks find the closest approach, *during* the step, of every UAV to every obstacle,
+   to every other UAV and to its target (`sim.metrics`);
+3. collisions (closer than d_col) end the episode; a UAV that comes within d_col of its target
+   has arrived and leaves the episode (masked); all arrived is a success; the step limit
+   truncates;
+4. every UAV's new arc is scored against the field at mid-step and pushed into its contour
+   window; the full reMARL reward and its Swarming part are computed for all agents at once;
+5. contour levels are (re)assigned by PSO where SPEC §6 says: at episode start (`reset`) and on
+   the first step on which any UAV of an environment senses an obstacle (avoidance begins).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from sim.config import ScenarioConfig
+from sim.contour import ArcWindow, arc_external
+from sim.field import FieldSources
+from sim.kinematics import arc_points, scale_action, wrap_angle
+from sim.metrics import substep_fractions, swept_min_distance
+from sim.observation import ObservationLayout, Observations, build_observations
+from sim.reward import RewardTerms, assign_contour_levels, reward
+from sim.spawn import spawn_obstacles, swarm_layout
+
+FloatArray = NDArray[np.float64]
+BoolArray = NDArray[np.bool_]
+IntArray = NDArray[np.int64]
+
+
+@dataclass(frozen=True)
+class EpisodeStats:
+    """Per-episode accumulators behind the metrics (SPEC §9), reset with the episode.
+
+    Attributes:
+        energy_rad: (B, N) Σ|a| flown so far (E = ∫|S''| dρ on arcs).
+        flown_m: (B, N) distance flown so far.
+        min_u2o_m: (B,) smallest swept UAV–obstacle distance so far (+inf if none).
+        min_u2u_m: (B,) smallest swept UAV–UAV distance so far (+inf if none).
+        swarming_return: (B, N) Σ of the Swarming part of the reward.
+        total_return: (B, N) Σ of the full reMARL reward.
+    """
+
+    energy_rad: FloatArray
+    flown_m: FloatArray
+    min_u2o_m: FloatArray
+    min_u2u_m: FloatArray
+    swarming_return: FloatArray
+    total_return: FloatArray
+
+
+@dataclass(frozen=True)
+class SwarmState:
+    """Everything the simulator knows about B environments, batch first.
+
+    Attributes:
+        pos_m: (B, N, 2) UAV positions.  heading_rad: (B, N).
+        active: (B, N) UAVs still flying (not arrived; the episode is not over).
+        reached: (B, N) UAVs that arrived at their target.
+        start_m: (B, N, 2) spawn positions.  target_m: (B, N, 2).
+        obstacle_pos_m, obstacle_vel_m_s: (B, M, 2).  obstacle_speed_m_s: (B, M).
+        centre_m: (B, 2) virtual centre p*.  swarm_vel_m_s: (B, 2) its constant velocity.
+        levels: (B, N) contour levels φ_i.
+        avoiding: (B,) whether avoidance has begun (levels were reassigned for it).
+        window: the contour windows (B, N, K).
+        steps: (B,) decision steps taken in the current episode.
+        stats: the episode accumulators.
+    """
+
+    pos_m: FloatArray
+    heading_rad: FloatArray
+    active: BoolArray
+    reached: BoolArray
+    start_m: FloatArray
+    target_m: FloatArray
+    obstacle_pos_m: FloatArray
+    obstacle_vel_m_s: FloatArray
+    obstacle_speed_m_s: FloatArray
+    centre_m: FloatArray
+    swarm_vel_m_s: FloatArray
+    levels: FloatArray
+    avoiding: BoolArray
+    window: ArcWindow
+    steps: IntArray
+    stats: EpisodeStats
+
+    @property
+    def num_envs(self) -> int:
+        """B."""
+        return int(self.pos_m.shape[0])
+
+    def velocity_m_s(self, speed_m_s: float) -> FloatArray:
+        """(B, N, 2) UAV velocities at the given airspeed along the headings."""
+        return speed_m_s * np.stack([np.cos(self.heading_rad), np.sin(self.heading_rad)], -1)
+
+    def sources(self, swarm_speed_m_s: float, dt_s: float = 0.0) -> FieldSources:
+        """Field sources, optionally advanced by ``dt_s`` (obstacles and p* move straight)."""
+        return FieldSources(
+            obstacle_pos_m=self.obstacle_pos_m + dt_s * self.obstacle_vel_m_s,
+            obstacle_speed_m_s=self.obstacle_speed_m_s,
+            centre_m=self.centre_m + dt_s * self.swarm_vel_m_s,
+            swarm_speed_m_s=swarm_speed_m_s,
+        )
+
+
+@dataclass(frozen=True)
+class StepResult:
+    """What one step produced, batch first.
+
+    Attributes:
+        obs: observations after the step (for the next decision).
+        reward: every reward term, (B, N); zero for UAVs that did not fly this step.
+        acted: (B, N) UAVs that flew this step.
+        turn_rad: (B, N) the heading change flown.
+        collided_u2o, collided_u2u: (B, N) collisions during the step, by kind.
+        arrived: (B, N) UAVs that reached their target during this step.
+        min_u2o_m, min_u2u_m: (B, N) swept closest approach this step (+inf if none).
+        terminated: (B,) collision, or every UAV arrived.
+        truncated: (B,) step limit reached without termination.
+        success: (B,) every UAV arrived and nothing collided.
+        levels_assigned: (B,) contour levels were reassigned this step (avoidance began).
+    """
+
+    obs: Observations
+    reward: RewardTerms
+    acted: BoolArray
+    turn_rad: FloatArray
+    collided_u2o: BoolArray
+    collided_u2u: BoolArray
+    arrived: BoolArray
+    min_u2o_m: FloatArray
+    min_u2u_m: FloatArray
+    terminated: BoolArray
+    truncated: BoolArray
+    success: BoolArray
+    levels_assigned: BoolArray
+
+
+def _fresh_stats(b: int, n: int) -> EpisodeStats:
+    return EpisodeStats(
+        energy_rad=np.zeros((b, n)),
+        flown_m=np.zeros((b, n)),
+        min_u2o_m=np.full(b, np.inf),
+        min_u2u_m=np.full(b, np.inf),
+        swarming_return=np.zeros((b, n)),
+        total_return=np.zeros((b, n)),
+    )
+
+
+def initial_state(cfg: ScenarioConfig, rng: np.random.Generator, num_envs: int) -> SwarmState:
+    """B new episodes: spawn, obstacles, virtual centre, and contour levels by PSO."""
+    b, n = num_envs, cfg.uav.count
+    layout = swarm_layout(cfg)
+    obs_pos, obs_vel = spawn_obstacles(cfg, rng, b)
+    pos = np.broadcast_to(layout.positions_m, (b, n, 2)).copy()
+    state = SwarmState(
+        pos_m=pos,
+        heading_rad=np.broadcast_to(layout.headings_rad, (b, n)).copy(),
+        active=np.ones((b, n), dtype=bool),
+        reached=np.zeros((b, n), dtype=bool),
+        start_m=pos.copy(),
+        target_m=np.broadcast_to(layout.targets_m, (b, n, 2)).copy(),
+        obstacle_pos_m=obs_pos,
+        obstacle_vel_m_s=obs_vel,
+        obstacle_speed_m_s=np.full((b, cfg.obstacles.count), cfg.obstacles.speed_m_s),
+        centre_m=np.broadcast_to(layout.centre_m, (b, 2)).copy(),
+        swarm_vel_m_s=np.broadcast_to(layout.velocity_m_s, (b, 2)).copy(),
+        levels=np.zeros((b, n)),
+        avoiding=np.zeros(b, dtype=bool),
+        window=ArcWindow.empty(b, n, cfg.reward.window_steps),
+        steps=np.zeros(b, dtype=np.int64),
+        stats=_fresh_stats(b, n),
+    )
+    levels, _ = assign_contour_levels(
+        pos, state.sources(cfg.uav.speed_m_s), cfg.field, cfg.pso, rng
+    )
+    return dataclasses.replace(state, levels=levels)
+
+
+def _merge(old: object, new: object, mask: BoolArray) -> object:
+    """Replace the masked environments of a dataclass of arrays (recursively)."""
+    if dataclasses.is_dataclass(old) and not isinstance(old, type):
+        fields = {
+            f.name: _merge(getattr(old, f.name), getattr(new, f.name), mask)
+            for f in dataclasses.fields(old)
+        }
+        return dataclasses.replace(old, **fields)
+    if isinstance(old, np.ndarray):
+        out = old.copy()
+        out[mask] = new
+        return out
+    return old
+
+
+def reset_where(
+    state: SwarmState, mask: BoolArray, cfg: ScenarioConfig, rng: np.random.Generator
+) -> SwarmState:
+    """Start new episodes in the environments selected by ``mask`` (B,); others are untouched."""
+    count = int(mask.sum())
+    if count == 0:
+        return state
+    fresh = initial_state(cfg, rng, count)
+    merged = _merge(state, fresh, mask)
+    assert isinstance(merged, SwarmState)
+    return merged
+
+
+def observe(state: SwarmState, cfg: ScenarioConfig) -> Observations:
+    """Every UAV's observation of the current state (the shared builder)."""
+    return build_observations(
+        ObservationLayout.from_scenario(cfg),
+        state.pos_m,
+        state.heading_rad,
+        state.velocity_m_s(cfg.uav.speed_m_s),
+        state.target_m,
+        state.centre_m,
+        state.obstacle_pos_m,
+        state.obstacle_vel_m_s,
+    )
+
+
+def step(
+    state: SwarmState, actions: NDArray[Any], rng: np.random.Generator, cfg: ScenarioConfig
+) -> tuple[SwarmState, StepResult]:
+    """Advance every environment by one decision step.
+
+    Args:
+        state: the current state (not modified).
+        actions: (B, N) normalised heading changes in [−1, 1] (clipped); ignored for UAVs that
+            are not active.
+        rng: the caller's generator (PSO when avoidance begins).
+        cfg: the scenario.
+
+    Returns:
+        (the next state, what happened). Environments whose episode ended stay ended (their
+        UAVs are inactive) until `reset_where` starts a new one.
+    """
+    b, n = state.pos_m.shape[:2]
+    dt, length, v_s = cfg.dt_s, cfg.step_length_m, cfg.uav.speed_m_s
+    acted = state.active
+    commanded = scale_action(np.asarray(actions, dtype=np.float64), cfg.uav.max_turn_rad)
+    turn = np.where(acted, commanded, 0.0)
+    # ---- kinematics: arcs for UAVs (inactive UAVs stay put), straight lines for obstacles
+    frac = substep_fractions()  # (T + 1,)
+    path = arc_points(state.pos_m, state.heading_rad, turn, length, frac)  # (B, N, T+1, 2)
+    path = np.where(acted[..., None, None], path, state.pos_m[:, :, None])
+    new_pos = path[:, :, -1]
+    new_heading = np.where(acted, wrap_angle(state.heading_rad + turn), state.heading_rad)
+    obs_path = (
+        state.obstacle_pos_m[:, :, None] + dt * frac[:, None] * state.obstacle_vel_m_s[:, :, None]
+    )  # (B, M, T+1, 2)
+
+    # ---- swept closest approaches during the step
+    m = state.obstacle_pos_m.shape[1]
+    if m:
+        d_uo = swept_min_distance(path[:, :, None] - obs_path[:, None])  # (B, N, M)
+        d_uo = np.where(acted[..., None], d_uo, np.inf)
+        min_u2o = d_uo.min(axis=-1)
+    else:
+        min_u2o = np.full((b, n), np.inf)
+    if n > 1:
+        i, j = np.triu_indices(n, k=1)
+        d_pair = swept_min_distance(path[:, i] - path[:, j])  # (B, pairs)
+        d_pair = np.where(acted[:, i] & acted[:, j], d_pair, np.inf)
+        d_uu = np.full((b, n, n), np.inf)
+        d_uu[:, i, j] = d_pair
+        d_uu[:, j, i] = d_pair
+        min_u2u = d_uu.min(axis=-1)
+    else:
+        min_u2u = np.full((b, n), np.inf)
+    d_target = swept_min_distance(path - state.target_m[:, :, None])  # (B, N)
+
+    collided_u2o = acted & (min_u2o < cfg.d_col_m)
+    collided_u2u = acted & (min_u2u < cfg.d_col_m)
+    collided = collided_u2o | collided_u2u
+    arrived = acted & ~collided & (d_target <= cfg.d_col_m)
+    any_collision = collided.any(axis=-1)
+    reached = state.reached | arrived
+    all_reached = reached.all(axis=-1)
+    running = acted.any(axis=-1)
+    terminated = running & (any_collision | all_reached)
+    steps = state.steps + running
+    truncated = running & ~terminated & (steps >= cfg.max_steps)
+    over = terminated | truncated
+    active = acted & ~arrived & ~over[:, None]
+
+    # ---- reward: score the new arc on the mid-step field, push it, evaluate the window
+    mid = state.sources(v_s, 0.5 * dt)
+    ext = arc_external(
+        state.pos_m, state.heading_rad, turn, length, state.levels, mid, cfg.field, cfg.reward
+    )
+    window = state.window.push(turn, ext, acted)
+    terms = reward(
+        window, new_heading, new_pos, state.target_m, collided, cfg.uav.max_turn_rad, cfg.reward
+    )
+    terms = RewardTerms(*(np.where(acted, t, 0.0) for t in dataclasses.astuple(terms)))
+
+    stats = state.stats
+    stats = EpisodeStats(
+        energy_rad=stats.energy_rad + np.abs(turn),
+        flown_m=stats.flown_m + length * acted,
+        min_u2o_m=np.minimum(stats.min_u2o_m, min_u2o.min(axis=-1)),
+        min_u2u_m=np.minimum(stats.min_u2u_m, min_u2u.min(axis=-1)),
+        swarming_return=stats.swarming_return + terms.swarming,
+        total_return=stats.total_return + terms.total,
+    )
+    new_state = SwarmState(
+        pos_m=new_pos,
+        heading_rad=new_heading,
+        active=active,
+        reached=reached,
+        start_m=state.start_m,
+        target_m=state.target_m,
+        obstacle_pos_m=obs_path[:, :, -1],
+        obstacle_vel_m_s=state.obstacle_vel_m_s,
+        obstacle_speed_m_s=state.obstacle_speed_m_s,
+        centre_m=state.centre_m + dt * state.swarm_vel_m_s,
+        swarm_vel_m_s=state.swarm_vel_m_s,
+        levels=state.levels,
+        avoiding=state.avoiding,
+        window=window,
+        steps=steps,
+        stats=stats,
+    )
+    obs = observe(new_state, cfg)
+
+    # ---- avoidance begins: the first sensing of an obstacle reassigns the contour levels
+    begin = ~new_state.avoiding & ~over & (obs.sensed & active[..., None]).any(axis=(1, 2))
+    if begin.any():
+        sub = FieldSources(
+            new_state.obstacle_pos_m[begin],
+            new_state.obstacle_speed_m_s[begin],
+            new_state.centre_m[begin],
+            v_s,
+        )
+        levels, _ = assign_contour_levels(
+            new_state.pos_m[begin], sub, cfg.field, cfg.pso, rng, active[begin]
+        )
+        new_levels = new_state.levels.copy()
+        new_levels[begin] = levels
+        new_state = dataclasses.replace(
+            new_state, levels=new_levels, avoiding=new_state.avoiding | begin
+        )
+    result = StepResult(
+        obs=obs,
+        reward=terms,
+        acted=acted,
+        turn_rad=turn,
+        collided_u2o=collided_u2o,
+        collided_u2u=collided_u2u,
+        arrived=arrived,
+        min_u2o_m=min_u2o,
+        min_u2u_m=min_u2u,
+        terminated=terminated,
+        truncated=truncated,
+        success=terminated & all_reached & ~any_collision,
+        levels_assigned=begin,
+    )
+    return new_state, result
