@@ -44,4 +44,7 @@ def potential_field_actions(
     push = REPULSION_GAIN * (away + ahead * side) / dist**2 * mask[..., None]
     desired = desired + push.sum(axis=-2)
     heading_error = np.arctan2(desired[..., 1], desired[..., 0])
-    return np.clip(heading_error / max_turn_rad, -1.0, 1.0).astype(np.float32)
+    actions: NDArray[np.float32] = np.clip(heading_error / max_turn_rad, -1.0, 1.0).astype(
+        np.float32
+    )
+    return actions
