@@ -102,9 +102,6 @@ class RewardConfig:
     window_steps: int = 3
     """K: decision steps in the contour window S, including the arc of the action just taken."""
 
-    samples_per_arc: int = 8
-    """Quadrature points per arc for the external term (composite midpoint rule in arc length)."""
-
     external: ExternalTerm = "level-edge"
     """External (image) energy: "level-edge" (edge of the UAV's own level set Φ = φ_i, as in the
     active-contour method the paper builds on) or "gradient" (the paper's literal ½|∇Φ|²)."""
@@ -123,11 +120,6 @@ class RewardConfig:
             isinstance(self.window_steps, int) and self.window_steps >= 1,
             "window_steps",
             f"must be an integer >= 1, got {self.window_steps!r}",
-        )
-        _require(
-            isinstance(self.samples_per_arc, int) and self.samples_per_arc >= 1,
-            "samples_per_arc",
-            f"must be an integer >= 1, got {self.samples_per_arc!r}",
         )
         _require(
             self.external in EXTERNAL_TERMS,
@@ -334,6 +326,11 @@ class ScenarioConfig:
     d_col_m: float = 20.0
     """d_col: collision distance, UAV–UAV and UAV–obstacle, metres (paper Table 2)."""
 
+    substeps: int = 8
+    """T: sub-intervals of each decision step. The swept collision checks (chord error
+    ≤ L·a_max/(8T²), 3 cm at the defaults) and the trapezoid quadrature of the reward's external
+    term both use the same T + 1 points of every arc."""
+
     sensing: SensingConfig = dataclasses.field(default_factory=SensingConfig)
     field: FieldConfig = dataclasses.field(default_factory=FieldConfig)
     reward: RewardConfig = dataclasses.field(default_factory=RewardConfig)
@@ -341,6 +338,11 @@ class ScenarioConfig:
 
     def __post_init__(self) -> None:
         _positive(self, "arena_length_m", "arena_width_m", "dt_s", "d_col_m")
+        _require(
+            isinstance(self.substeps, int) and self.substeps >= 1,
+            "substeps",
+            f"must be an integer >= 1, got {self.substeps!r}",
+        )
         _require(
             isinstance(self.max_steps, int) and self.max_steps >= 1,
             "max_steps",

@@ -17,8 +17,9 @@ lies in [0, 1] per step:
     distance from q to the UAV's own level set Φ = φ_i: an analytic, smoothed edge map of the
     field cut at the UAV's level, as in the active-contour method the paper builds on.
 
-Quadrature of the external term: composite midpoint rule in arc length, Q points per arc
-(`RewardConfig.samples_per_arc`), error O((L/Q)²) for a smooth integrand.
+Quadrature of the external term: composite trapezoid rule in arc length on the T + 1 equally
+spaced points of each arc (`ScenarioConfig.substeps`; the same points serve the swept collision
+checks), error O((L/T)²) for a smooth integrand.
 """
 
 from __future__ import annotations
@@ -30,8 +31,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from sim.config import FieldConfig, RewardConfig
-from sim.field import FieldSources, peak_gradient, potential_and_gradient
-from sim.kinematics import arc_points
+from sim.field import FieldSources, peak_gradient, potential_and_gradient_xy
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -112,13 +112,42 @@ def arc_bending_energy(turn_rad: FloatArray, length_m: float) -> FloatArray:
     return 0.5 * np.square(turn_rad) / length_m
 
 
-def quadrature_fractions(samples_per_arc: int) -> FloatArray:
-    """Midpoints (j + ½)/Q, j = 0..Q−1, of the Q equal pieces of an arc.
+def trapezoid_weights(intervals: int) -> FloatArray:
+    """Weights of the composite trapezoid rule on intervals + 1 equally spaced points (sum 1).
 
-    >>> quadrature_fractions(4).tolist()
-    [0.125, 0.375, 0.625, 0.875]
+    >>> trapezoid_weights(4).tolist()
+    [0.125, 0.25, 0.25, 0.25, 0.125]
     """
-    return (np.arange(samples_per_arc) + 0.5) / samples_per_arc
+    w = np.full(intervals + 1, 1.0 / intervals)
+    w[[0, -1]] *= 0.5
+    return w
+
+
+def external_density_xy(
+    x_m: FloatArray,
+    y_m: FloatArray,
+    levels: FloatArray | None,
+    src: FieldSources,
+    field_cfg: FieldConfig,
+    reward_cfg: RewardConfig,
+) -> FloatArray:
+    """Edge density e(q) ∈ [0, 1] at points given by coordinates x, y (each (B, *P)).
+
+    Args:
+        levels: φ_i broadcastable to (B, *P), required by "level-edge".
+
+    Returns:
+        (B, *P) densities.
+    """
+    phi, gx, gy = potential_and_gradient_xy(x_m, y_m, src, field_cfg)
+    gnorm = np.sqrt(gx * gx + gy * gy)
+    if reward_cfg.external == "gradient":
+        return np.square(np.minimum(gnorm / peak_gradient(field_cfg, src.swarm_speed_m_s), 1.0))
+    if levels is None:
+        raise ValueError('the "level-edge" external term needs the UAVs\' contour levels')
+    has_edge = gnorm > GRADIENT_FLOOR
+    signed = (phi - levels) / (np.where(has_edge, gnorm, 1.0) * reward_cfg.edge_width_m)
+    return np.exp(-signed * signed) * has_edge
 
 
 def external_density(
@@ -137,37 +166,39 @@ def external_density(
     Returns:
         (B, *P) densities.
     """
-    phi, grad = potential_and_gradient(points_m, src, field_cfg)
-    gnorm = np.hypot(grad[..., 0], grad[..., 1])
-    if reward_cfg.external == "gradient":
-        return np.square(np.minimum(gnorm / peak_gradient(field_cfg, src.swarm_speed_m_s), 1.0))
-    if levels is None:
-        raise ValueError('the "level-edge" external term needs the UAVs\' contour levels')
-    has_edge = gnorm > GRADIENT_FLOOR
-    signed_m = (phi - levels) / np.where(has_edge, gnorm, 1.0)
-    return np.where(has_edge, np.exp(-np.square(signed_m / reward_cfg.edge_width_m)), 0.0)
+    return external_density_xy(
+        points_m[..., 0], points_m[..., 1], levels, src, field_cfg, reward_cfg
+    )
 
 
 def arc_external(
-    start_m: FloatArray,
-    heading_rad: FloatArray,
-    turn_rad: FloatArray,
-    length_m: float,
+    points_m: FloatArray,
     levels: FloatArray,
     src: FieldSources,
     field_cfg: FieldConfig,
     reward_cfg: RewardConfig,
 ) -> FloatArray:
-    """Arc-length mean of the edge density along each arc (midpoint rule): (B, N) in [0, 1].
+    """Arc-length mean of the edge density along each arc (trapezoid rule): (B, N) in [0, 1].
 
     Args:
-        start_m: (B, N, 2) start of each arc; heading_rad, turn_rad: (B, N).
+        points_m: (B, N, T + 1, 2) equally spaced points of each arc, ends included
+            (`sim.kinematics.arc_points` at `sim.metrics.substep_fractions`).
         levels: (B, N) each UAV's contour level φ_i (ignored by the "gradient" term).
     """
-    fractions = quadrature_fractions(reward_cfg.samples_per_arc)
-    pts = arc_points(start_m, heading_rad, turn_rad, length_m, fractions)  # (B, N, Q, 2)
-    dens = external_density(pts, levels[..., None], src, field_cfg, reward_cfg)  # (B, N, Q)
-    mean: FloatArray = dens.mean(axis=-1)
+    return arc_external_xy(points_m[..., 0], points_m[..., 1], levels, src, field_cfg, reward_cfg)
+
+
+def arc_external_xy(
+    x_m: FloatArray,
+    y_m: FloatArray,
+    levels: FloatArray,
+    src: FieldSources,
+    field_cfg: FieldConfig,
+    reward_cfg: RewardConfig,
+) -> FloatArray:
+    """`arc_external` on the coordinates of the arc points, each (B, N, T + 1)."""
+    dens = external_density_xy(x_m, y_m, levels[..., None], src, field_cfg, reward_cfg)
+    mean: FloatArray = dens @ trapezoid_weights(x_m.shape[-1] - 1)
     return mean
 
 

@@ -212,7 +212,7 @@ class SwarmVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float32], NDArray
             infos["final_obs"] = obs.copy()
             infos["_final_obs"] = done.copy()
             state = reset_where(state, done, self.cfg, self._rng)
-            obs = np.where(done[:, None, None], observe(state, self.cfg).flat(), obs)
+            obs[done] = observe(state, self.cfg, done).flat()
         self._state = state
         infos["active"] = state.active.copy()
         if self.render_mode is not None:

@@ -66,10 +66,26 @@ class FieldSources:
         return inten
 
 
-def _expand(source: FloatArray, points: FloatArray) -> FloatArray:
-    """Reshape per-env (B, X) or (B, M, X) arrays so they broadcast against (B, *P, ...)."""
-    extra = points.ndim - 2  # number of point dimensions P
-    return source.reshape(source.shape[:1] + (1,) * extra + source.shape[1:])
+def _expand(source: FloatArray, points_ndim: int) -> FloatArray:
+    """Reshape per-env (B,) or (B, M) arrays to broadcast against (B, *P[, M]) point arrays."""
+    return source.reshape(source.shape[:1] + (1,) * (points_ndim - 1) + source.shape[1:])
+
+
+def _inverse_square(
+    d2: FloatArray, intensity: FloatArray | float, plateau_m: float, range_m: float, shift: bool
+) -> tuple[FloatArray, FloatArray]:
+    """I/max(d, plateau)² inside the range (lowered by I/R² if ``shift``) and its gradient factor.
+
+    Returns:
+        (phi, coef) with ∇ = coef·(q − p): coef = −2I/d⁴ on the slope, 0 on the plateau and
+        outside the range.
+    """
+    inside = d2 <= range_m**2
+    inv = 1.0 / np.maximum(d2, plateau_m**2)
+    phi = intensity * ((inv - 1.0 / range_m**2) if shift else inv) * inside
+    slope = inside & (d2 > plateau_m**2)
+    coef = (-GRADIENT_EXPONENT * intensity) * (inv * inv) * slope
+    return phi, coef
 
 
 def obstacle_terms(
@@ -83,16 +99,12 @@ def obstacle_terms(
     Returns:
         (phi (B, *P, M), grad (B, *P, M, 2)).
     """
-    diff = points_m[..., None, :] - _expand(src.obstacle_pos_m, points_m)  # (B, *P, M, 2)
+    nd = points_m.ndim - 1
+    diff = points_m[..., None, :] - _expand(src.obstacle_pos_m, nd)  # (B, *P, M, 2)
     d2 = np.einsum("...i,...i->...", diff, diff)  # (B, *P, M)
-    inten = _expand(src.intensity(), points_m)  # (B, 1.., M)
-    safe2, range2 = cfg.d_safe_m**2, cfg.obstacle_range_m**2
-    inside = d2 <= range2
-    offset = 1.0 / range2 if cfg.continuous else 0.0
-    phi = np.where(inside, inten * (1.0 / np.maximum(d2, safe2) - offset), 0.0)
-    slope = (d2 > safe2) & inside
-    # ∇(I/d²) = −2 I (q − p_o) / d⁴ on the slope; the plateau and the outside are flat.
-    coef = np.where(slope, -GRADIENT_EXPONENT * inten / np.where(slope, d2, 1.0) ** 2, 0.0)
+    phi, coef = _inverse_square(
+        d2, _expand(src.intensity(), nd), cfg.d_safe_m, cfg.obstacle_range_m, cfg.continuous
+    )
     return phi, coef[..., None] * diff
 
 
@@ -100,27 +112,50 @@ def swarm_term(
     points_m: FloatArray, src: FieldSources, cfg: FieldConfig
 ) -> tuple[FloatArray, FloatArray]:
     """The swarm's Φ_s and ∇Φ_s at the points: (phi (B, *P), grad (B, *P, 2))."""
-    diff = points_m - _expand(src.centre_m, points_m)  # (B, *P, 2)
+    diff = points_m - _expand(src.centre_m, points_m.ndim - 1)  # (B, *P, 2)
     d2 = np.einsum("...i,...i->...", diff, diff)
-    floor2, range2 = cfg.swarm_floor_m**2, cfg.swarm_range_m**2
-    inside = d2 <= range2
-    vs = src.swarm_speed_m_s
-    offset = 1.0 / range2 if cfg.continuous else 0.0
-    phi = np.where(inside, vs * (1.0 / np.maximum(d2, floor2) - offset), 0.0)
-    slope = (d2 > floor2) & inside
-    coef = np.where(slope, -GRADIENT_EXPONENT * vs / np.where(slope, d2, 1.0) ** 2, 0.0)
+    phi, coef = _inverse_square(
+        d2, src.swarm_speed_m_s, cfg.swarm_floor_m, cfg.swarm_range_m, cfg.continuous
+    )
     return phi, coef[..., None] * diff
+
+
+def potential_and_gradient_xy(
+    x_m: FloatArray, y_m: FloatArray, src: FieldSources, cfg: FieldConfig
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Φ and the two components of ∇Φ at points given by their coordinates, each (B, *P).
+
+    The same field as `potential_and_gradient`, on contiguous component arrays (faster).
+    """
+    nd = x_m.ndim
+    dx = x_m - _expand(src.centre_m[:, 0], nd)
+    dy = y_m - _expand(src.centre_m[:, 1], nd)
+    phi, coef = _inverse_square(
+        dx * dx + dy * dy, src.swarm_speed_m_s, cfg.swarm_floor_m, cfg.swarm_range_m, cfg.continuous
+    )
+    gx, gy = coef * dx, coef * dy
+    if src.obstacle_pos_m.shape[1]:
+        ox = x_m[..., None] - _expand(src.obstacle_pos_m[..., 0], nd)  # (B, *P, M)
+        oy = y_m[..., None] - _expand(src.obstacle_pos_m[..., 1], nd)
+        phi_o, coef_o = _inverse_square(
+            ox * ox + oy * oy,
+            _expand(src.intensity(), nd),
+            cfg.d_safe_m,
+            cfg.obstacle_range_m,
+            cfg.continuous,
+        )
+        phi = phi + phi_o.sum(axis=-1)
+        gx = gx + (coef_o * ox).sum(axis=-1)
+        gy = gy + (coef_o * oy).sum(axis=-1)
+    return phi, gx, gy
 
 
 def potential_and_gradient(
     points_m: FloatArray, src: FieldSources, cfg: FieldConfig
 ) -> tuple[FloatArray, FloatArray]:
     """Φ and ∇Φ at the points (Eq. environmentfield): (phi (B, *P), grad (B, *P, 2))."""
-    phi_s, grad_s = swarm_term(points_m, src, cfg)
-    if src.obstacle_pos_m.shape[1] == 0:
-        return phi_s, grad_s
-    phi_o, grad_o = obstacle_terms(points_m, src, cfg)
-    return phi_s + phi_o.sum(axis=-1), grad_s + grad_o.sum(axis=-2)
+    phi, gx, gy = potential_and_gradient_xy(points_m[..., 0], points_m[..., 1], src, cfg)
+    return phi, np.stack([gx, gy], axis=-1)
 
 
 def potential(points_m: FloatArray, src: FieldSources, cfg: FieldConfig) -> FloatArray:

@@ -13,6 +13,9 @@ from numpy.typing import NDArray
 
 FloatArray = NDArray[np.float64]
 
+SINC_SERIES_BELOW = 1e-3
+"""|x| below which sin(x)/x is evaluated as 1 − x²/6 (error < 1e-13)."""
+
 
 def scale_action(action: FloatArray, max_turn_rad: float) -> FloatArray:
     """Map normalised actions in [−1, 1] to heading changes in [−a_max, a_max], radians.
@@ -34,9 +37,32 @@ def wrap_angle(angle_rad: FloatArray) -> FloatArray:
     return (angle_rad + np.pi) % (2 * np.pi) - np.pi
 
 
-def _sinc(x: FloatArray) -> FloatArray:
-    """sin(x)/x with the removable singularity filled (numpy's sinc is normalised by π)."""
-    return np.sinc(x / np.pi)
+def sinc(x: FloatArray) -> FloatArray:
+    """sin(x)/x, with 1 at 0 and a 3-term series below |x| = 1e-3 (numpy's sinc is slower)."""
+    small = np.abs(x) < SINC_SERIES_BELOW
+    safe = np.where(small, 1.0, x)
+    return np.where(small, 1.0 - x * x / 6.0, np.sin(safe) / safe)
+
+
+def arc_points_xy(
+    start_m: FloatArray,
+    heading_rad: FloatArray,
+    turn_rad: FloatArray,
+    length_m: float | FloatArray,
+    fractions: FloatArray,
+) -> tuple[FloatArray, FloatArray]:
+    """X and y (each (..., Q)) of the points at the given fractions of arc length.
+
+    The same as `arc_points`, as two contiguous component arrays (faster to work with);
+    ``length_m`` may also be an array (...,) of per-arc lengths (0 keeps a UAV in place).
+    """
+    u = np.asarray(fractions, dtype=np.float64)
+    half = (0.5 * u) * turn_rad[..., None]  # (..., Q)
+    chord = (np.asarray(length_m)[..., None] * u) * sinc(half)  # (..., Q)
+    direction = heading_rad[..., None] + half
+    x = start_m[..., 0, None] + chord * np.cos(direction)
+    y = start_m[..., 1, None] + chord * np.sin(direction)
+    return x, y
 
 
 def arc_points(
@@ -58,12 +84,7 @@ def arc_points(
     Returns:
         (..., Q, 2) points.
     """
-    u = np.asarray(fractions, dtype=np.float64)
-    half = 0.5 * turn_rad[..., None] * u  # (..., Q)
-    chord = length_m * u * _sinc(half)  # (..., Q)
-    direction = heading_rad[..., None] + half
-    offset = np.stack([chord * np.cos(direction), chord * np.sin(direction)], axis=-1)
-    return start_m[..., None, :] + offset  # (..., Q, 2)
+    return np.stack(arc_points_xy(start_m, heading_rad, turn_rad, length_m, fractions), axis=-1)
 
 
 def arc_step(

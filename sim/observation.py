@@ -11,8 +11,9 @@ a policy trained flying east works flying north over any origin:
 | 2.. | (obstacle − own position) / range  | obstacle velocity / UAV speed          |
 
 Obstacle rows hold the m nearest obstacles inside the sensing range and aperture, nearest first;
-rows beyond those are zero and their mask entry is 0. Entries are clipped to ±`CLIP`. Units: positions are divided by the sensing
-range (m / m), velocities by the UAV speed (m/s / m/s), so every entry is dimensionless.
+rows beyond those are zero and their mask entry is 0. Entries are clipped to ±`CLIP`. Units:
+positions are divided by the sensing range (m / m), velocities by the UAV speed (m/s / m/s), so
+every entry is dimensionless.
 """
 
 from __future__ import annotations

@@ -26,10 +26,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from sim.config import ScenarioConfig
-from sim.contour import ArcWindow, arc_external
+from sim.contour import ArcWindow, arc_external_xy
 from sim.field import FieldSources
-from sim.kinematics import arc_points, scale_action, wrap_angle
-from sim.metrics import substep_fractions, swept_min_distance
+from sim.kinematics import scale_action, sinc, wrap_angle
+from sim.metrics import substep_fractions, swept_min_distance_xy
 from sim.observation import ObservationLayout, Observations, build_observations
 from sim.reward import RewardTerms, assign_contour_levels, reward
 from sim.spawn import spawn_obstacles, swarm_layout
@@ -99,10 +99,6 @@ class SwarmState:
     def num_envs(self) -> int:
         """B."""
         return int(self.pos_m.shape[0])
-
-    def velocity_m_s(self, speed_m_s: float) -> FloatArray:
-        """(B, N, 2) UAV velocities at the given airspeed along the headings."""
-        return speed_m_s * np.stack([np.cos(self.heading_rad), np.sin(self.heading_rad)], -1)
 
     def sources(self, swarm_speed_m_s: float, dt_s: float = 0.0) -> FieldSources:
         """Field sources, optionally advanced by ``dt_s`` (obstacles and p* move straight)."""
@@ -216,17 +212,24 @@ def reset_where(
     return merged
 
 
-def observe(state: SwarmState, cfg: ScenarioConfig) -> Observations:
-    """Every UAV's observation of the current state (the shared builder)."""
+def observe(state: SwarmState, cfg: ScenarioConfig, envs: BoolArray | None = None) -> Observations:
+    """Every UAV's observation of the current state (the shared builder).
+
+    Args:
+        envs: (B,) observe only these environments (the result has their count first).
+    """
+    sel: slice | BoolArray = slice(None) if envs is None else envs
+    heading = state.heading_rad[sel]
+    velocity = cfg.uav.speed_m_s * np.stack([np.cos(heading), np.sin(heading)], axis=-1)
     return build_observations(
         ObservationLayout.from_scenario(cfg),
-        state.pos_m,
-        state.heading_rad,
-        state.velocity_m_s(cfg.uav.speed_m_s),
-        state.target_m,
-        state.centre_m,
-        state.obstacle_pos_m,
-        state.obstacle_vel_m_s,
+        state.pos_m[sel],
+        heading,
+        velocity,
+        state.target_m[sel],
+        state.centre_m[sel],
+        state.obstacle_pos_m[sel],
+        state.obstacle_vel_m_s[sel],
     )
 
 
@@ -247,39 +250,48 @@ def step(
         UAVs are inactive) until `reset_where` starts a new one.
     """
     b, n = state.pos_m.shape[:2]
+    m = state.obstacle_pos_m.shape[1]
     dt, length, v_s = cfg.dt_s, cfg.step_length_m, cfg.uav.speed_m_s
     acted = state.active
     commanded = scale_action(np.asarray(actions, dtype=np.float64), cfg.uav.max_turn_rad)
     turn = np.where(acted, commanded, 0.0)
-    # ---- kinematics: arcs for UAVs (inactive UAVs stay put), straight lines for obstacles
-    frac = substep_fractions()  # (T + 1,)
-    path = arc_points(state.pos_m, state.heading_rad, turn, length, frac)  # (B, N, T+1, 2)
-    path = np.where(acted[..., None, None], path, state.pos_m[:, :, None])
-    new_pos = path[:, :, -1]
+    # ---- kinematics at the T + 1 sub-step instants: arcs for the UAVs (inactive ones stay
+    # put: zero length), straight lines for the obstacles.
+    frac = substep_fractions(cfg.substeps)  # (T + 1,)
+    u = frac[:, None, None]  # time first: (T + 1, B, N) slices are contiguous
+    half = (0.5 * u) * turn
+    chord = (length * u) * acted * sinc(half)
+    direction = state.heading_rad + half
+    px = state.pos_m[..., 0] + chord * np.cos(direction)  # (T + 1, B, N)
+    py = state.pos_m[..., 1] + chord * np.sin(direction)
+    new_pos = np.stack([px[-1], py[-1]], axis=-1)
     new_heading = np.where(acted, wrap_angle(state.heading_rad + turn), state.heading_rad)
-    obs_path = (
-        state.obstacle_pos_m[:, :, None] + dt * frac[:, None] * state.obstacle_vel_m_s[:, :, None]
-    )  # (B, M, T+1, 2)
+    tdt = (dt * frac)[:, None, None]
+    ox = state.obstacle_pos_m[..., 0] + tdt * state.obstacle_vel_m_s[..., 0]  # (T + 1, B, M)
+    oy = state.obstacle_pos_m[..., 1] + tdt * state.obstacle_vel_m_s[..., 1]
 
-    # ---- swept closest approaches during the step
-    m = state.obstacle_pos_m.shape[1]
-    if m:
-        d_uo = swept_min_distance(path[:, :, None] - obs_path[:, None])  # (B, N, M)
-        d_uo = np.where(acted[..., None], d_uo, np.inf)
-        min_u2o = d_uo.min(axis=-1)
-    else:
-        min_u2o = np.full((b, n), np.inf)
-    if n > 1:
-        i, j = np.triu_indices(n, k=1)
-        d_pair = swept_min_distance(path[:, i] - path[:, j])  # (B, pairs)
-        d_pair = np.where(acted[:, i] & acted[:, j], d_pair, np.inf)
-        d_uu = np.full((b, n, n), np.inf)
-        d_uu[:, i, j] = d_pair
-        d_uu[:, j, i] = d_pair
-        min_u2u = d_uu.min(axis=-1)
-    else:
-        min_u2u = np.full((b, n), np.inf)
-    d_target = swept_min_distance(path - state.target_m[:, :, None])  # (B, N)
+    # ---- swept closest approaches during the step, every kind in one float32 call:
+    # UAV–obstacle (N·M), UAV–UAV pairs (P), UAV–own target (N).
+    i, j = np.triu_indices(n, k=1)
+    k_uo, k_uu = n * m, len(i)
+    shape = (len(frac), b, k_uo + k_uu + n)
+    rel_x, rel_y = np.empty(shape, np.float32), np.empty(shape, np.float32)
+    for rel, p, o, t in (
+        (rel_x, px, ox, state.target_m[..., 0]),
+        (rel_y, py, oy, state.target_m[..., 1]),
+    ):
+        rel[..., :k_uo].reshape(len(frac), b, n, m)[...] = p[..., None] - o[:, :, None]
+        rel[..., k_uo : k_uo + k_uu] = p[..., i] - p[..., j]
+        rel[..., k_uo + k_uu :] = p - t
+    swept = swept_min_distance_xy(rel_x, rel_y).astype(np.float64)  # (B, N·M + P + N)
+    d_uo = swept[:, :k_uo].reshape(b, n, m)
+    d_pair = np.where(acted[:, i] & acted[:, j], swept[:, k_uo : k_uo + k_uu], np.inf)
+    d_target = swept[:, k_uo + k_uu :]
+    min_u2o = np.where(acted, d_uo.min(axis=-1, initial=np.inf), np.inf)
+    d_uu = np.full((b, n, n), np.inf)
+    d_uu[:, i, j] = d_pair
+    d_uu[:, j, i] = d_pair
+    min_u2u = d_uu.min(axis=-1)
 
     collided_u2o = acted & (min_u2o < cfg.d_col_m)
     collided_u2u = acted & (min_u2u < cfg.d_col_m)
@@ -297,8 +309,8 @@ def step(
 
     # ---- reward: score the new arc on the mid-step field, push it, evaluate the window
     mid = state.sources(v_s, 0.5 * dt)
-    ext = arc_external(
-        state.pos_m, state.heading_rad, turn, length, state.levels, mid, cfg.field, cfg.reward
+    ext = arc_external_xy(
+        px.transpose(1, 2, 0), py.transpose(1, 2, 0), state.levels, mid, cfg.field, cfg.reward
     )
     window = state.window.push(turn, ext, acted)
     terms = reward(
@@ -322,7 +334,7 @@ def step(
         reached=reached,
         start_m=state.start_m,
         target_m=state.target_m,
-        obstacle_pos_m=obs_path[:, :, -1],
+        obstacle_pos_m=np.stack([ox[-1], oy[-1]], axis=-1),
         obstacle_vel_m_s=state.obstacle_vel_m_s,
         obstacle_speed_m_s=state.obstacle_speed_m_s,
         centre_m=state.centre_m + dt * state.swarm_vel_m_s,

@@ -13,6 +13,7 @@ from sim.contour import (
 )
 from sim.field import FieldSources, potential
 from sim.kinematics import arc_points, arc_step
+from sim.metrics import substep_fractions
 
 A_MAX = np.pi / 4
 L = 20.0
@@ -27,14 +28,15 @@ def lone_obstacle(at=(0.0, 0.0)):
     )
 
 
-def fly(start, heading, turns, level, src, rcfg):
+def fly(start, heading, turns, level, src, rcfg, substeps=8):
     """Fly consecutive arcs on a static field; return the (1, 1, K) window of their scores."""
     window = ArcWindow.empty(1, 1, len(turns))
     p, h = np.asarray(start, dtype=float).reshape(1, 1, 2), np.full((1, 1), float(heading))
     lv = np.full((1, 1), level)
     for a in turns:
         turn = np.full((1, 1), float(a))
-        ext = arc_external(p, h, turn, L, lv, src, FIELD, rcfg)
+        pts = arc_points(p, h, turn, L, substep_fractions(substeps))
+        ext = arc_external(pts, lv, src, FIELD, rcfg)
         window = window.push(turn, ext, np.ones((1, 1), dtype=bool))
         p, h = arc_step(p, h, turn, L)
     return window
@@ -130,7 +132,7 @@ def test_quadrature_converges():
     src = lone_obstacle()
     level = potential(np.array([[[42.0, 0.0]]]), src, FIELD).item()
     coarse = window_terms(fly(*circle(40.0), level, src, RewardConfig()), A_MAX)
-    fine = window_terms(fly(*circle(40.0), level, src, RewardConfig(samples_per_arc=512)), A_MAX)
+    fine = window_terms(fly(*circle(40.0), level, src, RewardConfig(), substeps=512), A_MAX)
     assert coarse.external.item() == pytest.approx(fine.external.item(), rel=2e-2)
 
 

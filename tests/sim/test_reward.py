@@ -4,7 +4,8 @@ import pytest
 from sim.config import FieldConfig, PSOConfig, RewardConfig
 from sim.contour import ArcWindow, arc_external, window_terms
 from sim.field import FieldSources, potential
-from sim.kinematics import arc_step
+from sim.kinematics import arc_points, arc_step
+from sim.metrics import substep_fractions
 from sim.reward import assign_contour_levels, reward, swarming_reward
 
 A_MAX = np.pi / 4
@@ -67,14 +68,15 @@ def test_arc_scores_batched_equal_per_environment(external):
         rng.uniform(0, 300, (b, m, 2)), np.full((b, m), 2.5), rng.uniform(0, 300, (b, 2)), 10.0
     )
     rcfg = RewardConfig(external=external)
-    full = arc_external(start, heading, turn, L, levels, src, FIELD, rcfg)
+    pts = arc_points(start, heading, turn, L, substep_fractions(8))
+    full = arc_external(pts, levels, src, FIELD, rcfg)
     assert np.all((full >= 0) & (full <= 1))
     for e in range(b):
         sl = slice(e, e + 1)
         one_src = FieldSources(
             src.obstacle_pos_m[sl], src.obstacle_speed_m_s[sl], src.centre_m[sl], 10.0
         )
-        one = arc_external(start[sl], heading[sl], turn[sl], L, levels[sl], one_src, FIELD, rcfg)
+        one = arc_external(pts[sl], levels[sl], one_src, FIELD, rcfg)
         np.testing.assert_allclose(full[e], one[0])
 
 
@@ -90,7 +92,8 @@ def test_reward_sees_the_arc_of_the_action_just_taken():
         p, h = np.zeros((1, 1, 2)), np.zeros((1, 1))
         for a in (0.0, 0.0, last):
             turn = np.full((1, 1), a)
-            ext = arc_external(p, h, turn, L, level, src, FIELD, RewardConfig())
+            pts = arc_points(p, h, turn, L, substep_fractions(8))
+            ext = arc_external(pts, level, src, FIELD, RewardConfig())
             w = w.push(turn, ext, np.ones((1, 1), dtype=bool))
             p, h = arc_step(p, h, turn, L)
         t = window_terms(w, A_MAX)
