@@ -154,6 +154,24 @@ def _fresh_stats(b: int, n: int) -> EpisodeStats:
     )
 
 
+def _difference_operator(n: int, m: int) -> NDArray[np.float32]:
+    """The difference operator of the swept checks, (N + M, N·M + P + N).
+
+    It maps [UAV, obstacle] coordinates to UAV i − obstacle k, UAV i − UAV j (i < j) and
+    UAV i itself (its target is subtracted afterwards).
+    """
+    i, j = np.triu_indices(n, k=1)
+    op = np.zeros((n + m, n * m + len(i) + n), dtype=np.float32)
+    col = np.arange(n * m)
+    op[col // m, col] = 1.0  # UAV of the UAV–obstacle pair
+    op[n + col % m, col] = -1.0  # obstacle of the pair
+    pairs = n * m + np.arange(len(i))
+    op[i, pairs], op[j, pairs] = 1.0, -1.0
+    own = n * m + len(i) + np.arange(n)
+    op[np.arange(n), own] = 1.0
+    return op
+
+
 def initial_state(cfg: ScenarioConfig, rng: np.random.Generator, num_envs: int) -> SwarmState:
     """B new episodes: spawn, obstacles, virtual centre, and contour levels by PSO."""
     b, n = num_envs, cfg.uav.count
@@ -271,19 +289,19 @@ def step(
     oy = state.obstacle_pos_m[..., 1] + tdt * state.obstacle_vel_m_s[..., 1]
 
     # ---- swept closest approaches during the step, every kind in one float32 call:
-    # UAV–obstacle (N·M), UAV–UAV pairs (P), UAV–own target (N).
+    # UAV–obstacle (N·M), UAV–UAV pairs (P), UAV–own target (N). The relative positions of all
+    # of them come from one matrix product with a difference operator.
     i, j = np.triu_indices(n, k=1)
     k_uo, k_uu = n * m, len(i)
-    shape = (len(frac), b, k_uo + k_uu + n)
-    rel_x, rel_y = np.empty(shape, np.float32), np.empty(shape, np.float32)
-    for rel, p, o, t in (
-        (rel_x, px, ox, state.target_m[..., 0]),
-        (rel_y, py, oy, state.target_m[..., 1]),
-    ):
-        rel[..., :k_uo].reshape(len(frac), b, n, m)[...] = p[..., None] - o[:, :, None]
-        rel[..., k_uo : k_uo + k_uu] = p[..., i] - p[..., j]
-        rel[..., k_uo + k_uu :] = p - t
-    swept = swept_min_distance_xy(rel_x, rel_y).astype(np.float64)  # (B, N·M + P + N)
+    op = _difference_operator(n, m)  # (N + M, K)
+    steps_b = len(frac) * b
+    rel = []
+    for p, o, t in ((px, ox, state.target_m[..., 0]), (py, oy, state.target_m[..., 1])):
+        movers = np.concatenate([p, o], axis=-1, dtype=np.float32).reshape(steps_b, n + m)
+        r = (movers @ op).reshape(len(frac), b, -1)  # (T + 1, B, K)
+        r[..., k_uo + k_uu :] -= t.astype(np.float32)
+        rel.append(r)
+    swept = swept_min_distance_xy(*rel).astype(np.float64)  # (B, N·M + P + N)
     d_uo = swept[:, :k_uo].reshape(b, n, m)
     d_pair = np.where(acted[:, i] & acted[:, j], swept[:, k_uo : k_uo + k_uu], np.inf)
     d_target = swept[:, k_uo + k_uu :]
@@ -310,7 +328,12 @@ def step(
     # ---- reward: score the new arc on the mid-step field, push it, evaluate the window
     mid = state.sources(v_s, 0.5 * dt)
     ext = arc_external_xy(
-        px.transpose(1, 2, 0), py.transpose(1, 2, 0), state.levels, mid, cfg.field, cfg.reward
+        np.ascontiguousarray(px.transpose(1, 2, 0)),  # (B, N, T + 1)
+        np.ascontiguousarray(py.transpose(1, 2, 0)),
+        state.levels,
+        mid,
+        cfg.field,
+        cfg.reward,
     )
     window = state.window.push(turn, ext, acted)
     terms = reward(
