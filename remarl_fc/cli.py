@@ -79,8 +79,12 @@ def _cmd_field(args: argparse.Namespace) -> int:
 
 def _cmd_bench(args: argparse.Namespace) -> int:
     from remarl_fc.bench import bench_pso
+    from sim.config import PSOConfig
 
-    result = bench_pso(uavs=args.uavs, envs=args.envs, repeats=args.repeats, seed=args.seed)
+    cfg = PSOConfig(particles=args.particles, iterations=args.iterations)
+    result = bench_pso(
+        uavs=args.uavs, envs=args.envs, repeats=args.repeats, seed=args.seed, cfg=cfg
+    )
     human = (
         f"PSO, {result['uavs']} UAVs x {result['envs']} env(s): "
         f"{result['ms_per_call']:.2f} ms per call (p90 {result['ms_p90']:.2f}), "
@@ -124,6 +128,13 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--uavs", type=_positive_int, default=10, help="UAVs per swarm (default 10)")
     b.add_argument("--envs", type=_positive_int, default=1, help="environments per call")
     b.add_argument("--repeats", type=_positive_int, default=50, help="timed calls")
+    b.add_argument(
+        "--particles",
+        type=_positive_int,
+        default=200,
+        help="particles (default 200: with 30 iterations, the authors' 6,000 evaluations)",
+    )
+    b.add_argument("--iterations", type=_positive_int, default=30, help="iterations (default 30)")
     b.add_argument("--seed", type=int, default=0)
     b.add_argument("--json", action="store_true", help="print one JSON object")
     b.set_defaults(handler=_cmd_bench)

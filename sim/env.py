@@ -53,7 +53,7 @@ from sim.config import ScenarioConfig
 from sim.metrics import path_length_ratio
 from sim.observation import CLIP, ObservationLayout
 from sim.scenarios import load_scenario
-from sim.swarm import StepResult, SwarmState, initial_state, observe, reset_where, step
+from sim.swarm import StepResult, SwarmSim, SwarmState
 
 ENV_ID = "remarl/Swarm-v0"
 """Gymnasium id of the single-agent face, after `register` is called."""
@@ -140,6 +140,7 @@ class SwarmVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float32], NDArray
         if render_mode not in (None, "rgb_array"):
             raise ValueError(f'render_mode must be None or "rgb_array", got {render_mode!r}')
         self.cfg = _scenario(scenario, overrides)
+        self.sim = SwarmSim(self.cfg)
         self.num_envs = num_envs
         self.num_agents = self.cfg.uav.count
         self.reward_mode: RewardMode = reward
@@ -175,13 +176,12 @@ class SwarmVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float32], NDArray
             self._rng = np.random.default_rng(seed)
         mask = None if options is None else options.get("reset_mask")
         if mask is None or self._state is None:
-            self._state = initial_state(self.cfg, self._rng, self.num_envs)
+            self._state = self.sim.initial_state(self._rng, self.num_envs)
         else:
-            self._state = reset_where(
-                self._state, np.asarray(mask, dtype=bool), self.cfg, self._rng
-            )
+            mask = np.asarray(mask, dtype=bool)
+            self._state = self.sim.reset_where(self._state, mask, self._rng)
         self._trails = [[self._state.pos_m[0].copy()]]
-        obs = observe(self._state, self.cfg).flat()
+        obs = self.sim.observe(self._state).flat()
         return obs, {"active": self._state.active.copy()}
 
     def step(  # type: ignore[override]
@@ -194,7 +194,7 @@ class SwarmVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float32], NDArray
         dict[str, Any],
     ]:
         """Step every environment (see the class docstring for the autoreset and ``infos``)."""
-        state, result = step(self.state, np.asarray(actions), self._rng, self.cfg)
+        state, result = self.sim.step(self.state, np.asarray(actions), self._rng)
         rewards = self.rewards_of(result)
         done = result.terminated | result.truncated
         obs = result.obs.flat()
@@ -211,8 +211,8 @@ class SwarmVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float32], NDArray
             infos["episode"] = episode_metrics(state, result, done)
             infos["final_obs"] = obs.copy()
             infos["_final_obs"] = done.copy()
-            state = reset_where(state, done, self.cfg, self._rng)
-            obs[done] = observe(state, self.cfg, done).flat()
+            state = self.sim.reset_where(state, done, self._rng)
+            obs[done] = self.sim.observe(state, done).flat()
         self._state = state
         infos["active"] = state.active.copy()
         if self.render_mode is not None:
@@ -310,7 +310,7 @@ class SwarmParallelEnv(ParallelEnv[str, NDArray[np.float32], NDArray[np.float32]
         vec_actions = np.zeros((1, self.cfg.uav.count), dtype=np.float32)
         for agent, action in actions.items():
             vec_actions[0, self.possible_agents.index(agent)] = np.asarray(action).reshape(-1)[0]
-        state, result = step(self._vec.state, vec_actions, self._vec._rng, self.cfg)
+        state, result = self._vec.sim.step(self._vec.state, vec_actions, self._vec._rng)
         self._vec._state = state
         if self.render_mode is not None:
             self._vec._trails[0].append(state.pos_m[0].copy())
@@ -344,7 +344,7 @@ class SwarmParallelEnv(ParallelEnv[str, NDArray[np.float32], NDArray[np.float32]
 
     def state(self) -> NDArray[np.float32]:
         """Global state: every UAV's observation, concatenated."""
-        flat: NDArray[np.float32] = observe(self._vec.state, self.cfg).flat()[0].reshape(-1)
+        flat: NDArray[np.float32] = self._vec.sim.observe(self._vec.state).flat()[0].reshape(-1)
         return flat
 
 
@@ -393,7 +393,9 @@ class SwarmEnv(gymnasium.Env[NDArray[np.float32], NDArray[np.float32]]):
         self, action: NDArray[np.float32]
     ) -> tuple[NDArray[np.float32], float, bool, bool, dict[str, Any]]:
         """Step the swarm (no autoreset: call `reset` after the episode ends)."""
-        state, result = step(self._vec.state, np.asarray(action)[None], self._vec._rng, self.cfg)
+        state, result = self._vec.sim.step(
+            self._vec.state, np.asarray(action)[None], self._vec._rng
+        )
         self._vec._state = state
         if self.render_mode is not None:
             self._vec._trails[0].append(state.pos_m[0].copy())

@@ -12,6 +12,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -34,7 +36,9 @@ def substep_fractions(substeps: int = SUBSTEPS) -> FloatArray:
     return np.linspace(0.0, 1.0, substeps + 1)
 
 
-def swept_min_distance_xy(rel_x: FloatArray, rel_y: FloatArray) -> FloatArray:
+def swept_min_distance_xy(
+    rel_x: NDArray[np.floating[Any]], rel_y: NDArray[np.floating[Any]]
+) -> NDArray[np.floating[Any]]:
     """`swept_min_distance` on time-first components: rel_x, rel_y (T + 1, ...) → (...).
 
     Time first keeps every slice contiguous; the work is done in place on four temporaries,
@@ -57,7 +61,7 @@ def swept_min_distance_xy(rel_x: FloatArray, rel_y: FloatArray) -> FloatArray:
     dx *= dx
     dy *= dy
     dx += dy
-    smallest: FloatArray = np.sqrt(dx.min(axis=0))
+    smallest: NDArray[np.floating[Any]] = np.sqrt(dx.min(axis=0))
     return smallest
 
 
@@ -74,9 +78,10 @@ def swept_min_distance(relative_m: FloatArray) -> FloatArray:
     3.0
     """
     rel = np.moveaxis(relative_m, -2, 0)  # (T + 1, ..., 2)
-    return swept_min_distance_xy(
+    smallest = swept_min_distance_xy(
         np.ascontiguousarray(rel[..., 0]), np.ascontiguousarray(rel[..., 1])
     )
+    return smallest.astype(np.float64)
 
 
 def uav_substep_positions(

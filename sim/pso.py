@@ -19,9 +19,11 @@ d_U2O; its text means UAV–UAV spacing). Two departures from the literal formul
 The update is the standard global-best PSO of Eq. pso with the inertia μ ~ U[0, 1] drawn per
 particle and iteration and the usual per-dimension r₁, r₂ ~ U[0, 1] on c₁ and c₂, vectorised
 over particles and over the batch of environments. The first particle of every swarm is the
-current positions themselves. Positions that already meet the threshold are their own optimum
-(f_thres = d̄ is its floor and f_shift = 0), so they are returned without a search: the call
-costs almost nothing when there is nothing to separate.
+current positions themselves and the second a constructive repair of them (every pair closer
+than the threshold pushed apart by half its deficit, repeatedly): a good feasible start that
+lets a small swarm reach near-optimal shifts. Positions that already meet the threshold are
+their own optimum (f_thres = d̄ is its floor and f_shift = 0), so they are returned without a
+search: the call costs almost nothing when there is nothing to separate.
 """
 
 from __future__ import annotations
@@ -154,6 +156,36 @@ def _min_distance(q: FloatArray, active: BoolArray) -> FloatArray:
     return smallest
 
 
+REPAIR_SWEEPS = 30
+"""Sweeps of the constructive repair that seeds one particle (`_spread`)."""
+
+REPAIR_MARGIN = 1e-3
+"""Relative margin the repair adds to the threshold, so its result is feasible, not borderline."""
+
+
+def _spread(q: FloatArray, act: BoolArray, threshold_m: float) -> FloatArray:
+    """Push every pair closer than the threshold apart, half the deficit each, repeatedly.
+
+    A cheap constructive candidate (position-based projection, vectorised over environments);
+    positions (B, 2, N) → (B, 2, N). Coincident UAVs are separated along fixed directions.
+    """
+    n = q.shape[-1]
+    pair = act[:, :, None] & act[:, None, :] & ~np.eye(n, dtype=bool)  # (B, N, N)
+    angle = 2 * np.pi * np.arange(n) / n
+    apart = np.stack([np.cos(angle), np.sin(angle)])  # (2, N): fallback directions
+    fallback = apart[:, :, None] - apart[:, None, :]  # (2, N, N)
+    x = q.copy()
+    for _ in range(REPAIR_SWEEPS):
+        diff = x[:, :, :, None] - x[:, :, None, :]  # (B, 2, N, N)
+        dist = np.sqrt(np.einsum("bcij,bcij->bij", diff, diff))
+        deficit = np.where(pair, np.maximum(threshold_m * (1 + REPAIR_MARGIN) - dist, 0.0), 0.0)
+        if not deficit.any():
+            break
+        unit = np.where(dist[:, None] > 0, diff / np.maximum(dist, 1e-12)[:, None], fallback)
+        x += 0.5 * (unit * deficit[:, None]).sum(axis=-1)
+    return x
+
+
 def _search(q: FloatArray, act: BoolArray, cfg: PSOConfig, rng: np.random.Generator) -> PSOResult:
     """The particle swarm itself, on positions (B, 2, N) — coordinate-major."""
     b, _, n = q.shape
@@ -163,6 +195,8 @@ def _search(q: FloatArray, act: BoolArray, cfg: PSOConfig, rng: np.random.Genera
     p = cfg.particles
     x = q[:, None] + rng.normal(0.0, cfg.init_noise_m, size=(b, p, 2, n))  # (B, P, 2, N)
     x[:, 0] = q  # the current positions are a candidate
+    if p > 1:
+        x[:, 1] = _spread(q, act, cfg.threshold_m)  # and so is a constructive repair of them
     v = rng.normal(0.0, cfg.init_speed_m, size=x.shape)
     if move is not None:
         x = q[:, None] + (x - q[:, None]) * move

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -172,36 +172,6 @@ def _difference_operator(n: int, m: int) -> NDArray[np.float32]:
     return op
 
 
-def initial_state(cfg: ScenarioConfig, rng: np.random.Generator, num_envs: int) -> SwarmState:
-    """B new episodes: spawn, obstacles, virtual centre, and contour levels by PSO."""
-    b, n = num_envs, cfg.uav.count
-    layout = swarm_layout(cfg)
-    obs_pos, obs_vel = spawn_obstacles(cfg, rng, b)
-    pos = np.broadcast_to(layout.positions_m, (b, n, 2)).copy()
-    state = SwarmState(
-        pos_m=pos,
-        heading_rad=np.broadcast_to(layout.headings_rad, (b, n)).copy(),
-        active=np.ones((b, n), dtype=bool),
-        reached=np.zeros((b, n), dtype=bool),
-        start_m=pos.copy(),
-        target_m=np.broadcast_to(layout.targets_m, (b, n, 2)).copy(),
-        obstacle_pos_m=obs_pos,
-        obstacle_vel_m_s=obs_vel,
-        obstacle_speed_m_s=np.full((b, cfg.obstacles.count), cfg.obstacles.speed_m_s),
-        centre_m=np.broadcast_to(layout.centre_m, (b, 2)).copy(),
-        swarm_vel_m_s=np.broadcast_to(layout.velocity_m_s, (b, 2)).copy(),
-        levels=np.zeros((b, n)),
-        avoiding=np.zeros(b, dtype=bool),
-        window=ArcWindow.empty(b, n, cfg.reward.window_steps),
-        steps=np.zeros(b, dtype=np.int64),
-        stats=_fresh_stats(b, n),
-    )
-    levels, _ = assign_contour_levels(
-        pos, state.sources(cfg.uav.speed_m_s), cfg.field, cfg.pso, rng
-    )
-    return dataclasses.replace(state, levels=levels)
-
-
 def _merge(old: object, new: object, mask: BoolArray) -> object:
     """Replace the masked environments of a dataclass of arrays (recursively)."""
     if dataclasses.is_dataclass(old) and not isinstance(old, type):
@@ -217,189 +187,253 @@ def _merge(old: object, new: object, mask: BoolArray) -> object:
     return old
 
 
+class SwarmSim:
+    """The simulator of one scenario: constants computed once, and pure batched functions.
+
+    Every method takes the state and returns a new one; the object holds only the scenario and
+    arrays derived from it (never modified), so one instance serves any number of batches.
+    """
+
+    def __init__(self, cfg: ScenarioConfig) -> None:
+        self.cfg = cfg
+        self.layout = swarm_layout(cfg)
+        self.obs_layout = ObservationLayout.from_scenario(cfg)
+        self.fractions = substep_fractions(cfg.substeps)
+        self.pairs = np.triu_indices(cfg.uav.count, k=1)
+        self.difference_op = _difference_operator(cfg.uav.count, cfg.obstacles.count)
+
+    def initial_state(self, rng: np.random.Generator, num_envs: int) -> SwarmState:
+        """B new episodes: spawn, obstacles, virtual centre, and contour levels by PSO."""
+        cfg, layout = self.cfg, self.layout
+        b, n = num_envs, cfg.uav.count
+        obs_pos, obs_vel = spawn_obstacles(cfg, rng, b)
+        pos = np.broadcast_to(layout.positions_m, (b, n, 2)).copy()
+        state = SwarmState(
+            pos_m=pos,
+            heading_rad=np.broadcast_to(layout.headings_rad, (b, n)).copy(),
+            active=np.ones((b, n), dtype=bool),
+            reached=np.zeros((b, n), dtype=bool),
+            start_m=pos.copy(),
+            target_m=np.broadcast_to(layout.targets_m, (b, n, 2)).copy(),
+            obstacle_pos_m=obs_pos,
+            obstacle_vel_m_s=obs_vel,
+            obstacle_speed_m_s=np.full((b, cfg.obstacles.count), cfg.obstacles.speed_m_s),
+            centre_m=np.broadcast_to(layout.centre_m, (b, 2)).copy(),
+            swarm_vel_m_s=np.broadcast_to(layout.velocity_m_s, (b, 2)).copy(),
+            levels=np.zeros((b, n)),
+            avoiding=np.zeros(b, dtype=bool),
+            window=ArcWindow.empty(b, n, cfg.reward.window_steps),
+            steps=np.zeros(b, dtype=np.int64),
+            stats=_fresh_stats(b, n),
+        )
+        levels, _ = assign_contour_levels(
+            pos, state.sources(cfg.uav.speed_m_s), cfg.field, cfg.pso, rng
+        )
+        return dataclasses.replace(state, levels=levels)
+
+    def reset_where(
+        self, state: SwarmState, mask: BoolArray, rng: np.random.Generator
+    ) -> SwarmState:
+        """Start new episodes in the environments selected by ``mask`` (B,); others untouched."""
+        count = int(mask.sum())
+        if count == 0:
+            return state
+        merged = _merge(state, self.initial_state(rng, count), mask)
+        return cast(SwarmState, merged)
+
+    def observe(self, state: SwarmState, envs: BoolArray | None = None) -> Observations:
+        """Every UAV's observation of the current state (the shared builder).
+
+        Args:
+            envs: (B,) observe only these environments (the result has their count first).
+        """
+        sel: slice | BoolArray = slice(None) if envs is None else envs
+        heading = state.heading_rad[sel]
+        velocity = self.cfg.uav.speed_m_s * np.stack([np.cos(heading), np.sin(heading)], axis=-1)
+        return build_observations(
+            self.obs_layout,
+            state.pos_m[sel],
+            heading,
+            velocity,
+            state.target_m[sel],
+            state.centre_m[sel],
+            state.obstacle_pos_m[sel],
+            state.obstacle_vel_m_s[sel],
+        )
+
+    def step(
+        self, state: SwarmState, actions: NDArray[Any], rng: np.random.Generator
+    ) -> tuple[SwarmState, StepResult]:
+        """Advance every environment by one decision step.
+
+        Args:
+            state: the current state (not modified).
+            actions: (B, N) normalised heading changes in [−1, 1] (clipped); ignored for UAVs that
+                are not active.
+            rng: the caller's generator (PSO when avoidance begins).
+
+        Returns:
+            (the next state, what happened). Environments whose episode ended stay ended (their
+            UAVs are inactive) until `reset_where` starts a new one.
+        """
+        cfg = self.cfg
+        b, n = state.pos_m.shape[:2]
+        m = state.obstacle_pos_m.shape[1]
+        dt, length, v_s = cfg.dt_s, cfg.step_length_m, cfg.uav.speed_m_s
+        acted = state.active
+        commanded = scale_action(np.asarray(actions, dtype=np.float64), cfg.uav.max_turn_rad)
+        turn = np.where(acted, commanded, 0.0)
+        # ---- kinematics at the T + 1 sub-step instants: arcs for the UAVs (inactive ones stay
+        # put: zero length), straight lines for the obstacles.
+        frac = self.fractions  # (T + 1,)
+        u = frac[:, None, None]  # time first: (T + 1, B, N) slices are contiguous
+        half = (0.5 * u) * turn
+        chord = (length * u) * acted * sinc(half)
+        direction = state.heading_rad + half
+        px = state.pos_m[..., 0] + chord * np.cos(direction)  # (T + 1, B, N)
+        py = state.pos_m[..., 1] + chord * np.sin(direction)
+        new_pos = np.stack([px[-1], py[-1]], axis=-1)
+        new_heading = np.where(acted, wrap_angle(state.heading_rad + turn), state.heading_rad)
+        tdt = (dt * frac)[:, None, None]
+        ox = state.obstacle_pos_m[..., 0] + tdt * state.obstacle_vel_m_s[..., 0]  # (T + 1, B, M)
+        oy = state.obstacle_pos_m[..., 1] + tdt * state.obstacle_vel_m_s[..., 1]
+
+        # ---- swept closest approaches during the step, every kind in one float32 call:
+        # UAV–obstacle (N·M), UAV–UAV pairs (P), UAV–own target (N). The relative positions of all
+        # of them come from one matrix product with a difference operator.
+        i, j = self.pairs
+        k_uo, k_uu = n * m, len(i)
+        op = self.difference_op  # (N + M, K)
+        steps_b = len(frac) * b
+        rel = []
+        for p, o, t in ((px, ox, state.target_m[..., 0]), (py, oy, state.target_m[..., 1])):
+            movers = np.concatenate([p, o], axis=-1, dtype=np.float32).reshape(steps_b, n + m)
+            r = (movers @ op).reshape(len(frac), b, -1)  # (T + 1, B, K)
+            r[..., k_uo + k_uu :] -= t.astype(np.float32)
+            rel.append(r)
+        swept = swept_min_distance_xy(*rel).astype(np.float64)  # (B, N·M + P + N)
+        d_uo = swept[:, :k_uo].reshape(b, n, m)
+        d_pair = np.where(acted[:, i] & acted[:, j], swept[:, k_uo : k_uo + k_uu], np.inf)
+        d_target = swept[:, k_uo + k_uu :]
+        min_u2o = np.where(acted, d_uo.min(axis=-1, initial=np.inf), np.inf)
+        d_uu = np.full((b, n, n), np.inf)
+        d_uu[:, i, j] = d_pair
+        d_uu[:, j, i] = d_pair
+        min_u2u = d_uu.min(axis=-1)
+
+        collided_u2o = acted & (min_u2o < cfg.d_col_m)
+        collided_u2u = acted & (min_u2u < cfg.d_col_m)
+        collided = collided_u2o | collided_u2u
+        arrived = acted & ~collided & (d_target <= cfg.d_col_m)
+        any_collision = collided.any(axis=-1)
+        reached = state.reached | arrived
+        all_reached = reached.all(axis=-1)
+        running = acted.any(axis=-1)
+        terminated = running & (any_collision | all_reached)
+        steps = state.steps + running
+        truncated = running & ~terminated & (steps >= cfg.max_steps)
+        over = terminated | truncated
+        active = acted & ~arrived & ~over[:, None]
+
+        # ---- reward: score the new arc on the mid-step field, push it, evaluate the window
+        mid = state.sources(v_s, 0.5 * dt)
+        ext = arc_external_xy(
+            np.ascontiguousarray(px.transpose(1, 2, 0)),  # (B, N, T + 1)
+            np.ascontiguousarray(py.transpose(1, 2, 0)),
+            state.levels,
+            mid,
+            cfg.field,
+            cfg.reward,
+        )
+        window = state.window.push(turn, ext, acted)
+        terms = reward(
+            window, new_heading, new_pos, state.target_m, collided, cfg.uav.max_turn_rad, cfg.reward
+        )
+        terms = RewardTerms(*(np.where(acted, t, 0.0) for t in dataclasses.astuple(terms)))
+
+        stats = state.stats
+        stats = EpisodeStats(
+            energy_rad=stats.energy_rad + np.abs(turn),
+            flown_m=stats.flown_m + length * acted,
+            min_u2o_m=np.minimum(stats.min_u2o_m, min_u2o.min(axis=-1)),
+            min_u2u_m=np.minimum(stats.min_u2u_m, min_u2u.min(axis=-1)),
+            swarming_return=stats.swarming_return + terms.swarming,
+            total_return=stats.total_return + terms.total,
+        )
+        new_state = SwarmState(
+            pos_m=new_pos,
+            heading_rad=new_heading,
+            active=active,
+            reached=reached,
+            start_m=state.start_m,
+            target_m=state.target_m,
+            obstacle_pos_m=np.stack([ox[-1], oy[-1]], axis=-1),
+            obstacle_vel_m_s=state.obstacle_vel_m_s,
+            obstacle_speed_m_s=state.obstacle_speed_m_s,
+            centre_m=state.centre_m + dt * state.swarm_vel_m_s,
+            swarm_vel_m_s=state.swarm_vel_m_s,
+            levels=state.levels,
+            avoiding=state.avoiding,
+            window=window,
+            steps=steps,
+            stats=stats,
+        )
+        obs = self.observe(new_state)
+
+        # ---- avoidance begins: the first sensing of an obstacle reassigns the contour levels
+        begin = ~new_state.avoiding & ~over & (obs.sensed & active[..., None]).any(axis=(1, 2))
+        if begin.any():
+            sub = FieldSources(
+                new_state.obstacle_pos_m[begin],
+                new_state.obstacle_speed_m_s[begin],
+                new_state.centre_m[begin],
+                v_s,
+            )
+            levels, _ = assign_contour_levels(
+                new_state.pos_m[begin], sub, cfg.field, cfg.pso, rng, active[begin]
+            )
+            new_levels = new_state.levels.copy()
+            new_levels[begin] = levels
+            new_state = dataclasses.replace(
+                new_state, levels=new_levels, avoiding=new_state.avoiding | begin
+            )
+        result = StepResult(
+            obs=obs,
+            reward=terms,
+            acted=acted,
+            turn_rad=turn,
+            collided_u2o=collided_u2o,
+            collided_u2u=collided_u2u,
+            arrived=arrived,
+            min_u2o_m=min_u2o,
+            min_u2u_m=min_u2u,
+            terminated=terminated,
+            truncated=truncated,
+            success=terminated & all_reached & ~any_collision,
+            levels_assigned=begin,
+        )
+        return new_state, result
+
+
+def initial_state(cfg: ScenarioConfig, rng: np.random.Generator, num_envs: int) -> SwarmState:
+    """B new episodes of a scenario (see `SwarmSim.initial_state`)."""
+    return SwarmSim(cfg).initial_state(rng, num_envs)
+
+
 def reset_where(
     state: SwarmState, mask: BoolArray, cfg: ScenarioConfig, rng: np.random.Generator
 ) -> SwarmState:
-    """Start new episodes in the environments selected by ``mask`` (B,); others are untouched."""
-    count = int(mask.sum())
-    if count == 0:
-        return state
-    fresh = initial_state(cfg, rng, count)
-    merged = _merge(state, fresh, mask)
-    assert isinstance(merged, SwarmState)
-    return merged
+    """New episodes where ``mask`` (B,) is set (see `SwarmSim.reset_where`)."""
+    return SwarmSim(cfg).reset_where(state, mask, rng)
 
 
 def observe(state: SwarmState, cfg: ScenarioConfig, envs: BoolArray | None = None) -> Observations:
-    """Every UAV's observation of the current state (the shared builder).
-
-    Args:
-        envs: (B,) observe only these environments (the result has their count first).
-    """
-    sel: slice | BoolArray = slice(None) if envs is None else envs
-    heading = state.heading_rad[sel]
-    velocity = cfg.uav.speed_m_s * np.stack([np.cos(heading), np.sin(heading)], axis=-1)
-    return build_observations(
-        ObservationLayout.from_scenario(cfg),
-        state.pos_m[sel],
-        heading,
-        velocity,
-        state.target_m[sel],
-        state.centre_m[sel],
-        state.obstacle_pos_m[sel],
-        state.obstacle_vel_m_s[sel],
-    )
+    """Every UAV's observation (see `SwarmSim.observe`)."""
+    return SwarmSim(cfg).observe(state, envs)
 
 
 def step(
     state: SwarmState, actions: NDArray[Any], rng: np.random.Generator, cfg: ScenarioConfig
 ) -> tuple[SwarmState, StepResult]:
-    """Advance every environment by one decision step.
-
-    Args:
-        state: the current state (not modified).
-        actions: (B, N) normalised heading changes in [−1, 1] (clipped); ignored for UAVs that
-            are not active.
-        rng: the caller's generator (PSO when avoidance begins).
-        cfg: the scenario.
-
-    Returns:
-        (the next state, what happened). Environments whose episode ended stay ended (their
-        UAVs are inactive) until `reset_where` starts a new one.
-    """
-    b, n = state.pos_m.shape[:2]
-    m = state.obstacle_pos_m.shape[1]
-    dt, length, v_s = cfg.dt_s, cfg.step_length_m, cfg.uav.speed_m_s
-    acted = state.active
-    commanded = scale_action(np.asarray(actions, dtype=np.float64), cfg.uav.max_turn_rad)
-    turn = np.where(acted, commanded, 0.0)
-    # ---- kinematics at the T + 1 sub-step instants: arcs for the UAVs (inactive ones stay
-    # put: zero length), straight lines for the obstacles.
-    frac = substep_fractions(cfg.substeps)  # (T + 1,)
-    u = frac[:, None, None]  # time first: (T + 1, B, N) slices are contiguous
-    half = (0.5 * u) * turn
-    chord = (length * u) * acted * sinc(half)
-    direction = state.heading_rad + half
-    px = state.pos_m[..., 0] + chord * np.cos(direction)  # (T + 1, B, N)
-    py = state.pos_m[..., 1] + chord * np.sin(direction)
-    new_pos = np.stack([px[-1], py[-1]], axis=-1)
-    new_heading = np.where(acted, wrap_angle(state.heading_rad + turn), state.heading_rad)
-    tdt = (dt * frac)[:, None, None]
-    ox = state.obstacle_pos_m[..., 0] + tdt * state.obstacle_vel_m_s[..., 0]  # (T + 1, B, M)
-    oy = state.obstacle_pos_m[..., 1] + tdt * state.obstacle_vel_m_s[..., 1]
-
-    # ---- swept closest approaches during the step, every kind in one float32 call:
-    # UAV–obstacle (N·M), UAV–UAV pairs (P), UAV–own target (N). The relative positions of all
-    # of them come from one matrix product with a difference operator.
-    i, j = np.triu_indices(n, k=1)
-    k_uo, k_uu = n * m, len(i)
-    op = _difference_operator(n, m)  # (N + M, K)
-    steps_b = len(frac) * b
-    rel = []
-    for p, o, t in ((px, ox, state.target_m[..., 0]), (py, oy, state.target_m[..., 1])):
-        movers = np.concatenate([p, o], axis=-1, dtype=np.float32).reshape(steps_b, n + m)
-        r = (movers @ op).reshape(len(frac), b, -1)  # (T + 1, B, K)
-        r[..., k_uo + k_uu :] -= t.astype(np.float32)
-        rel.append(r)
-    swept = swept_min_distance_xy(*rel).astype(np.float64)  # (B, N·M + P + N)
-    d_uo = swept[:, :k_uo].reshape(b, n, m)
-    d_pair = np.where(acted[:, i] & acted[:, j], swept[:, k_uo : k_uo + k_uu], np.inf)
-    d_target = swept[:, k_uo + k_uu :]
-    min_u2o = np.where(acted, d_uo.min(axis=-1, initial=np.inf), np.inf)
-    d_uu = np.full((b, n, n), np.inf)
-    d_uu[:, i, j] = d_pair
-    d_uu[:, j, i] = d_pair
-    min_u2u = d_uu.min(axis=-1)
-
-    collided_u2o = acted & (min_u2o < cfg.d_col_m)
-    collided_u2u = acted & (min_u2u < cfg.d_col_m)
-    collided = collided_u2o | collided_u2u
-    arrived = acted & ~collided & (d_target <= cfg.d_col_m)
-    any_collision = collided.any(axis=-1)
-    reached = state.reached | arrived
-    all_reached = reached.all(axis=-1)
-    running = acted.any(axis=-1)
-    terminated = running & (any_collision | all_reached)
-    steps = state.steps + running
-    truncated = running & ~terminated & (steps >= cfg.max_steps)
-    over = terminated | truncated
-    active = acted & ~arrived & ~over[:, None]
-
-    # ---- reward: score the new arc on the mid-step field, push it, evaluate the window
-    mid = state.sources(v_s, 0.5 * dt)
-    ext = arc_external_xy(
-        np.ascontiguousarray(px.transpose(1, 2, 0)),  # (B, N, T + 1)
-        np.ascontiguousarray(py.transpose(1, 2, 0)),
-        state.levels,
-        mid,
-        cfg.field,
-        cfg.reward,
-    )
-    window = state.window.push(turn, ext, acted)
-    terms = reward(
-        window, new_heading, new_pos, state.target_m, collided, cfg.uav.max_turn_rad, cfg.reward
-    )
-    terms = RewardTerms(*(np.where(acted, t, 0.0) for t in dataclasses.astuple(terms)))
-
-    stats = state.stats
-    stats = EpisodeStats(
-        energy_rad=stats.energy_rad + np.abs(turn),
-        flown_m=stats.flown_m + length * acted,
-        min_u2o_m=np.minimum(stats.min_u2o_m, min_u2o.min(axis=-1)),
-        min_u2u_m=np.minimum(stats.min_u2u_m, min_u2u.min(axis=-1)),
-        swarming_return=stats.swarming_return + terms.swarming,
-        total_return=stats.total_return + terms.total,
-    )
-    new_state = SwarmState(
-        pos_m=new_pos,
-        heading_rad=new_heading,
-        active=active,
-        reached=reached,
-        start_m=state.start_m,
-        target_m=state.target_m,
-        obstacle_pos_m=np.stack([ox[-1], oy[-1]], axis=-1),
-        obstacle_vel_m_s=state.obstacle_vel_m_s,
-        obstacle_speed_m_s=state.obstacle_speed_m_s,
-        centre_m=state.centre_m + dt * state.swarm_vel_m_s,
-        swarm_vel_m_s=state.swarm_vel_m_s,
-        levels=state.levels,
-        avoiding=state.avoiding,
-        window=window,
-        steps=steps,
-        stats=stats,
-    )
-    obs = observe(new_state, cfg)
-
-    # ---- avoidance begins: the first sensing of an obstacle reassigns the contour levels
-    begin = ~new_state.avoiding & ~over & (obs.sensed & active[..., None]).any(axis=(1, 2))
-    if begin.any():
-        sub = FieldSources(
-            new_state.obstacle_pos_m[begin],
-            new_state.obstacle_speed_m_s[begin],
-            new_state.centre_m[begin],
-            v_s,
-        )
-        levels, _ = assign_contour_levels(
-            new_state.pos_m[begin], sub, cfg.field, cfg.pso, rng, active[begin]
-        )
-        new_levels = new_state.levels.copy()
-        new_levels[begin] = levels
-        new_state = dataclasses.replace(
-            new_state, levels=new_levels, avoiding=new_state.avoiding | begin
-        )
-    result = StepResult(
-        obs=obs,
-        reward=terms,
-        acted=acted,
-        turn_rad=turn,
-        collided_u2o=collided_u2o,
-        collided_u2u=collided_u2u,
-        arrived=arrived,
-        min_u2o_m=min_u2o,
-        min_u2u_m=min_u2u,
-        terminated=terminated,
-        truncated=truncated,
-        success=terminated & all_reached & ~any_collision,
-        levels_assigned=begin,
-    )
-    return new_state, result
+    """One decision step of every environment (see `SwarmSim.step`)."""
+    return SwarmSim(cfg).step(state, actions, rng)

@@ -16,7 +16,7 @@ import time
 
 import numpy as np
 
-from remarl_fc.bench import bench_pso, crowded_line
+from remarl_fc.bench import AUTHORS_BUDGET, bench_pso, crowded_line
 from sim.config import PSOConfig
 from sim.pso import INFEASIBLE_COST
 
@@ -63,7 +63,7 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=20)
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
-    cfg = PSOConfig()
+    cfg: PSOConfig = AUTHORS_BUDGET
     rows = []
     for n in args.uavs:
         ours = bench_pso(uavs=n, repeats=args.repeats, cfg=cfg)
