@@ -106,6 +106,11 @@ class RewardConfig:
     """External (image) energy: "level-edge" (edge of the UAV's own level set Φ = φ_i, as in the
     active-contour method the paper builds on) or "gradient" (the paper's literal ½|∇Φ|²)."""
 
+    quadrature_intervals: int = 4
+    """Q: intervals of the trapezoid rule for the external term along each arc (5 m apart at the
+    defaults, half the edge width σ). Must divide `ScenarioConfig.substeps`: the rule uses
+    every (T/Q)-th sub-step point of the arc."""
+
     edge_width_m: float = 10.0
     """σ of the level edge exp(−s²/σ²), s the signed distance to the level set, metres."""
 
@@ -120,6 +125,11 @@ class RewardConfig:
             isinstance(self.window_steps, int) and self.window_steps >= 1,
             "window_steps",
             f"must be an integer >= 1, got {self.window_steps!r}",
+        )
+        _require(
+            isinstance(self.quadrature_intervals, int) and self.quadrature_intervals >= 1,
+            "quadrature_intervals",
+            f"must be an integer >= 1, got {self.quadrature_intervals!r}",
         )
         _require(
             self.external in EXTERNAL_TERMS,
@@ -343,6 +353,11 @@ class ScenarioConfig:
             isinstance(self.substeps, int) and self.substeps >= 1,
             "substeps",
             f"must be an integer >= 1, got {self.substeps!r}",
+        )
+        _require(
+            self.substeps % self.reward.quadrature_intervals == 0,
+            "reward.quadrature_intervals",
+            f"must divide substeps ({self.substeps}), got {self.reward.quadrature_intervals}",
         )
         _require(
             isinstance(self.max_steps, int) and self.max_steps >= 1,

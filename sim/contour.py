@@ -17,9 +17,9 @@ lies in [0, 1] per step:
     distance from q to the UAV's own level set Φ = φ_i: an analytic, smoothed edge map of the
     field cut at the UAV's level, as in the active-contour method the paper builds on.
 
-Quadrature of the external term: composite trapezoid rule in arc length on the T + 1 equally
-spaced points of each arc (`ScenarioConfig.substeps`; the same points serve the swept collision
-checks), error O((L/T)²) for a smooth integrand.
+Quadrature of the external term: composite trapezoid rule in arc length on Q + 1 equally spaced
+points of each arc (`RewardConfig.quadrature_intervals`; they are a subset of the T + 1 points of
+the swept collision checks), error O((L/Q)²) for a smooth integrand.
 """
 
 from __future__ import annotations

@@ -127,19 +127,21 @@ def potential_and_gradient_xy(
 
     The same field as `potential_and_gradient`, on contiguous component arrays (faster).
     """
-    nd = x_m.ndim
-    dx = x_m - _expand(src.centre_m[:, 0], nd)
-    dy = y_m - _expand(src.centre_m[:, 1], nd)
+    nd, dt = x_m.ndim, x_m.dtype  # computed in the points' dtype (float32 is faster)
+    centre = src.centre_m.astype(dt, copy=False)
+    dx = x_m - _expand(centre[:, 0], nd)
+    dy = y_m - _expand(centre[:, 1], nd)
     phi, coef = _inverse_square(
         dx * dx + dy * dy, src.swarm_speed_m_s, cfg.swarm_floor_m, cfg.swarm_range_m, cfg.continuous
     )
     gx, gy = coef * dx, coef * dy
     if src.obstacle_pos_m.shape[1]:
-        ox = x_m[..., None] - _expand(src.obstacle_pos_m[..., 0], nd)  # (B, *P, M)
-        oy = y_m[..., None] - _expand(src.obstacle_pos_m[..., 1], nd)
+        obstacles = src.obstacle_pos_m.astype(dt, copy=False)
+        ox = x_m[..., None] - _expand(obstacles[..., 0], nd)  # (B, *P, M)
+        oy = y_m[..., None] - _expand(obstacles[..., 1], nd)
         phi_o, coef_o = _inverse_square(
             ox * ox + oy * oy,
-            _expand(src.intensity(), nd),
+            _expand(src.intensity().astype(dt, copy=False), nd),
             cfg.d_safe_m,
             cfg.obstacle_range_m,
             cfg.continuous,

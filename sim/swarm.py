@@ -337,14 +337,17 @@ class SwarmSim:
 
         # ---- reward: score the new arc on the mid-step field, push it, evaluate the window
         mid = state.sources(v_s, 0.5 * dt)
+        stride = cfg.substeps // cfg.reward.quadrature_intervals
+        qx = px[::stride].astype(np.float32).transpose(1, 2, 0)  # (B, N, Q + 1), float32
+        qy = py[::stride].astype(np.float32).transpose(1, 2, 0)
         ext = arc_external_xy(
-            np.ascontiguousarray(px.transpose(1, 2, 0)),  # (B, N, T + 1)
-            np.ascontiguousarray(py.transpose(1, 2, 0)),
-            state.levels,
+            np.ascontiguousarray(qx),
+            np.ascontiguousarray(qy),
+            state.levels.astype(np.float32),
             mid,
             cfg.field,
             cfg.reward,
-        )
+        ).astype(np.float64)
         window = state.window.push(turn, ext, acted)
         terms = reward(
             window, new_heading, new_pos, state.target_m, collided, cfg.uav.max_turn_rad, cfg.reward

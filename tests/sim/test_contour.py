@@ -131,7 +131,7 @@ def test_gradient_density_saturates_at_one_on_the_strongest_edge():
 def test_quadrature_converges():
     src = lone_obstacle()
     level = potential(np.array([[[42.0, 0.0]]]), src, FIELD).item()
-    coarse = window_terms(fly(*circle(40.0), level, src, RewardConfig()), A_MAX)
+    coarse = window_terms(fly(*circle(40.0), level, src, RewardConfig(), substeps=4), A_MAX)
     fine = window_terms(fly(*circle(40.0), level, src, RewardConfig(), substeps=512), A_MAX)
     assert coarse.external.item() == pytest.approx(fine.external.item(), rel=2e-2)
 
