@@ -95,12 +95,6 @@ class Observations:
         return np.concatenate([self.rows.reshape(b, n, -1), self.mask], axis=-1)
 
 
-def _rotate(vec: FloatArray, cos_h: FloatArray, sin_h: FloatArray) -> FloatArray:
-    """Rotate world vectors (..., 2) into heading frames given cos/sin broadcastable to (...)."""
-    x, y = vec[..., 0], vec[..., 1]
-    return np.stack([cos_h * x + sin_h * y, cos_h * y - sin_h * x], axis=-1)
-
-
 def build_observations(
     layout: ObservationLayout,
     own_pos_m: FloatArray,
@@ -126,41 +120,63 @@ def build_observations(
         `Observations` (rows, mask, sensed).
     """
     b, n, _ = own_pos_m.shape
-    m = layout.max_obstacles
-    cos_h, sin_h = np.cos(own_heading_rad), np.sin(own_heading_rad)  # (B, N)
-    inv_r, inv_v = 1.0 / layout.range_m, 1.0 / layout.speed_m_s
-
+    m, num_obstacles = layout.max_obstacles, obstacle_pos_m.shape[1]
+    # World-frame vectors first, as x and y arrays (rows, kind, B, N) with kind 0 = position-
+    # like and 1 = velocity-like: one rotation and one scaling at the end serve every row, and
+    # (B, N) innermost keeps numpy's inner loops long.
+    keep = min(m, num_obstacles)
+    used = ROW_OBSTACLES + keep  # rows below are empty: not computed
+    wx = np.empty((used, 2, b, n))
+    wy = np.empty((used, 2, b, n))
     to_target = target_m - own_pos_m
-    dist_t = np.hypot(to_target[..., 0], to_target[..., 1])[..., None]
-    vbar = layout.speed_m_s * to_target / np.where(dist_t > 0, dist_t, 1.0)
-    rows = np.zeros((b, n, layout.rows, COLUMNS), dtype=np.float32)
-    rows[:, :, ROW_SELF, :2] = _rotate(to_target, cos_h, sin_h) * inv_r
-    rows[:, :, ROW_SELF, 2:] = _rotate(own_vel_m_s, cos_h, sin_h) * inv_v
-    rows[:, :, ROW_SWARM, :2] = _rotate(centre_m[:, None] - own_pos_m, cos_h, sin_h) * inv_r
-    rows[:, :, ROW_SWARM, 2:] = _rotate(vbar, cos_h, sin_h) * inv_v
+    dist_t = np.sqrt(np.einsum("...i,...i->...", to_target, to_target))
+    vbar = layout.speed_m_s / np.where(dist_t > 0, dist_t, np.inf)
+    to_centre = centre_m[:, None] - own_pos_m
+    for w, k in ((wx, 0), (wy, 1)):
+        w[ROW_SELF, 0] = to_target[..., k]
+        w[ROW_SELF, 1] = own_vel_m_s[..., k]
+        w[ROW_SWARM, 0] = to_centre[..., k]
+        w[ROW_SWARM, 1] = to_target[..., k] * vbar
+    cos_h, sin_h = np.cos(own_heading_rad), np.sin(own_heading_rad)  # (B, N)
 
     mask = np.zeros((b, n, m), dtype=np.float32)
-    num_obstacles = obstacle_pos_m.shape[1]
-    if num_obstacles == 0:
-        np.clip(rows, -CLIP, CLIP, out=rows)
-        return Observations(rows, mask, np.zeros((b, n, 0), dtype=bool))
-    c, s = cos_h[..., None], sin_h[..., None]  # (B, N, 1)
-    rel = _rotate(obstacle_pos_m[:, None] - own_pos_m[:, :, None], c, s)  # (B, N, M, 2)
-    dist = np.hypot(rel[..., 0], rel[..., 1])  # (B, N, M)
-    sensed = dist <= layout.range_m
-    if layout.aperture_rad < 2 * math.pi:
-        bearing = np.arctan2(rel[..., 1], rel[..., 0])
-        sensed &= np.abs(bearing) <= 0.5 * layout.aperture_rad
-    if obstacle_valid is not None:
-        sensed &= obstacle_valid[:, None]
-    keep = min(m, num_obstacles)
-    order = np.argsort(np.where(sensed, dist, np.inf), axis=-1, kind="stable")[..., :keep]
-    chosen = np.take_along_axis(sensed, order, axis=-1)  # (B, N, keep)
-    rel_k = np.take_along_axis(rel, order[..., None], axis=-2)
-    vel = _rotate(np.broadcast_to(obstacle_vel_m_s[:, None], rel.shape), c, s)
-    vel_k = np.take_along_axis(vel, order[..., None], axis=-2)
-    block = np.concatenate([rel_k * inv_r, vel_k * inv_v], axis=-1)  # (B, N, keep, 4)
-    rows[:, :, ROW_OBSTACLES : ROW_OBSTACLES + keep] = np.where(chosen[..., None], block, 0.0)
-    mask[..., :keep] = chosen
-    np.clip(rows, -CLIP, CLIP, out=rows)
-    return Observations(rows, mask, sensed)
+    sensed = np.zeros((b, n, num_obstacles), dtype=bool)
+    if num_obstacles:
+        rx = obstacle_pos_m[:, None, :, 0] - own_pos_m[:, :, None, 0]  # (B, N, M), world frame
+        ry = obstacle_pos_m[:, None, :, 1] - own_pos_m[:, :, None, 1]
+        dist = np.sqrt(rx * rx + ry * ry)
+        sensed = dist <= layout.range_m
+        if layout.aperture_rad < 2 * math.pi:  # inside the sector: cos(bearing) ≥ cos(½ aperture)
+            ahead = rx * cos_h[..., None] + ry * sin_h[..., None]
+            sensed &= ahead >= dist * math.cos(0.5 * layout.aperture_rad)
+        if obstacle_valid is not None:
+            sensed &= obstacle_valid[:, None]
+        rows_k = slice(ROW_OBSTACLES, used)
+        if num_obstacles == 1:
+            chosen = sensed
+            picked = (rx, ry, obstacle_vel_m_s[:, None, :, 0], obstacle_vel_m_s[:, None, :, 1])
+        else:
+            order = np.argsort(np.where(sensed, dist, np.inf), axis=-1, kind="stable")[..., :keep]
+            chosen = np.take_along_axis(sensed, order, axis=-1)  # (B, N, keep)
+            envs = np.arange(b)[:, None, None]
+            picked = (
+                np.take_along_axis(rx, order, axis=-1),
+                np.take_along_axis(ry, order, axis=-1),
+                obstacle_vel_m_s[envs, order, 0],
+                obstacle_vel_m_s[envs, order, 1],
+            )
+        front = np.moveaxis(chosen, -1, 0)  # (keep, B, N)
+        wx[rows_k, 0] = np.moveaxis(picked[0], -1, 0) * front
+        wy[rows_k, 0] = np.moveaxis(picked[1], -1, 0) * front
+        wx[rows_k, 1] = np.moveaxis(picked[2], -1, 0) * front
+        wy[rows_k, 1] = np.moveaxis(picked[3], -1, 0) * front
+        mask[..., :keep] = chosen
+
+    scale = np.array([1.0 / layout.range_m, 1.0 / layout.speed_m_s])[:, None, None]  # per kind
+    rotated = np.empty((2, used, 2, b, n))
+    rotated[0] = (cos_h * wx + sin_h * wy) * scale  # x' ahead
+    rotated[1] = (cos_h * wy - sin_h * wx) * scale  # y' to the left
+    np.clip(rotated, -CLIP, CLIP, out=rotated)
+    rows = np.zeros((b, n, layout.rows, 2, 2), dtype=np.float32)  # (B, N, rows, kind, xy)
+    rows[:, :, :used] = rotated.transpose(3, 4, 1, 2, 0)
+    return Observations(rows.reshape(b, n, layout.rows, COLUMNS), mask, sensed)
