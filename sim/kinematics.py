@@ -8,6 +8,8 @@ special case. Headings are counter-clockwise from +x, radians.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -42,6 +44,20 @@ def sinc(x: FloatArray) -> FloatArray:
     small = np.abs(x) < SINC_SERIES_BELOW
     safe = np.where(small, 1.0, x)
     return np.where(small, 1.0 - x * x / 6.0, np.sin(safe) / safe)
+
+
+SINC_SERIES_MAX = math.pi / 4
+"""Largest |x| for `sinc_series` (a heading change of π/2 over one arc, the config's limit)."""
+
+
+def sinc_series(x: FloatArray) -> FloatArray:
+    """sin(x)/x for |x| ≤ π/4 by its Taylor series to x⁸ (error < 3e-9): no division, no branch.
+
+    >>> float(abs(sinc_series(np.array(0.7)) - np.sin(0.7) / 0.7)) < 3e-9
+    True
+    """
+    x2 = x * x
+    return 1.0 + x2 * (-1 / 6 + x2 * (1 / 120 + x2 * (-1 / 5040 + x2 * (1 / 362880))))
 
 
 def arc_points_xy(

@@ -28,7 +28,7 @@ from numpy.typing import NDArray
 from sim.config import ScenarioConfig
 from sim.contour import ArcWindow, arc_external_xy
 from sim.field import FieldSources
-from sim.kinematics import scale_action, sinc, wrap_angle
+from sim.kinematics import scale_action, sinc_series, wrap_angle
 from sim.metrics import substep_fractions, swept_min_distance_xy
 from sim.observation import ObservationLayout, Observations, build_observations
 from sim.reward import RewardTerms, assign_contour_levels, reward
@@ -285,18 +285,27 @@ class SwarmSim:
         turn = np.where(acted, commanded, 0.0)
         # ---- kinematics at the T + 1 sub-step instants: arcs for the UAVs (inactive ones stay
         # put: zero length), straight lines for the obstacles.
+        # float32 for the sub-step grid (collision checks, reward quadrature: millimetres at
+        # kilometre range); the state itself advances in float64.
+        f32 = np.float32
         frac = self.fractions  # (T + 1,)
-        u = frac[:, None, None]  # time first: (T + 1, B, N) slices are contiguous
-        half = (0.5 * u) * turn
-        chord = (length * u) * acted * sinc(half)
-        direction = state.heading_rad + half
-        px = state.pos_m[..., 0] + chord * np.cos(direction)  # (T + 1, B, N)
-        py = state.pos_m[..., 1] + chord * np.sin(direction)
-        new_pos = np.stack([px[-1], py[-1]], axis=-1)
+        u = frac.astype(f32)[:, None, None]  # time first: (T + 1, B, N) slices are contiguous
+        half = (f32(0.5) * u) * turn.astype(f32)
+        chord = (f32(length) * u) * acted * sinc_series(half)  # |half| ≤ a_max/2 ≤ π/4
+        direction = state.heading_rad.astype(f32) + half
+        px = state.pos_m[..., 0].astype(f32) + chord * np.cos(direction)  # (T + 1, B, N)
+        py = state.pos_m[..., 1].astype(f32) + chord * np.sin(direction)
+        end_half = 0.5 * turn
+        end_chord = length * acted * sinc_series(end_half)
+        end_dir = state.heading_rad + end_half
+        new_pos = state.pos_m + end_chord[..., None] * np.stack(
+            [np.cos(end_dir), np.sin(end_dir)], axis=-1
+        )
         new_heading = np.where(acted, wrap_angle(state.heading_rad + turn), state.heading_rad)
-        tdt = (dt * frac)[:, None, None]
-        ox = state.obstacle_pos_m[..., 0] + tdt * state.obstacle_vel_m_s[..., 0]  # (T + 1, B, M)
-        oy = state.obstacle_pos_m[..., 1] + tdt * state.obstacle_vel_m_s[..., 1]
+        tdt = (dt * frac).astype(f32)[:, None, None]
+        obs_pos, obs_vel = state.obstacle_pos_m.astype(f32), state.obstacle_vel_m_s.astype(f32)
+        ox = obs_pos[..., 0] + tdt * obs_vel[..., 0]  # (T + 1, B, M)
+        oy = obs_pos[..., 1] + tdt * obs_vel[..., 1]
 
         # ---- swept closest approaches during the step, every kind in one float32 call:
         # UAV–obstacle (N·M), UAV–UAV pairs (P), UAV–own target (N). The relative positions of all
@@ -307,7 +316,7 @@ class SwarmSim:
         steps_b = len(frac) * b
         rel = []
         for p, o, t in ((px, ox, state.target_m[..., 0]), (py, oy, state.target_m[..., 1])):
-            movers = np.concatenate([p, o], axis=-1, dtype=np.float32).reshape(steps_b, n + m)
+            movers = np.concatenate([p, o], axis=-1).reshape(steps_b, n + m)
             r = (movers @ op).reshape(len(frac), b, -1)  # (T + 1, B, K)
             r[..., k_uo + k_uu :] -= t.astype(np.float32)
             rel.append(r)
@@ -338,8 +347,8 @@ class SwarmSim:
         # ---- reward: score the new arc on the mid-step field, push it, evaluate the window
         mid = state.sources(v_s, 0.5 * dt)
         stride = cfg.substeps // cfg.reward.quadrature_intervals
-        qx = px[::stride].astype(np.float32).transpose(1, 2, 0)  # (B, N, Q + 1), float32
-        qy = py[::stride].astype(np.float32).transpose(1, 2, 0)
+        qx = px[::stride].transpose(1, 2, 0)  # (B, N, Q + 1)
+        qy = py[::stride].transpose(1, 2, 0)
         ext = arc_external_xy(
             np.ascontiguousarray(qx),
             np.ascontiguousarray(qy),
@@ -370,7 +379,7 @@ class SwarmSim:
             reached=reached,
             start_m=state.start_m,
             target_m=state.target_m,
-            obstacle_pos_m=np.stack([ox[-1], oy[-1]], axis=-1),
+            obstacle_pos_m=state.obstacle_pos_m + dt * state.obstacle_vel_m_s,
             obstacle_vel_m_s=state.obstacle_vel_m_s,
             obstacle_speed_m_s=state.obstacle_speed_m_s,
             centre_m=state.centre_m + dt * state.swarm_vel_m_s,
