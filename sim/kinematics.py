@@ -9,6 +9,7 @@ special case. Headings are counter-clockwise from +x, radians.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -50,7 +51,7 @@ SINC_SERIES_MAX = math.pi / 4
 """Largest |x| for `sinc_series` (a heading change of π/2 over one arc, the config's limit)."""
 
 
-def sinc_series(x: FloatArray) -> FloatArray:
+def sinc_series(x: NDArray[Any]) -> NDArray[Any]:
     """sin(x)/x for |x| ≤ π/4 by its Taylor series to x⁸ (error < 3e-9): no division, no branch.
 
     >>> float(abs(sinc_series(np.array(0.7)) - np.sin(0.7) / 0.7)) < 3e-9
