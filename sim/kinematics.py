@@ -58,7 +58,8 @@ def sinc_series(x: NDArray[Any]) -> NDArray[Any]:
     True
     """
     x2 = x * x
-    return 1.0 + x2 * (-1 / 6 + x2 * (1 / 120 + x2 * (-1 / 5040 + x2 * (1 / 362880))))
+    series: NDArray[Any] = 1.0 + x2 * (-1 / 6 + x2 * (1 / 120 + x2 * (-1 / 5040 + x2 / 362880)))
+    return series
 
 
 def arc_points_xy(
