@@ -77,6 +77,31 @@ def _cmd_field(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_rollout(args: argparse.Namespace) -> int:
+    from remarl_fc.rollout import rollout
+
+    result = rollout(args.scenario, args.policy, Path(args.out), seed=args.seed)
+    outcome = "success" if result.get("success") else "no success"
+    human = (
+        f"wrote {result['out']}: {result['scenario']} with {result['policy']}, "
+        f"{result.get('length', '?')} steps, {outcome}"
+    )
+    _emit(args, result, human)
+    return 0
+
+
+def _cmd_bench_sim(args: argparse.Namespace) -> int:
+    from remarl_fc.bench import bench_sim
+
+    result = bench_sim(args.scenario, args.batch, args.actions, args.seconds, args.seed)
+    human = (
+        f"{result['scenario']}, batch {result['batch']}, {result['actions']} actions: "
+        f"{result['agent_steps_per_s']:,.0f} agent-steps/s ({result['ms_per_step']:.2f} ms/step)"
+    )
+    _emit(args, result, human)
+    return 0
+
+
 def _cmd_bench(args: argparse.Namespace) -> int:
     from remarl_fc.bench import bench_pso
     from sim.config import PSOConfig
@@ -122,6 +147,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(handler=_cmd_field)
 
+    p = sub.add_parser("rollout", help="fly one episode with a hand-written policy and draw it")
+    p.add_argument("--scenario", default="3u2o", help="scenario name or .toml path (default 3u2o)")
+    p.add_argument("--policy", choices=["straight", "potential-field"], default="potential-field")
+    p.add_argument("--out", default="run.png", help="run.png (last frame) or run.gif (animated)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(handler=_cmd_rollout)
+
     p = sub.add_parser("bench", help="micro-benchmarks")
     bench = p.add_subparsers(dest="what", required=True, metavar="WHAT")
     b = bench.add_parser("pso", help="contour-level PSO: time per call")
@@ -138,6 +171,19 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--seed", type=int, default=0)
     b.add_argument("--json", action="store_true", help="print one JSON object")
     b.set_defaults(handler=_cmd_bench)
+    b = bench.add_parser("sim", help="simulator throughput with the full reMARL reward")
+    b.add_argument("--scenario", default="5u1o", help="scenario name or .toml path")
+    b.add_argument("--batch", type=_positive_int, default=1024, help="environments per step")
+    b.add_argument(
+        "--actions",
+        choices=["uniform", "noise"],
+        default="uniform",
+        help="uniform in [-1, 1] (default) or N(0, 0.1) around straight flight",
+    )
+    b.add_argument("--seconds", type=float, default=2.0, help="how long to time")
+    b.add_argument("--seed", type=int, default=0)
+    b.add_argument("--json", action="store_true", help="print one JSON object")
+    b.set_defaults(handler=_cmd_bench_sim)
     return parser
 
 

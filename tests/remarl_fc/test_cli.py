@@ -70,3 +70,43 @@ def test_bench_pso_json(capsys):
     assert result["evaluations"] == 6000
     assert result["ms_per_call"] > 0
     assert result["feasible_fraction"] == 1.0
+
+
+@pytest.mark.parametrize(("scenario", "suffix"), [("3u2o", ".png"), ("10u1o", ".gif")])
+def test_rollout_draws_an_episode(capsys, tmp_path, scenario, suffix):
+    out = tmp_path / f"run{suffix}"
+    code, text, _ = run(
+        capsys,
+        "rollout",
+        "--scenario",
+        scenario,
+        "--policy",
+        "straight",
+        "--out",
+        str(out),
+        "--json",
+    )
+    assert code == 0
+    result = json.loads(text)
+    assert result["length"] >= 1
+    assert result["success"] is False  # flying straight into the obstacles
+    header = out.read_bytes()[:6]
+    assert header in (b"\x89PNG\r\n", b"GIF89a")
+    assert not list(tmp_path.glob("*.part"))
+
+
+def test_rollout_refuses_other_image_types(capsys, tmp_path):
+    code, _, err = run(capsys, "rollout", "--out", str(tmp_path / "run.jpg"))
+    assert code == 2
+    assert ".png or .gif" in err
+
+
+def test_bench_sim_json(capsys):
+    code, out, _ = run(
+        capsys, "bench", "sim", "--scenario", "3u1o", "--batch", "8", "--seconds", "0.05", "--json"
+    )
+    assert code == 0
+    result = json.loads(out)
+    assert result["agents"] == 3
+    assert result["agent_steps_per_s"] > 0
+    assert result["steps"] >= 5
