@@ -148,11 +148,11 @@ class PSOConfig:
     """d̄_U2U: minimum distance between adjusted UAV positions, metres (Eq. psocost; the paper
     writes d_U2O, the text means UAV–UAV). 1.5·d_col, the spawn spacing guarantee."""
 
-    particles: int = 40
+    particles: int = 20
     """Number of particles, each a candidate position for all N UAVs (2N numbers)."""
 
-    iterations: int = 15
-    """Cost evaluations per particle, the first on the initial particles: 600 per call by
+    iterations: int = 10
+    """Cost evaluations per particle, the first on the initial particles: 200 per call by
     default. Seeded with a constructive repair, this finds smaller shifts than the authors'
     unseeded 6,000 (100 particles × 30 iterations, every particle evaluated twice) — see
     `docs/MODEL.md` — and keeps the simulator fast when many environments need it at once."""

@@ -33,7 +33,7 @@ def test_every_scenario_keeps_speeds_and_timing(name):
 def test_pso_threshold_and_budget():
     pso = PSOConfig()
     assert pso.threshold_m == 1.5 * 20.0
-    assert pso.evaluations == 600
+    assert pso.evaluations == 200
 
 
 def test_reward_window_includes_the_new_arc_and_default_external_term():
