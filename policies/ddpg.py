@@ -61,8 +61,11 @@ class Critic(nn.Module):
 
     def forward(self, obs: Tensor, action: Tensor) -> Tensor:
         """(A, B, obs), (A, B) → (A, B) Q-values."""
-        h = torch.cat([torch.relu(self.obs_l(obs)), torch.relu(self.act_l(action[..., None]))], -1)
-        return self.out(torch.relu(self.l2(h))).squeeze(-1)
+        h = torch.cat(
+            [torch.relu(self.obs_l(obs)), torch.relu(self.act_l(action[..., None]))], dim=-1
+        )
+        q: Tensor = self.out(torch.relu(self.l2(h))).squeeze(-1)
+        return q
 
 
 @dataclass
@@ -80,7 +83,8 @@ class DDPGNets:
     def create(cls, agents: int, obs_size: int, cfg: DDPGConfig) -> DDPGNets:
         """Fresh networks (targets start as copies)."""
         actor, critic = Actor(agents, obs_size, cfg.hidden), Critic(agents, obs_size, cfg.hidden)
-        actor_t, critic_t = Actor(agents, obs_size, cfg.hidden), Critic(agents, obs_size, cfg.hidden)
+        actor_t = Actor(agents, obs_size, cfg.hidden)
+        critic_t = Critic(agents, obs_size, cfg.hidden)
         actor_t.load_state_dict(actor.state_dict())
         critic_t.load_state_dict(critic.state_dict())
         for p in (*actor_t.parameters(), *critic_t.parameters()):
@@ -137,20 +141,20 @@ def ddpg_update(nets: DDPGNets, batch: Batch, cfg: DDPGConfig) -> dict[str, floa
         per = (q - target) ** 2
     critic_loss = (per * w).sum() / norm
     nets.critic_opt.zero_grad(set_to_none=True)
-    critic_loss.backward()  # type: ignore[no-untyped-call]
+    critic_loss.backward()
     nn.utils.clip_grad_norm_(nets.critic.parameters(), cfg.grad_clip)
     nets.critic_opt.step()
 
     actor_loss = -(nets.critic(batch.obs, nets.actor(batch.obs)) * w).sum() / norm
     nets.actor_opt.zero_grad(set_to_none=True)
-    actor_loss.backward()  # type: ignore[no-untyped-call]
+    actor_loss.backward()
     nn.utils.clip_grad_norm_(nets.actor.parameters(), cfg.grad_clip)
     nets.actor_opt.step()
 
     soft_update(nets.actor_target, nets.actor, cfg.tau)
     soft_update(nets.critic_target, nets.critic, cfg.tau)
     return {
-        "losses/critic": float(critic_loss),
-        "losses/actor": float(actor_loss),
+        "losses/critic": float(critic_loss.detach()),
+        "losses/actor": float(actor_loss.detach()),
         "values/q_mean": float((q.detach() * w).sum() / norm),
     }

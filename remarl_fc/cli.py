@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from remarl_fc._version import __version__
-from remarl_fc.errors import RemarlError
+from remarl_fc.errors import ConfigError, RemarlError
 
 EXIT_USAGE = 2
 """Exit status for bad input (also argparse's)."""
@@ -90,6 +90,104 @@ def _cmd_rollout(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_train(args: argparse.Namespace) -> int:
+    import dataclasses
+
+    from policies.config import DDPGConfig, TrainConfig
+    from policies.train import train
+
+    ddpg = DDPGConfig(shared=args.shared)
+    cfg = TrainConfig(
+        scenario=args.scenario,
+        num_envs=args.envs,
+        total_steps=args.steps,
+        minutes=args.minutes,
+        seed=args.seed,
+        eval_every=args.eval_every,
+        eval_episodes=args.eval_episodes,
+        reward=args.reward,
+        ddpg=ddpg,
+    )
+    from sim.scenarios import load_scenario
+
+    load_scenario(cfg.scenario)  # a bad name fails here, before anything is written
+    out = Path(args.out or f"runs/{Path(cfg.scenario).stem}-s{cfg.seed}")
+    bar = _progress_bar(cfg.total_steps, enabled=not args.json)
+    with bar as progress:
+        task = progress.add_task("train", total=cfg.total_steps)
+
+        def report(scalars: dict[str, float]) -> None:
+            progress.update(
+                task,
+                completed=scalars["step"],
+                description=(
+                    f"success {scalars['charts/success']:.0%}  "
+                    f"swarming return {scalars['charts/episodic_swarming_return']:.1f}"
+                ),
+            )
+
+        try:
+            summary = train(cfg, out, resume=args.resume, progress=report)
+        except KeyboardInterrupt:
+            print(f"interrupted: resume with --resume --out {out}", file=sys.stderr)
+            return 130
+    _emit(
+        args,
+        {"config": dataclasses.asdict(cfg), **summary},
+        f"trained {summary['env_steps']:,} environment steps in {summary['elapsed_s']:.0f} s; "
+        f"best success {summary['best_success']:.1%}; run folder {out}",
+    )
+    return 0
+
+
+def _progress_bar(total: int, *, enabled: bool) -> Any:
+    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+    return Progress(
+        TextColumn("{task.description}"),
+        BarColumn(),
+        TextColumn("{task.completed}/{task.total} steps"),
+        TimeElapsedColumn(),
+        disable=not enabled,
+        transient=False,
+    )
+
+
+def _cmd_eval(args: argparse.Namespace) -> int:
+    from remarl_fc.evaluate import evaluate_policy, plot_episode
+
+    policy, result = evaluate_policy(args.policy, args.scenario, args.episodes, args.seed)
+    if args.plot:
+        plot_episode(policy, args.scenario, args.seed, Path(args.plot))
+        result["plot"] = args.plot
+    human = (
+        f"{result['scenario']}, {int(result['episodes'])} episodes: success "
+        f"{result['success_rate']:.1%}, collisions {result['collision_rate']:.1%} "
+        f"(U2O {result['collision_rate_u2o']:.1%}, U2U {result['collision_rate_u2u']:.1%}), "
+        f"min d_U2O {result['min_d_u2o_m']:.1f} m, min d_U2U {result['min_d_u2u_m']:.1f} m, "
+        f"energy {result['energy_rad']:.2f} rad, path ratio {result['path_length_ratio']:.3f}, "
+        f"swarming return {result['swarming_return']:.1f}, reaction time "
+        f"{result['reaction_time_median_ms'] * 1e3:.0f} µs median "
+        f"({result['reaction_time_p99_ms'] * 1e3:.0f} µs p99)"
+    )
+    _emit(args, result, human)
+    return 0
+
+
+def _cmd_export(args: argparse.Namespace) -> int:
+    import json
+
+    from policies.export import export_policy
+
+    run = Path(args.run)
+    if not (run / "config.json").is_file():
+        raise ConfigError(f"{run}: not a training run folder (no config.json); pass --out of train")
+    metrics = json.loads(Path(args.metrics).read_text()) if args.metrics else None
+    meta = export_policy(run, Path(args.out), checkpoint=args.checkpoint, metrics=metrics)
+    _emit(args, {"out": args.out, **meta}, f"wrote {args.out} ({meta['scenario']})")
+    return 0
+
+
 def _cmd_bench_sim(args: argparse.Namespace) -> int:
     from remarl_fc.bench import bench_sim
 
@@ -146,6 +244,43 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0, help="seed of the obstacle spawn and PSO")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(handler=_cmd_field)
+
+    p = sub.add_parser("train", help="train per-agent DDPG with the reMARL reward")
+    p.add_argument("--scenario", default="3u2o", help="scenario name or .toml path")
+    p.add_argument("--steps", type=_positive_int, default=20_000, help="vectorised env steps")
+    p.add_argument("--minutes", type=float, default=0.0, help="wall-clock budget (0: none)")
+    p.add_argument("--envs", type=_positive_int, default=16, help="environments stepped at once")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--out", default=None, help="run folder (default runs/SCENARIO-sSEED)")
+    p.add_argument("--resume", action="store_true", help="continue the run in --out")
+    p.add_argument("--shared", action="store_true", help="one network for all agents")
+    p.add_argument(
+        "--reward",
+        choices=["remarl", "swarming"],
+        default="remarl",
+        help="full reMARL reward (default) or its Swarming part only",
+    )
+    p.add_argument("--eval-every", type=_positive_int, default=2_000, help="steps between evals")
+    p.add_argument("--eval-episodes", type=_positive_int, default=100)
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(handler=_cmd_train)
+
+    p = sub.add_parser("eval", help="evaluate a policy file (numpy inference)")
+    p.add_argument("--policy", required=True, help="zoo name (e.g. 3u2o) or .safetensors path")
+    p.add_argument("--scenario", default=None, help="default: the policy's own scenario")
+    p.add_argument("--episodes", type=_positive_int, default=1000)
+    p.add_argument("--seed", type=int, default=2_000_000, help="first evaluation seed")
+    p.add_argument("--plot", default=None, help="also draw one episode and its Q-values here")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(handler=_cmd_eval)
+
+    p = sub.add_parser("export", help="write a policy file from a training run")
+    p.add_argument("run", help="run folder (the --out of train)")
+    p.add_argument("--out", required=True, help="the .safetensors file to write")
+    p.add_argument("--checkpoint", choices=["best", "last"], default="best")
+    p.add_argument("--metrics", default=None, help="eval JSON to embed in the file")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(handler=_cmd_export)
 
     p = sub.add_parser("rollout", help="fly one episode with a hand-written policy and draw it")
     p.add_argument("--scenario", default="3u2o", help="scenario name or .toml path (default 3u2o)")

@@ -86,7 +86,8 @@ def episode_metrics(
 ) -> dict[str, Any]:
     """Per-environment episode metrics (SPEC §9) for the environments in ``done`` (B,)."""
     s = state.stats
-    ratio = path_length_ratio(s.flown_m, state.start_m, state.target_m)
+    # Detour measure: distance flown over the straight line to where each UAV arrived.
+    ratio = path_length_ratio(s.flown_m, state.start_m, state.pos_m)
     return {
         "success": result.success[done],
         "collision_u2o": np.asarray(result.collided_u2o.any(axis=-1))[done],
@@ -154,6 +155,8 @@ class SwarmVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float32], NDArray
         )
         self.single_action_space = spaces.Box(-1.0, 1.0, (n,), np.float32)
         self.observation_space = batch_space(self.single_observation_space, num_envs)
+        self.obs_layout_size = int(obs.shape[0])
+        """D, the length of one UAV's flat observation."""
         self.action_space = batch_space(self.single_action_space, num_envs)
         self._rng = np.random.default_rng()
         self._state: SwarmState | None = None

@@ -1,0 +1,195 @@
+"""Load exported policy files and run them in numpy (no torch, no pickle).
+
+A policy is resolved by zoo name (``3u2o`` → ``policies/zoo/3u2o.safetensors``) or by path.
+The safetensors format holds only tensors and a JSON header: loading one never executes code.
+Everything is checked before use: the header, the schema version, the tensor names and shapes
+against the metadata, and — with `Policy.check_scenario` — the scenario it is asked to fly.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from remarl_fc.errors import PolicyError, PolicySpecMismatch
+from sim.config import ScenarioConfig
+from sim.observation import ObservationLayout
+
+POLICY_SCHEMA = 1
+"""The policy file layout this loader reads (written by `policies.export`)."""
+
+ACTOR_LAYERS = ("l1", "out")
+CRITIC_LAYERS = ("obs_l", "act_l", "l2", "out")
+
+
+def zoo_dir() -> Path:
+    """Folder of the shipped policies (located without importing the torch-based package)."""
+    spec = importlib.util.find_spec("policies")
+    if spec is None or not spec.submodule_search_locations:
+        raise PolicyError("the policies package is not installed", source="zoo")
+    return Path(next(iter(spec.submodule_search_locations))) / "zoo"
+
+
+def zoo_names() -> list[str]:
+    """Names of the shipped policies."""
+    folder = zoo_dir()
+    return sorted(p.stem for p in folder.glob("*.safetensors")) if folder.is_dir() else []
+
+
+def resolve(name_or_path: str | Path) -> Path:
+    """The file of a zoo name or a path; a clear error if there is none."""
+    text = str(name_or_path)
+    if isinstance(name_or_path, Path) or text.endswith(".safetensors") or "/" in text:
+        path = Path(name_or_path)
+        if not path.is_file():
+            raise PolicyError("no such policy file", source=text)
+        return path
+    path = zoo_dir() / f"{text}.safetensors"
+    if not path.is_file():
+        known = ", ".join(zoo_names()) or "none shipped"
+        raise PolicyError(
+            f"no policy of that name in the zoo (known: {known}); pass a .safetensors path",
+            source=text,
+        )
+    return path
+
+
+@dataclass(frozen=True)
+class Policy:
+    """A loaded policy: per-agent actor (and critic) weights and the metadata they came with.
+
+    Attributes:
+        source: where it was loaded from.
+        meta: the metadata header (`policies.export`).
+        actor: layer name → (weight (A, in, out), bias (A, 1, out)).
+        critic: the same for the critic (may be empty).
+    """
+
+    source: str
+    meta: dict[str, Any]
+    actor: dict[str, tuple[NDArray[np.float32], NDArray[np.float32]]]
+    critic: dict[str, tuple[NDArray[np.float32], NDArray[np.float32]]]
+
+    @property
+    def agents(self) -> int:
+        """N, the UAVs the policy flies."""
+        return int(self.meta["agents"])
+
+    @property
+    def layout(self) -> ObservationLayout:
+        """The observation layout the policy expects."""
+        o = self.meta["observation"]
+        return ObservationLayout(
+            int(o["max_obstacles"]),
+            float(o["range_m"]),
+            float(o["aperture_rad"]),
+            float(o["speed_m_s"]),
+        )
+
+    def _weights(self, layer: tuple[NDArray[np.float32], NDArray[np.float32]], n: int) -> Any:
+        w, b = layer
+        if w.shape[0] == 1 and n != 1:  # shared parameters
+            w, b = np.broadcast_to(w, (n, *w.shape[1:])), np.broadcast_to(b, (n, *b.shape[1:]))
+        return w, b[:, 0]
+
+    def act(self, obs: NDArray[np.floating[Any]]) -> NDArray[np.float32]:
+        """Normalised actions (..., N) in [−1, 1] for flat observations (..., N, D)."""
+        x = np.asarray(obs, dtype=np.float32)
+        n = x.shape[-2]
+        if n != self.agents:
+            raise PolicySpecMismatch(self.source, "number of UAVs", self.agents, n)
+        w1, b1 = self._weights(self.actor["l1"], n)
+        w2, b2 = self._weights(self.actor["out"], n)
+        h = np.maximum(np.einsum("...nd,ndh->...nh", x, w1) + b1, 0.0)
+        out: NDArray[np.float32] = np.tanh(np.einsum("...nh,nho->...no", h, w2) + b2)[..., 0]
+        return out.astype(np.float32, copy=False)
+
+    def q_values(self, obs: NDArray[np.floating[Any]], act: NDArray[np.floating[Any]]) -> Any:
+        """Critic values (..., N) of actions (..., N) at flat observations (..., N, D)."""
+        if not self.critic:
+            raise PolicyError("this policy file holds no critic", source=self.source)
+        x = np.asarray(obs, dtype=np.float32)
+        a = np.asarray(act, dtype=np.float32)[..., None]
+        n = x.shape[-2]
+        wo, bo = self._weights(self.critic["obs_l"], n)
+        wa, ba = self._weights(self.critic["act_l"], n)
+        w2, b2 = self._weights(self.critic["l2"], n)
+        w3, b3 = self._weights(self.critic["out"], n)
+        h = np.concatenate(
+            [
+                np.maximum(np.einsum("...nd,ndh->...nh", x, wo) + bo, 0.0),
+                np.maximum(np.einsum("...nd,ndh->...nh", a, wa) + ba, 0.0),
+            ],
+            axis=-1,
+        )
+        h = np.maximum(np.einsum("...nd,ndh->...nh", h, w2) + b2, 0.0)
+        return (np.einsum("...nh,nho->...no", h, w3) + b3)[..., 0]
+
+    def check_scenario(self, cfg: ScenarioConfig) -> None:
+        """Raise `PolicySpecMismatch` unless ``cfg`` matches what the policy was trained on."""
+        layout = ObservationLayout.from_scenario(cfg)
+        checks = [
+            ("number of UAVs", self.agents, cfg.uav.count),
+            ("decision step dt_s", float(self.meta["dt_s"]), cfg.dt_s),
+            ("UAV speed speed_m_s", float(self.meta["speed_m_s"]), cfg.uav.speed_m_s),
+            ("max_turn_rad", float(self.meta["action"]["max_turn_rad"]), cfg.uav.max_turn_rad),
+            ("observation layout", self.layout, layout),
+        ]
+        for field, expected, actual in checks:
+            if expected != actual:
+                raise PolicySpecMismatch(self.source, field, expected, actual)
+
+
+def load_policy(name_or_path: str | Path) -> Policy:
+    """Load and validate a policy file (zoo name or path). Raises `PolicyError` subclasses."""
+    from safetensors import SafetensorError, safe_open
+
+    path = resolve(name_or_path)
+    source = str(name_or_path)
+    try:
+        with safe_open(str(path), framework="numpy") as f:
+            header = f.metadata() or {}
+            tensors = {k: f.get_tensor(k) for k in f.keys()}  # noqa: SIM118 - not a dict
+    except (SafetensorError, OSError, ValueError) as exc:
+        raise PolicyError(f"not a readable safetensors file ({exc})", source=source) from exc
+    if "remarl_policy" not in header:
+        raise PolicyError("not a remarl-fc policy (no remarl_policy metadata)", source=source)
+    try:
+        meta = json.loads(header["remarl_policy"])
+    except json.JSONDecodeError as exc:
+        raise PolicyError(f"corrupt metadata ({exc})", source=source) from exc
+    if meta.get("schema") != POLICY_SCHEMA:
+        raise PolicySpecMismatch(source, "policy file schema", POLICY_SCHEMA, meta.get("schema"))
+    for key in ("agents", "observation", "action", "dt_s", "speed_m_s", "shared", "hidden"):
+        if key not in meta:
+            raise PolicyError(f"metadata lacks {key!r}", source=source)
+
+    def layers(prefix: str, names: tuple[str, ...], required: bool) -> dict[str, Any]:
+        out = {}
+        for name in names:
+            w, b = tensors.get(f"{prefix}.{name}.weight"), tensors.get(f"{prefix}.{name}.bias")
+            if w is None or b is None:
+                if required:
+                    raise PolicyError(f"missing tensor {prefix}.{name}", source=source)
+                return {}
+            out[name] = (np.asarray(w, np.float32), np.asarray(b, np.float32))
+        return out
+
+    actor = layers("actor", ACTOR_LAYERS, required=True)
+    critic = layers("critic", CRITIC_LAYERS, required=False)
+    agents = 1 if meta["shared"] else int(meta["agents"])
+    size, hidden = int(meta["observation"]["size"]), int(meta["hidden"])
+    expected = {"l1": (agents, size, hidden), "out": (agents, hidden, 1)}
+    for name, shape in expected.items():
+        if actor[name][0].shape != shape or actor[name][1].shape != (agents, 1, shape[2]):
+            raise PolicyError(
+                f"tensor actor.{name} has shape {actor[name][0].shape}, metadata says {shape}",
+                source=source,
+            )
+    return Policy(source=source, meta=meta, actor=actor, critic=critic)
