@@ -190,6 +190,7 @@ def train(
                 for k in range(len(ep["success"])):
                     episodes.append(
                         {
+                            "collision": float(ep["collision_u2o"][k] or ep["collision_u2u"][k]),
                             "success": float(ep["success"][k]),
                             "swarming_return": float(ep["swarming_return"][k]),
                             "total_return": float(ep["total_return"][k]),
@@ -212,6 +213,7 @@ def train(
                 recent = episodes[-200:]
                 scalars = {
                     "charts/success": float(np.mean([e["success"] for e in recent])),
+                    "charts/collision": float(np.mean([e["collision"] for e in recent])),
                     "charts/episodic_swarming_return": float(
                         np.mean([e["swarming_return"] for e in recent])
                     ),
@@ -233,7 +235,11 @@ def train(
                         EVAL_SEED_OFFSET + step,
                     )
                 )
-                record = {"step": step, **result}
+                record = {
+                    "step": step,
+                    "elapsed_s": elapsed_before + time.monotonic() - start_time,
+                    **result,
+                }
                 with (out_dir / "evals.jsonl").open("a") as f:
                     f.write(json.dumps(record) + "\n")
                 if writer is not None:

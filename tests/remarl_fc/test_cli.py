@@ -110,3 +110,85 @@ def test_bench_sim_json(capsys):
     assert result["agents"] == 3
     assert result["agent_steps_per_s"] > 0
     assert result["steps"] >= 5
+
+
+def test_train_export_eval_round_trip(capsys, tmp_path):
+    run_dir = tmp_path / "run"
+    code, out, _ = run(
+        capsys,
+        "train",
+        "--scenario",
+        "2u1o",
+        "--steps",
+        "40",
+        "--envs",
+        "4",
+        "--eval-every",
+        "40",
+        "--eval-episodes",
+        "4",
+        "--out",
+        str(run_dir),
+        "--json",
+    )
+    assert code == 0
+    summary = json.loads(out)
+    assert summary["steps"] == 40
+    assert (run_dir / "config.json").is_file() and (run_dir / "best.safetensors").is_file()
+    policy_file = tmp_path / "p.safetensors"
+    code, out, _ = run(capsys, "export", str(run_dir), "--out", str(policy_file), "--json")
+    assert code == 0
+    assert json.loads(out)["agents"] == 2
+    code, out, _ = run(
+        capsys,
+        "eval",
+        "--policy",
+        str(policy_file),
+        "--episodes",
+        "6",
+        "--plot",
+        str(tmp_path / "e.png"),
+        "--json",
+    )
+    assert code == 0
+    result = json.loads(out)
+    assert result["episodes"] == 6
+    assert 0.0 <= result["success_rate"] <= 1.0
+    assert result["reaction_time_median_ms"] > 0
+    assert (tmp_path / "e.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def test_eval_refuses_a_policy_for_another_scenario(capsys, tmp_path):
+    run_dir = tmp_path / "run"
+    run(
+        capsys,
+        "train",
+        "--scenario",
+        "2u1o",
+        "--steps",
+        "5",
+        "--envs",
+        "2",
+        "--eval-episodes",
+        "2",
+        "--out",
+        str(run_dir),
+    )
+    policy_file = tmp_path / "p.safetensors"
+    run(capsys, "export", str(run_dir), "--out", str(policy_file))
+    code, _, err = run(capsys, "eval", "--policy", str(policy_file), "--scenario", "3u2o")
+    assert code == 2
+    assert "number of UAVs" in err
+
+
+def test_export_of_a_non_run_folder_is_a_clear_error(capsys, tmp_path):
+    code, _, err = run(capsys, "export", str(tmp_path), "--out", str(tmp_path / "p.safetensors"))
+    assert code == 2
+    assert "not a training run folder" in err
+
+
+def test_train_rejects_unknown_scenario_before_writing(capsys, tmp_path):
+    code, _, err = run(capsys, "train", "--scenario", "9u9o", "--out", str(tmp_path / "r"))
+    assert code == 2
+    assert "unknown scenario" in err
+    assert not (tmp_path / "r").exists()

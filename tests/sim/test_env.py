@@ -117,3 +117,15 @@ def test_potential_field_oracle_beats_flying_straight_on_2u1o_static():
     )
     assert field >= 0.9
     assert field > straight + 0.5
+
+
+def test_reset_mask_restarts_only_the_selected_environments():
+    env = make_vector_env("3u2o", 3)
+    env.reset(seed=0)
+    for _ in range(3):
+        env.step(np.full((3, 3), 0.2, np.float32))
+    before = env.state.pos_m.copy()
+    obs, _ = env.reset(options={"reset_mask": np.array([False, True, False])})
+    np.testing.assert_array_equal(env.state.steps, [3, 0, 3])
+    np.testing.assert_array_equal(env.state.pos_m[[0, 2]], before[[0, 2]])
+    assert obs.shape == (3, 3, env.obs_layout_size)

@@ -1,0 +1,67 @@
+"""Train, evaluate and export the policy zoo (``policies/zoo/<scenario>.safetensors``).
+
+    python tools/train_zoo.py [--scenarios 2u1o 3u2o ...] [--minutes 10] [--episodes 1000]
+
+For each scenario: ``remarl-fc train`` with a wall-clock budget, ``remarl-fc eval`` of the best
+checkpoint on 1,000 episodes with seeds never used in training, then export with the metrics
+embedded, and the eval JSON beside the policy file. Prints one line per scenario.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+from policies.config import TrainConfig
+from policies.export import export_policy
+from policies.train import train
+from remarl_fc.evaluate import evaluate_policy
+
+ZOO = Path(__file__).resolve().parents[1] / "policies" / "zoo"
+PAPER = ["2u1o", "3u1o", "5u1o", "7u1o", "10u1o", "3u2o", "5u2o", "7u2o"]
+EVAL_SEED = 5_000_000
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--scenarios", nargs="+", default=PAPER)
+    parser.add_argument("--minutes", type=float, default=10.0)
+    parser.add_argument("--episodes", type=int, default=1000)
+    parser.add_argument("--runs", default="runs/zoo")
+    parser.add_argument("--seed", type=int, default=0)
+    args = parser.parse_args()
+    ZOO.mkdir(parents=True, exist_ok=True)
+    for name in args.scenarios:
+        t0 = time.monotonic()
+        run = Path(args.runs) / name
+        cfg = TrainConfig(
+            scenario=name,
+            total_steps=10_000_000,
+            minutes=args.minutes,
+            seed=args.seed,
+            eval_every=1_000,
+            eval_episodes=100,
+        )
+        summary = train(cfg, run)
+        staging = run / "policy.safetensors"
+        export_policy(run, staging)
+        _, result = evaluate_policy(str(staging), name, args.episodes, EVAL_SEED)
+        result["train_wall_s"] = summary["elapsed_s"]
+        result["train_env_steps"] = summary["env_steps"]
+        out = ZOO / f"{name}.safetensors"
+        export_policy(run, out, metrics=result)
+        result["policy"] = f"{name} (policies/zoo/{name}.safetensors)"
+        (ZOO / f"{name}.eval.json").write_text(json.dumps(result, indent=2) + "\n")
+        print(
+            f"{name}: success {result['success_rate']:.1%}, collisions "
+            f"{result['collision_rate']:.1%}, min d_U2O {result['min_d_u2o_m']:.1f} m, "
+            f"trained {summary['elapsed_s'] / 60:.1f} min, "
+            f"total {(time.monotonic() - t0) / 60:.1f} min",
+            flush=True,
+        )
+
+
+if __name__ == "__main__":
+    main()
