@@ -257,8 +257,10 @@ class ObstacleConfig:
     spawn_x_m: float = 240.0
     """x of the line on which obstacles spawn, metres."""
 
-    spacing_m: float = 60.0
-    """Distance between neighbouring obstacles on the spawn line, metres."""
+    spacing_m: float = 80.0
+    """Distance between neighbouring obstacles on the spawn line, metres: with the lateral
+    jitter, two obstacles leave a gap of 60–100 m, wide enough to pass between (2·d_col plus
+    margin), as the middle UAVs do in the paper's Fig. 4."""
 
     center_y_m: float = 150.0
     """y of the centre of the obstacle spawn line, metres."""
