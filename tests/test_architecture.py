@@ -33,6 +33,7 @@ def test_imports_point_one_way(package, forbidden):
 def test_cli_and_sim_import_without_torch():
     code = (
         "import sys; import remarl_fc.cli, remarl_fc.plots, remarl_fc.bench, sim, sim.reward; "
+        "import remarl_fc.policy_io, remarl_fc.evaluate, remarl_fc.rollout, sim.env; "
         "assert 'torch' not in sys.modules and 'policies' not in sys.modules"
     )
     subprocess.run([sys.executable, "-c", code], check=True)
