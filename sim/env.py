@@ -225,6 +225,18 @@ class SwarmVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float32], NDArray
                 self._trails[0].append(state.pos_m[0].copy())
         return obs, rewards.astype(np.float32), result.terminated, result.truncated, infos
 
+    def step_without_reset(self, actions: NDArray[Any]) -> StepResult:
+        """Step every environment and keep finished episodes finished (no autoreset).
+
+        The single-episode faces (`SwarmParallelEnv`, `SwarmEnv`) step this way; the caller
+        resets when it wants a new episode.
+        """
+        state, result = self.sim.step(self.state, np.asarray(actions), self._rng)
+        self._state = state
+        if self.render_mode is not None:
+            self._trails[0].append(state.pos_m[0].copy())
+        return result
+
     def rewards_of(self, result: StepResult) -> NDArray[np.float64]:
         """The rewards this environment pays: the reMARL reward or its Swarming part, (B, N)."""
         return result.reward.total if self.reward_mode == "remarl" else result.reward.swarming
@@ -313,10 +325,7 @@ class SwarmParallelEnv(ParallelEnv[str, NDArray[np.float32], NDArray[np.float32]
         vec_actions = np.zeros((1, self.cfg.uav.count), dtype=np.float32)
         for agent, action in actions.items():
             vec_actions[0, self.possible_agents.index(agent)] = np.asarray(action).reshape(-1)[0]
-        state, result = self._vec.sim.step(self._vec.state, vec_actions, self._vec._rng)
-        self._vec._state = state
-        if self.render_mode is not None:
-            self._vec._trails[0].append(state.pos_m[0].copy())
+        result = self._vec.step_without_reset(vec_actions)
         obs = result.obs.flat()[0]
         rewards = self._vec.rewards_of(result)
         live = list(self.agents)
@@ -396,12 +405,8 @@ class SwarmEnv(gymnasium.Env[NDArray[np.float32], NDArray[np.float32]]):
         self, action: NDArray[np.float32]
     ) -> tuple[NDArray[np.float32], float, bool, bool, dict[str, Any]]:
         """Step the swarm (no autoreset: call `reset` after the episode ends)."""
-        state, result = self._vec.sim.step(
-            self._vec.state, np.asarray(action)[None], self._vec._rng
-        )
-        self._vec._state = state
-        if self.render_mode is not None:
-            self._vec._trails[0].append(state.pos_m[0].copy())
+        result = self._vec.step_without_reset(np.asarray(action)[None])
+        state = self._vec.state
         rewards = self._vec.rewards_of(result)
         info: dict[str, Any] = {"active": state.active[0].copy()}
         if result.terminated[0] or result.truncated[0]:
