@@ -14,7 +14,7 @@ import json
 import time
 from pathlib import Path
 
-from policies.config import TrainConfig
+from policies.config import DDPGConfig, TrainConfig
 from policies.export import export_policy
 from policies.train import train
 from remarl_fc.evaluate import evaluate_policy
@@ -31,8 +31,11 @@ def main() -> None:
     parser.add_argument("--episodes", type=int, default=1000)
     parser.add_argument("--runs", default="runs/zoo")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--shared", action="store_true", help="parameter sharing across agents")
+    parser.add_argument("--zoo", default=str(ZOO), help="where to write the policies")
     args = parser.parse_args()
-    ZOO.mkdir(parents=True, exist_ok=True)
+    zoo = Path(args.zoo)
+    zoo.mkdir(parents=True, exist_ok=True)
     for name in args.scenarios:
         t0 = time.monotonic()
         run = Path(args.runs) / name
@@ -43,6 +46,7 @@ def main() -> None:
             seed=args.seed,
             eval_every=1_000,
             eval_episodes=100,
+            ddpg=DDPGConfig(shared=args.shared),
         )
         summary = train(cfg, run)
         staging = run / "policy.safetensors"
@@ -50,10 +54,10 @@ def main() -> None:
         _, result = evaluate_policy(str(staging), name, args.episodes, EVAL_SEED)
         result["train_wall_s"] = summary["elapsed_s"]
         result["train_env_steps"] = summary["env_steps"]
-        out = ZOO / f"{name}.safetensors"
+        out = zoo / f"{name}.safetensors"
         export_policy(run, out, metrics=result)
         result["policy"] = f"{name} (policies/zoo/{name}.safetensors)"
-        (ZOO / f"{name}.eval.json").write_text(json.dumps(result, indent=2) + "\n")
+        (zoo / f"{name}.eval.json").write_text(json.dumps(result, indent=2) + "\n")
         print(
             f"{name}: success {result['success_rate']:.1%}, collisions "
             f"{result['collision_rate']:.1%}, min d_U2O {result['min_d_u2o_m']:.1f} m, "
