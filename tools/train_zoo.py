@@ -13,6 +13,7 @@ import argparse
 import json
 import time
 from pathlib import Path
+from typing import Any
 
 from policies.config import DDPGConfig, TrainConfig
 from policies.export import export_policy
@@ -33,31 +34,31 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--shared", action="store_true", help="parameter sharing across agents")
     parser.add_argument("--zoo", default=str(ZOO), help="where to write the policies")
+    parser.add_argument(
+        "--from-run", default=None, help="publish this existing run folder instead of training"
+    )
     args = parser.parse_args()
     zoo = Path(args.zoo)
     zoo.mkdir(parents=True, exist_ok=True)
     for name in args.scenarios:
         t0 = time.monotonic()
-        run = Path(args.runs) / name
-        cfg = TrainConfig(
-            scenario=name,
-            total_steps=10_000_000,
-            minutes=args.minutes,
-            seed=args.seed,
-            eval_every=1_000,
-            eval_episodes=100,
-            ddpg=DDPGConfig(shared=args.shared),
-        )
-        summary = train(cfg, run)
-        staging = run / "policy.safetensors"
-        export_policy(run, staging)
-        _, result = evaluate_policy(str(staging), name, args.episodes, EVAL_SEED)
-        result["train_wall_s"] = summary["elapsed_s"]
-        result["train_env_steps"] = summary["env_steps"]
-        out = zoo / f"{name}.safetensors"
-        export_policy(run, out, metrics=result)
-        result["policy"] = f"{name} (policies/zoo/{name}.safetensors)"
-        (zoo / f"{name}.eval.json").write_text(json.dumps(result, indent=2) + "\n")
+        if args.from_run:
+            run = Path(args.from_run)
+            last = [json.loads(x) for x in (run / "evals.jsonl").read_text().splitlines()][-1]
+            summary = {"elapsed_s": last["elapsed_s"], "env_steps": None}
+        else:
+            run = Path(args.runs) / name
+            cfg = TrainConfig(
+                scenario=name,
+                total_steps=10_000_000,
+                minutes=args.minutes,
+                seed=args.seed,
+                eval_every=1_000,
+                eval_episodes=100,
+                ddpg=DDPGConfig(shared=args.shared),
+            )
+            summary = train(cfg, run)
+        result = publish(run, name, args.episodes, zoo, summary)
         print(
             f"{name}: success {result['success_rate']:.1%}, collisions "
             f"{result['collision_rate']:.1%}, min d_U2O {result['min_d_u2o_m']:.1f} m, "
@@ -65,6 +66,21 @@ def main() -> None:
             f"total {(time.monotonic() - t0) / 60:.1f} min",
             flush=True,
         )
+
+
+def publish(
+    run: Path, name: str, episodes: int, zoo: Path, summary: dict[str, Any]
+) -> dict[str, Any]:
+    """Evaluate a run's best networks on held-out seeds and write the zoo file and its JSON."""
+    staging = run / "policy.safetensors"
+    export_policy(run, staging)
+    _, result = evaluate_policy(str(staging), name, episodes, EVAL_SEED)
+    result["train_wall_s"] = summary["elapsed_s"]
+    result["train_env_steps"] = summary["env_steps"]
+    export_policy(run, zoo / f"{name}.safetensors", metrics=result)
+    result["policy"] = f"{name} (policies/zoo/{name}.safetensors)"
+    (zoo / f"{name}.eval.json").write_text(json.dumps(result, indent=2) + "\n")
+    return result
 
 
 if __name__ == "__main__":
