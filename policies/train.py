@@ -164,6 +164,7 @@ def train(
     obs, _ = env.reset(seed=cfg.seed + step)
     episodes: list[dict[str, float]] = []
     summary: dict[str, Any] = {}
+    env_seconds = learn_seconds = 0.0
     warm = 0 if resume and step > 0 else d.warmup_steps // cfg.num_envs
     try:
         while step < cfg.total_steps:
@@ -180,7 +181,9 @@ def train(
                 actions = policy_actions(nets, obs, d.shared)
                 actions += rng.normal(0.0, sigma, actions.shape).astype(np.float32)
                 np.clip(actions, -1.0, 1.0, out=actions)
+            t_env = time.perf_counter()
             next_obs, rewards, _, _, info = env.step(actions)
+            env_seconds += time.perf_counter() - t_env
 
             # ---- store: the real next observation of finished episodes is in final_obs
             real_next = next_obs
@@ -205,8 +208,10 @@ def train(
             # ---- learn
             losses: dict[str, float] = {}
             if warm == 0 and buffer.size >= d.batch_size:
+                t_learn = time.perf_counter()
                 for _ in range(d.updates_per_step):
                     losses = ddpg_update(nets, buffer.sample(d.batch_size, rng, d.shared), d)
+                learn_seconds += time.perf_counter() - t_learn
 
             # ---- log, evaluate, checkpoint
             if step % 100 == 0 and episodes:
@@ -219,6 +224,9 @@ def train(
                     ),
                     "charts/episodic_return": float(np.mean([e["total_return"] for e in recent])),
                     "charts/SPS": step * cfg.num_envs / max(time.monotonic() - start_time, 1e-9),
+                    # Where the time goes: the simulator (reward, PSO, field) against learning.
+                    "perf/simulator_share": env_seconds / max(env_seconds + learn_seconds, 1e-9),
+                    "perf/simulator_ms_per_step": 1e3 * env_seconds / step,
                     **losses,
                 }
                 for key, value in scalars.items():
