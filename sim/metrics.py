@@ -17,8 +17,6 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from sim.kinematics import arc_points, straight_points
-
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
 
@@ -101,47 +99,6 @@ def swept_min_distance(relative_m: FloatArray) -> FloatArray:
         np.ascontiguousarray(rel[..., 0]), np.ascontiguousarray(rel[..., 1])
     )
     return smallest.astype(np.float64)
-
-
-def uav_substep_positions(
-    start_m: FloatArray,
-    heading_rad: FloatArray,
-    turn_rad: FloatArray,
-    length_m: float,
-    substeps: int = SUBSTEPS,
-) -> FloatArray:
-    """Positions of UAVs flying arcs at the T + 1 sub-step instants: (..., T + 1, 2)."""
-    return arc_points(start_m, heading_rad, turn_rad, length_m, substep_fractions(substeps))
-
-
-def obstacle_substep_positions(
-    start_m: FloatArray, velocity_m_s: FloatArray, dt_s: float, substeps: int = SUBSTEPS
-) -> FloatArray:
-    """Positions of straight-flying obstacles at the T + 1 sub-step instants: (..., T + 1, 2)."""
-    return straight_points(start_m, velocity_m_s, dt_s, substep_fractions(substeps))
-
-
-def swept_uav_obstacle_distance(uav_path_m: FloatArray, obstacle_path_m: FloatArray) -> FloatArray:
-    """Closest approach of every UAV to every obstacle during a step.
-
-    Args:
-        uav_path_m: (B, N, T + 1, 2) UAV sub-step positions.
-        obstacle_path_m: (B, M, T + 1, 2) obstacle sub-step positions.
-
-    Returns:
-        (B, N, M) minimum distances.
-    """
-    rel = uav_path_m[:, :, None] - obstacle_path_m[:, None]  # (B, N, M, T + 1, 2)
-    return swept_min_distance(rel)
-
-
-def swept_uav_uav_distance(uav_path_m: FloatArray) -> FloatArray:
-    """Closest approach of every pair of UAVs during a step: (B, N, N), +inf on the diagonal."""
-    rel = uav_path_m[:, :, None] - uav_path_m[:, None]  # (B, N, N, T + 1, 2)
-    dist = swept_min_distance(rel)
-    n = uav_path_m.shape[1]
-    dist[:, np.arange(n), np.arange(n)] = np.inf
-    return dist
 
 
 def energy(turn_rad: FloatArray, flown: BoolArray) -> FloatArray:

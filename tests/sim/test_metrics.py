@@ -4,17 +4,28 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from sim.kinematics import arc_points, straight_points
-from sim.metrics import (
-    energy,
-    obstacle_substep_positions,
-    path_length_ratio,
-    swept_min_distance,
-    swept_uav_obstacle_distance,
-    swept_uav_uav_distance,
-    uav_substep_positions,
-)
+from sim.metrics import energy, path_length_ratio, substep_fractions, swept_min_distance
 
 L, DT = 20.0, 2.0
+
+
+def uav_substep_positions(start, heading, turn, length):
+    return arc_points(start, heading, turn, length, substep_fractions())
+
+
+def obstacle_substep_positions(start, velocity, dt):
+    return straight_points(start, velocity, dt, substep_fractions())
+
+
+def swept_uav_obstacle_distance(uav_path, obstacle_path):
+    return swept_min_distance(uav_path[:, :, None] - obstacle_path[:, None])
+
+
+def swept_uav_uav_distance(uav_path):
+    dist = swept_min_distance(uav_path[:, :, None] - uav_path[:, None])
+    n = uav_path.shape[1]
+    dist[:, np.arange(n), np.arange(n)] = np.inf
+    return dist
 
 
 def test_head_on_pass_between_samples_is_caught():
