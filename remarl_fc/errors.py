@@ -6,18 +6,33 @@ converted where they enter (``raise X from exc``), so callers need to know only 
     RemarlError
      ├── ConfigError (also a ValueError)     bad configuration value or file
      │    └── ScenarioError                  scenario name/file that cannot be used
-     └── PolicyError                         a policy file that cannot be used
-          └── PolicySpecMismatch             ... for this scenario or vehicle set
+     │    └── SigningKeyError                a MAVLink signing key file that cannot be used
+     ├── PolicyError                         a policy file that cannot be used
+     │    └── PolicySpecMismatch             ... for this scenario or vehicle set
+     ├── LinkError                           a MAVLink link that cannot be used
+     │    ├── LinkTimeout                    an awaited message did not come in time
+     │    └── LinkLost                       the socket failed or the peer went silent
+     └── CommandRejected                     an autopilot answered a command with a refusal
 
-Messages say what to do next. Later layers (policy files, MAVLink link, swarm bus) add their
-branches here.
+Messages say what to do next.
 """
 
 from __future__ import annotations
 
 from sim.errors import ConfigError, RemarlError, ScenarioError
 
-__all__ = ["ConfigError", "PolicyError", "PolicySpecMismatch", "RemarlError", "ScenarioError"]
+__all__ = [
+    "CommandRejected",
+    "ConfigError",
+    "LinkError",
+    "LinkLost",
+    "LinkTimeout",
+    "PolicyError",
+    "PolicySpecMismatch",
+    "RemarlError",
+    "ScenarioError",
+    "SigningKeyError",
+]
 
 
 class PolicyError(RemarlError):
@@ -46,3 +61,76 @@ class PolicySpecMismatch(PolicyError):
             source=source,
         )
         self.field, self.expected, self.actual = field, expected, actual
+
+
+class SigningKeyError(ConfigError):
+    """A MAVLink 2 signing key file is missing or not 32 bytes (raw, hex or base64).
+
+    Attributes:
+        path: the key file.
+    """
+
+    def __init__(self, message: str, *, path: str) -> None:
+        super().__init__(f"{path}: {message}")
+        self.path = path
+
+
+class LinkError(RemarlError):
+    """A MAVLink link cannot be used.
+
+    Attributes:
+        link: the link's address as the user gave it (``udp:127.0.0.1:14550``).
+    """
+
+    def __init__(self, message: str, *, link: str) -> None:
+        super().__init__(f"{link}: {message}")
+        self.link = link
+
+
+class LinkTimeout(LinkError):
+    """A message awaited on a link did not arrive within its deadline (monotonic clock).
+
+    Attributes:
+        waited_for: what was awaited; timeout_s: the deadline in seconds.
+    """
+
+    def __init__(self, *, link: str, waited_for: str, timeout_s: float) -> None:
+        super().__init__(
+            f"no {waited_for} within {timeout_s:g} s; check that the vehicle is powered, the "
+            "address and port are right and nothing else holds the port",
+            link=link,
+        )
+        self.waited_for, self.timeout_s = waited_for, timeout_s
+
+
+class LinkLost(LinkError):
+    """The link failed: the socket closed or errored, or the peer stopped talking."""
+
+
+class CommandRejected(RemarlError):
+    """An autopilot refused a command (COMMAND_ACK with a result other than ACCEPTED).
+
+    Attributes:
+        command: the MAV_CMD number; command_name: its name; result: the MAV_RESULT number;
+        result_name: its name; system_id: the vehicle that refused; reason: the autopilot's
+        STATUSTEXT explanation when one came with the refusal, else "".
+    """
+
+    def __init__(
+        self,
+        *,
+        command: int,
+        command_name: str,
+        result: int,
+        result_name: str,
+        system_id: int,
+        reason: str = "",
+    ) -> None:
+        why = f" ({reason})" if reason else ""
+        super().__init__(
+            f"vehicle {system_id} refused {command_name} ({command}) with {result_name} "
+            f"({result}){why}; check the vehicle's mode, arming state and pre-arm messages"
+        )
+        self.command, self.command_name = command, command_name
+        self.result, self.result_name = result, result_name
+        self.system_id, self.reason = system_id, reason

@@ -42,43 +42,50 @@ chunk stay in cache (1.6× faster at 4096 environments than one pass over everyt
 def swept_min_distance_xy(
     rel_x: NDArray[np.floating[Any]], rel_y: NDArray[np.floating[Any]]
 ) -> NDArray[np.floating[Any]]:
-    """`swept_min_distance` on time-first components: rel_x, rel_y (T + 1, ...) → (...).
+    """`swept_min_distance` on time-first components: rel_x, rel_y (T + 1, ...) → (...)."""
+    return swept_min_distance_parts((rel_x, rel_y))
 
-    Time first keeps every slice contiguous; the work is done in place on four temporaries,
+
+def swept_min_distance_parts(
+    parts: tuple[NDArray[np.floating[Any]], ...],
+) -> NDArray[np.floating[Any]]:
+    """`swept_min_distance` on time-first components, any number of them (2-D or 3-D).
+
+    Args:
+        parts: D arrays (T + 1, ...) of one component of the relative position each.
+
+    Time first keeps every slice contiguous; the work is done in place on a few temporaries,
     chunk by chunk, in the input's dtype (float32 halves the memory traffic and keeps
     millimetres at kilometre range).
     """
-    shape = rel_x.shape[1:]
-    flat_x = rel_x.reshape(rel_x.shape[0], -1)
-    flat_y = rel_y.reshape(rel_y.shape[0], -1)
-    out = np.empty(flat_x.shape[1], dtype=flat_x.dtype)
-    for start in range(0, flat_x.shape[1], CHUNK_COLUMNS):
+    shape = parts[0].shape[1:]
+    flat = [p.reshape(p.shape[0], -1) for p in parts]
+    out = np.empty(flat[0].shape[1], dtype=flat[0].dtype)
+    for start in range(0, flat[0].shape[1], CHUNK_COLUMNS):
         cols = slice(start, start + CHUNK_COLUMNS)
-        out[cols] = _swept_chunk(flat_x[:, cols], flat_y[:, cols])
+        out[cols] = _swept_chunk([f[:, cols] for f in flat])
     return out.reshape(shape)
 
 
-def _swept_chunk(
-    rel_x: NDArray[np.floating[Any]], rel_y: NDArray[np.floating[Any]]
-) -> NDArray[np.floating[Any]]:
-    x0, y0 = rel_x[:-1], rel_y[:-1]
-    dx, dy = rel_x[1:] - x0, rel_y[1:] - y0
-    dd = dx * dx
-    dd += dy * dy
-    tau = x0 * dx
-    tau += y0 * dy
+def _swept_chunk(rel: list[NDArray[np.floating[Any]]]) -> NDArray[np.floating[Any]]:
+    starts = [r[:-1] for r in rel]
+    deltas = [r[1:] - r0 for r, r0 in zip(rel, starts, strict=True)]
+    dd = deltas[0] * deltas[0]
+    tau = starts[0] * deltas[0]
+    for r0, d in zip(starts[1:], deltas[1:], strict=True):
+        dd += d * d
+        tau += r0 * d
     np.maximum(dd, np.finfo(dd.dtype).tiny, out=dd)
     tau /= dd
     np.negative(tau, out=tau)
     np.clip(tau, 0.0, 1.0, out=tau)  # the closest instant of each sub-interval
-    dx *= tau
-    dx += x0
-    dy *= tau
-    dy += y0
-    dx *= dx
-    dy *= dy
-    dx += dy
-    smallest: NDArray[np.floating[Any]] = np.sqrt(dx.min(axis=0))
+    total = np.zeros_like(dd)
+    for r0, d in zip(starts, deltas, strict=True):
+        d *= tau  # the deltas are temporaries of this chunk: reuse them in place
+        d += r0
+        d *= d
+        total += d
+    smallest: NDArray[np.floating[Any]] = np.sqrt(total.min(axis=0))
     return smallest
 
 
@@ -86,7 +93,7 @@ def swept_min_distance(relative_m: FloatArray) -> FloatArray:
     """Closest approach of two points whose relative position is piecewise linear in time.
 
     Args:
-        relative_m: (..., T + 1, 2) relative position at T + 1 instants of the step.
+        relative_m: (..., T + 1, D) relative position (D = 2 or 3) at T + 1 instants of the step.
 
     Returns:
         (...,) the minimum distance over the whole step.
@@ -94,9 +101,9 @@ def swept_min_distance(relative_m: FloatArray) -> FloatArray:
     >>> float(swept_min_distance(np.array([[-10.0, 3.0], [10.0, 3.0]])))  # passes 3 m abeam
     3.0
     """
-    rel = np.moveaxis(relative_m, -2, 0)  # (T + 1, ..., 2)
-    smallest = swept_min_distance_xy(
-        np.ascontiguousarray(rel[..., 0]), np.ascontiguousarray(rel[..., 1])
+    rel = np.moveaxis(relative_m, -2, 0)  # (T + 1, ..., D)
+    smallest = swept_min_distance_parts(
+        tuple(np.ascontiguousarray(rel[..., k]) for k in range(rel.shape[-1]))
     )
     return smallest.astype(np.float64)
 

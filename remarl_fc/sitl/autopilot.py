@@ -1,0 +1,1009 @@
+"""Autopilot logic of one mock vehicle: modes, arming, commands, setpoints, streams, timeouts.
+
+Sans-IO: `Autopilot.handle` takes a decoded message and the simulated time and emits replies
+through a callback; `Autopilot.tick` runs the timers (setpoint timeouts, auto-disarm, mode
+phases). The vehicle's motion is set through its row of the batched `Airframes`.
+
+Two flavours, as strict as the real ones (references in the docstrings of each rule):
+`ArduCopterLogic` and `Px4Logic`. A rule the mock does not model answers with a refusal and a
+STATUSTEXT saying so, never with a silent success.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+import numpy as np
+
+from remarl_fc.frames import GeoPoint, wrap_yaw
+from remarl_fc.mavlink.consts import (
+    ARM_FORCE_MAGIC,
+    LandedState,
+    MavAutopilot,
+    MavCmd,
+    MavComponent,
+    MavFrame,
+    MavModeFlag,
+    MavResult,
+    MavState,
+    MsgId,
+    Severity,
+)
+from remarl_fc.sitl.config import SitlConfig
+from remarl_fc.sitl.setpoints import Setpoint, parse_setpoint
+from remarl_fc.sitl.vehicle import Airframes, Guidance, YawMode
+
+Emit = Callable[[Any], None]
+"""Sends one message to the vehicle's peers."""
+
+TICK_HZ = 10.0
+"""Rate of the autopilot timers (simulated Hz)."""
+
+PILOT_DESCENT_M_S = 2.5
+"""Sink rate of an ArduCopter pilot mode with the throttle stick at minimum (no RC), as
+measured on ArduCopter SITL."""
+
+MAX_INTERVAL_HZ = 50.0
+"""Highest message rate a stream can be set to (the physics rate caps it anyway)."""
+
+REQUEST_DATA_STREAM_GROUPS: dict[int, tuple[int, ...]] = {
+    1: (),  # RAW_SENSORS: not modelled
+    2: (MsgId.SYS_STATUS, MsgId.GPS_RAW_INT, MsgId.POSITION_TARGET_LOCAL_NED),  # EXTENDED_STATUS
+    3: (),  # RC_CHANNELS
+    6: (MsgId.GLOBAL_POSITION_INT, MsgId.LOCAL_POSITION_NED),  # POSITION
+    10: (MsgId.ATTITUDE,),  # EXTRA1
+    11: (),  # EXTRA2 (VFR_HUD): not modelled
+    12: (MsgId.EKF_STATUS_REPORT, MsgId.EXTENDED_SYS_STATE),  # EXTRA3
+}
+"""ArduPilot stream groups (MAV_DATA_STREAM ids → messages), as its SRx_ parameters map them."""
+
+
+@dataclass
+class Counters:
+    """What one vehicle received and did with it (goes into the ground-truth summary)."""
+
+    setpoints_received: int = 0
+    setpoints_applied: int = 0
+    setpoints_ignored: int = 0
+    commands: Counter[str] = field(default_factory=Counter)
+    results: Counter[str] = field(default_factory=Counter)
+    ignored_reasons: Counter[str] = field(default_factory=Counter)
+
+    def as_dict(self) -> dict[str, Any]:
+        """JSON-ready form."""
+        return {
+            "setpoints_received": self.setpoints_received,
+            "setpoints_applied": self.setpoints_applied,
+            "setpoints_ignored": self.setpoints_ignored,
+            "setpoints_ignored_by_reason": dict(self.ignored_reasons),
+            "commands": dict(self.commands),
+            "command_results": dict(self.results),
+        }
+
+
+@dataclass(frozen=True)
+class Command:
+    """A COMMAND_LONG or COMMAND_INT, normalised (COMMAND_INT x/y → params 5/6, z → 7)."""
+
+    command: int
+    params: tuple[float, float, float, float, float, float, float]
+    frame: int | None  # None for COMMAND_LONG
+    source: tuple[int, int]
+
+
+class Autopilot:
+    """Logic shared by both flavours. Subclasses fill in modes and rules."""
+
+    autopilot_id: ClassVar[int] = MavAutopilot.GENERIC
+    flavour: ClassVar[str] = ""
+
+    def __init__(
+        self,
+        index: int,
+        cfg: SitlConfig,
+        frames: Airframes,
+        origin: GeoPoint,
+        factory: Any,
+        emit: Emit,
+    ) -> None:
+        self.index, self.cfg, self.frames, self.origin = index, cfg, frames, origin
+        self.system_id = index + 1
+        self.factory, self.emit = factory, emit
+        self.armed = False
+        self.custom_mode = 0
+        self.failsafe = False
+        self.flew = False  # has been airborne
+        self.counters = Counters()
+        self.stream_interval_s: dict[int, float] = self.default_streams()
+        self.stream_due_s: dict[int, float] = {}
+        self.last_setpoint_s = -math.inf
+        self.setpoint: Setpoint | None = None
+        self._armed_at_s = 0.0
+        self._landed_since_s: float | None = 0.0
+
+    # -- identity and state -------------------------------------------------------------
+
+    def boot_s(self) -> float:
+        """Seconds in MAV_STATE_BOOT after start."""
+        raise NotImplementedError
+
+    def position_estimate_s(self) -> float:
+        """Seconds after start until a global position is valid."""
+        raise NotImplementedError
+
+    def default_streams(self) -> dict[int, float]:
+        """Message id → interval s the flavour streams before anyone asks."""
+        raise NotImplementedError
+
+    def time_boot_ms(self, now_s: float) -> int:
+        """time_boot_ms of the simulated clock (wraps at 2³²)."""
+        return int(now_s * 1000) & 0xFFFF_FFFF
+
+    def position_ok(self, now_s: float) -> bool:
+        """Whether the vehicle has an absolute position estimate."""
+        return now_s >= self.position_estimate_s()
+
+    def booting(self, now_s: float) -> bool:
+        """Whether the vehicle is still in MAV_STATE_BOOT."""
+        return now_s < self.boot_s()
+
+    @property
+    def landed(self) -> bool:
+        """Whether the airframe is on the ground."""
+        return bool(self.frames.landed[self.index])
+
+    def landed_state(self) -> int:
+        """MAV_LANDED_STATE for EXTENDED_SYS_STATE."""
+        g = self.frames.guidance[self.index]
+        if self.landed:
+            return LandedState.ON_GROUND
+        if g == Guidance.CLIMB:
+            return LandedState.TAKEOFF
+        if g == Guidance.LAND:
+            return LandedState.LANDING
+        return LandedState.IN_AIR
+
+    def base_mode(self) -> int:
+        """HEARTBEAT.base_mode."""
+        raise NotImplementedError
+
+    def system_status(self) -> int:
+        """HEARTBEAT.system_status (needs the time: use `status_at`)."""
+        return self._status
+
+    def status_at(self, now_s: float) -> None:
+        """Refresh the cached system status for the next heartbeat."""
+        if self.booting(now_s):
+            self._status = MavState.BOOT
+        elif self.failsafe:
+            self._status = MavState.CRITICAL
+        else:
+            self._status = self.resting_status()
+
+    def resting_status(self) -> int:
+        """STANDBY or ACTIVE, per flavour."""
+        raise NotImplementedError
+
+    _status: int = MavState.BOOT
+
+    def active_target(self) -> tuple[int, np.ndarray, np.ndarray, float, float] | None:
+        """(type_mask, position, velocity, yaw, yaw rate) of the external target being flown."""
+        if not self.under_external_control() or self.setpoint is None:
+            return None
+        sp = self.setpoint
+        pos = sp.pos_ned_m if sp.pos_ned_m is not None else self.frames.pos_ned_m[self.index]
+        vel = sp.vel_ned_m_s if sp.vel_ned_m_s is not None else np.zeros(3)
+        return (
+            sp.type_mask,
+            np.nan_to_num(pos),
+            np.nan_to_num(vel),
+            sp.yaw_rad if sp.yaw_rad is not None else 0.0,
+            sp.yaw_rate_rad_s if sp.yaw_rate_rad_s is not None else 0.0,
+        )
+
+    def under_external_control(self) -> bool:
+        """Whether setpoints are being flown (GUIDED / OFFBOARD)."""
+        raise NotImplementedError
+
+    # -- messages -----------------------------------------------------------------------
+
+    def for_me(self, target_system: int, target_component: int) -> bool:
+        """Addressed to this vehicle's autopilot (or broadcast)."""
+        return target_system in (0, self.system_id) and target_component in (
+            MavComponent.ALL,
+            MavComponent.AUTOPILOT1,
+        )
+
+    def handle(self, msg: Any, now_s: float) -> None:
+        """React to one message from a peer."""
+        mid = msg.get_msgId()
+        if mid in (MsgId.COMMAND_LONG, MsgId.COMMAND_INT):
+            if not self.for_me(msg.target_system, msg.target_component):
+                return
+            self._command(self._normalise(msg), now_s)
+        elif mid in (MsgId.SET_POSITION_TARGET_LOCAL_NED, MsgId.SET_POSITION_TARGET_GLOBAL_INT):
+            if not self.for_me(msg.target_system, msg.target_component):
+                return
+            self.counters.setpoints_received += 1
+            i = self.index
+            sp = parse_setpoint(
+                msg,
+                flavour=self.flavour,
+                origin=self.origin,
+                home_ned_m=self.frames.home_ned_m[i],
+                pos_ned_m=self.frames.pos_ned_m[i],
+                yaw_rad=float(self.frames.yaw_rad[i]),
+            )
+            if self.on_setpoint(sp, now_s):
+                self.counters.setpoints_applied += 1
+        elif mid == MsgId.REQUEST_DATA_STREAM and self.for_me(
+            msg.target_system, msg.target_component
+        ):
+            self.on_request_data_stream(msg, now_s)
+
+    def ignore_setpoint(self, reason: str) -> bool:
+        """Count a setpoint that changes nothing; returns False."""
+        self.counters.setpoints_ignored += 1
+        self.counters.ignored_reasons[reason] += 1
+        return False
+
+    @staticmethod
+    def _normalise(msg: Any) -> Command:
+        src = (msg.get_srcSystem(), msg.get_srcComponent())
+        if msg.get_msgId() == MsgId.COMMAND_LONG:
+            p = (msg.param1, msg.param2, msg.param3, msg.param4, msg.param5, msg.param6)
+            return Command(int(msg.command), (*p, msg.param7), None, src)
+        p = (msg.param1, msg.param2, msg.param3, msg.param4, float(msg.x), float(msg.y))
+        return Command(int(msg.command), (*p, msg.z), int(msg.frame), src)
+
+    def _command(self, cmd: Command, now_s: float) -> None:
+        try:
+            name = MavCmd(cmd.command).name
+        except ValueError:
+            name = str(cmd.command)
+        self.counters.commands[name] += 1
+        handler = self.command_handlers().get(cmd.command)
+        if handler is None:
+            result, text = int(MavResult.UNSUPPORTED), ""
+        else:
+            result, text = handler(cmd, now_s)
+        self.counters.results[MavResult(result).name] += 1
+        self.emit(
+            self.factory.command_ack_encode(
+                cmd.command, int(result), 0, 0, cmd.source[0], cmd.source[1]
+            )
+        )
+        if text:
+            severity = Severity.INFO if result == MavResult.ACCEPTED else Severity.CRITICAL
+            self.say(severity, text)
+
+    def say(self, severity: int, text: str) -> None:
+        """Send a STATUSTEXT."""
+        self.emit(self.factory.statustext_encode(severity, text[:50].encode("ascii", "replace")))
+
+    def command_handlers(
+        self,
+    ) -> dict[int, Callable[[Command, float], tuple[int, str]]]:
+        """MAV_CMD → handler returning (MAV_RESULT, STATUSTEXT or "")."""
+        return {
+            MavCmd.SET_MESSAGE_INTERVAL: self.cmd_set_message_interval,
+            MavCmd.REQUEST_MESSAGE: self.cmd_request_message,
+            MavCmd.REQUEST_AUTOPILOT_CAPABILITIES: self.cmd_request_capabilities,
+            MavCmd.DO_SET_MODE: self.cmd_set_mode,
+            MavCmd.COMPONENT_ARM_DISARM: self.cmd_arm_disarm,
+            MavCmd.NAV_TAKEOFF: self.cmd_takeoff,
+            MavCmd.NAV_LAND: self.cmd_land,
+            MavCmd.NAV_RETURN_TO_LAUNCH: self.cmd_rtl,
+        }
+
+    # -- streams ------------------------------------------------------------------------
+
+    supported_streams: ClassVar[frozenset[int]] = frozenset(
+        {
+            MsgId.SYS_STATUS,
+            MsgId.GPS_RAW_INT,
+            MsgId.ATTITUDE,
+            MsgId.LOCAL_POSITION_NED,
+            MsgId.GLOBAL_POSITION_INT,
+            MsgId.POSITION_TARGET_LOCAL_NED,
+            MsgId.HOME_POSITION,
+            MsgId.EXTENDED_SYS_STATE,
+        }
+    )
+
+    def set_interval(self, msg_id: int, interval_s: float | None, now_s: float) -> None:
+        """Stream ``msg_id`` every ``interval_s`` (None: stop)."""
+        if interval_s is None:
+            self.stream_interval_s.pop(msg_id, None)
+            self.stream_due_s.pop(msg_id, None)
+            return
+        self.stream_interval_s[msg_id] = max(interval_s, 1.0 / MAX_INTERVAL_HZ)
+        self.stream_due_s[msg_id] = now_s
+
+    def due_streams(self, now_s: float) -> list[int]:
+        """Message ids due now (their next time is advanced)."""
+        due = []
+        for mid, interval in self.stream_interval_s.items():
+            t = self.stream_due_s.get(mid, now_s)
+            if now_s + 1e-9 >= t:
+                due.append(mid)
+                nxt = t + interval
+                self.stream_due_s[mid] = nxt if nxt > now_s else now_s + interval
+        return due
+
+    def cmd_set_message_interval(self, cmd: Command, now_s: float) -> tuple[int, str]:
+        """MAV_CMD_SET_MESSAGE_INTERVAL: p1 message id, p2 µs (−1 off, 0 default)."""
+        msg_id, interval_us = int(cmd.params[0]), cmd.params[1]
+        if msg_id not in self.supported_streams:
+            return MavResult.FAILED, ""
+        if interval_us < 0:
+            self.set_interval(msg_id, None, now_s)
+        elif interval_us == 0:
+            default = self.default_streams().get(msg_id)
+            self.set_interval(msg_id, default, now_s)
+        else:
+            self.set_interval(msg_id, interval_us * 1e-6, now_s)
+        return MavResult.ACCEPTED, ""
+
+    def cmd_request_message(self, cmd: Command, now_s: float) -> tuple[int, str]:
+        """MAV_CMD_REQUEST_MESSAGE: p1 message id, sent once after the ACK."""
+        msg_id = int(cmd.params[0])
+        if msg_id not in self.supported_streams | {MsgId.AUTOPILOT_VERSION}:
+            return MavResult.UNSUPPORTED, ""
+        self.requested.append(msg_id)
+        return MavResult.ACCEPTED, ""
+
+    def cmd_request_capabilities(self, cmd: Command, now_s: float) -> tuple[int, str]:
+        """MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES: AUTOPILOT_VERSION follows the ACK."""
+        self.requested.append(MsgId.AUTOPILOT_VERSION)
+        return MavResult.ACCEPTED, ""
+
+    requested: list[int]
+
+    def on_request_data_stream(self, msg: Any, now_s: float) -> None:
+        """REQUEST_DATA_STREAM (66): not supported unless the flavour says otherwise."""
+
+    # -- flavour rules ------------------------------------------------------------------
+
+    def on_setpoint(self, sp: Setpoint, now_s: float) -> bool:
+        """Take a setpoint; True if it now drives the vehicle."""
+        raise NotImplementedError
+
+    def cmd_set_mode(self, cmd: Command, now_s: float) -> tuple[int, str]:
+        """MAV_CMD_DO_SET_MODE."""
+        raise NotImplementedError
+
+    def cmd_arm_disarm(self, cmd: Command, now_s: float) -> tuple[int, str]:
+        """MAV_CMD_COMPONENT_ARM_DISARM: p1 1 arm / 0 disarm, p2 21196 force."""
+        raise NotImplementedError
+
+    def cmd_takeoff(self, cmd: Command, now_s: float) -> tuple[int, str]:
+        """MAV_CMD_NAV_TAKEOFF."""
+        raise NotImplementedError
+
+    def cmd_land(self, cmd: Command, now_s: float) -> tuple[int, str]:
+        """MAV_CMD_NAV_LAND: switch to the flavour's landing mode."""
+        raise NotImplementedError
+
+    def cmd_rtl(self, cmd: Command, now_s: float) -> tuple[int, str]:
+        """MAV_CMD_NAV_RETURN_TO_LAUNCH: switch to the flavour's return mode."""
+        raise NotImplementedError
+
+    def tick(self, now_s: float) -> None:
+        """Run the timers (called at `TICK_HZ`)."""
+        if not self.landed:
+            self.flew = True
+            self._landed_since_s = None
+        elif self._landed_since_s is None:
+            self._landed_since_s = now_s
+        self.status_at(now_s)
+
+    def pilot_mode(self, mode: str, now_s: float) -> bool:
+        """The pilot flips the mode switch to ``mode`` (a fault); False if unknown."""
+        raise NotImplementedError
+
+    # -- motion helpers -----------------------------------------------------------------
+
+    def do_arm(self, now_s: float) -> None:
+        """Arm: motors spin, the vehicle stays on the ground."""
+        self.armed = True
+        self._armed_at_s = now_s
+        if self.landed:
+            self.frames.set_idle(self.index)
+
+    def do_disarm(self) -> None:
+        """Disarm: motors stop (in the air the vehicle drops to the ground)."""
+        self.armed = False
+        f, i = self.frames, self.index
+        if self.landed:
+            f.set_idle(i)
+        else:
+            self.fly_land(self.cfg.model.max_climb_m_s, self.cfg.model.max_climb_m_s, 0.0)
+
+    def fly_hold(self) -> None:
+        """Hold position and heading (on the ground: stay idle)."""
+        if self.landed:
+            self.frames.set_idle(self.index)
+        else:
+            self.frames.set_hold(self.index)
+
+    def fly_land(self, fast_m_s: float, slow_m_s: float, slow_below_m: float) -> None:
+        """Descend where the vehicle is, slowing to ``slow_m_s`` below ``slow_below_m``."""
+        f, i = self.frames, self.index
+        f.set_hold(i)
+        f.guidance[i] = Guidance.LAND
+        f.fast_descent_m_s[i], f.slow_descent_m_s[i] = fast_m_s, slow_m_s
+        f.slow_below_m[i] = slow_below_m
+
+    def fly_climb(self, height_m: float, rate_m_s: float) -> None:
+        """Climb vertically to ``height_m`` above the ground at ``rate_m_s``."""
+        f, i = self.frames, self.index
+        f.set_hold(i)
+        f.guidance[i] = Guidance.CLIMB
+        f.pos_target_ned_m[i, 2] = -height_m
+        f.climb_m_s[i] = rate_m_s
+
+    def fly_return(self, alt_m: float, speed_m_s: float, climb_m_s: float) -> None:
+        """Climb to ``alt_m`` if lower, fly home at ``speed_m_s``, then the flavour lands."""
+        f, i = self.frames, self.index
+        f.set_hold(i)
+        f.guidance[i] = Guidance.RETURN
+        f.return_alt_m[i] = alt_m
+        f.speed_limit_m_s[i] = speed_m_s
+        f.climb_m_s[i] = climb_m_s
+
+    def climb_done(self) -> bool:
+        """A take-off climb has reached its height."""
+        f, i = self.frames, self.index
+        return bool(f.pos_ned_m[i, 2] <= f.pos_target_ned_m[i, 2] + 0.1)
+
+    def home_reached(self) -> bool:
+        """A return has arrived over home."""
+        f, i = self.frames, self.index
+        d = f.home_ned_m[i, :2] - f.pos_ned_m[i, :2]
+        return bool(np.hypot(d[0], d[1]) < 1.0 and f.guidance[i] == Guidance.RETURN)
+
+    def fly_setpoint(self, sp: Setpoint, *, default_yaw: YawMode) -> None:
+        """Fly a valid setpoint: velocity, position, or both (velocity as feed-forward)."""
+        f, i = self.frames, self.index
+        if sp.vel_ned_m_s is not None and sp.pos_ned_m is None:
+            v = sp.vel_ned_m_s
+            f.guidance[i] = Guidance.VELOCITY
+            f.vel_target_m_s[i] = np.where(np.isnan(v), 0.0, v)
+            if np.isnan(v[2]):  # PX4: vertical axis ignored → hold the height
+                f.guidance[i] = Guidance.VELOCITY
+        elif sp.pos_ned_m is not None:
+            p = sp.pos_ned_m
+            f.guidance[i] = Guidance.POSITION
+            f.pos_target_ned_m[i] = np.where(np.isnan(p), f.pos_ned_m[i], p)
+            f.speed_limit_m_s[i] = self.cfg.model.max_speed_m_s
+        else:  # acceleration only: hold the current velocity (feed-forward of 0 m/s²)
+            f.guidance[i] = Guidance.VELOCITY
+            f.vel_target_m_s[i] = f.vel_ned_m_s[i]
+        if sp.yaw_rad is not None:
+            f.yaw_mode[i] = YawMode.ANGLE
+            f.yaw_target_rad[i] = wrap_yaw(sp.yaw_rad)
+        elif sp.yaw_rate_rad_s is not None:
+            f.yaw_mode[i] = YawMode.RATE
+            f.yaw_rate_target_rad_s[i] = sp.yaw_rate_rad_s
+        else:
+            f.yaw_mode[i] = default_yaw
+            f.yaw_target_rad[i] = f.yaw_rad[i]
+
+    def stop_velocity(self) -> None:
+        """Velocity target → 0 and yaw → hold, staying under external control."""
+        f, i = self.frames, self.index
+        if f.guidance[i] == Guidance.VELOCITY:
+            f.vel_target_m_s[i] = 0.0
+        if f.yaw_mode[i] in (YawMode.RATE, YawMode.TRAVEL):
+            f.yaw_mode[i] = YawMode.HOLD
+            f.yaw_target_rad[i] = f.yaw_rad[i]
+
+    def stream_frame_ok(self, frame: int | None, allowed: tuple[int, ...]) -> bool:
+        """COMMAND_INT frame check (COMMAND_LONG has none)."""
+        return frame is None or frame in allowed
+
+
+def _init_requested(ap: Autopilot) -> None:
+    ap.requested = []
+
+
+class ArduCopterLogic(Autopilot):
+    """ArduCopter 4.x in GUIDED (GCS_MAVLink_Copter.cpp, mode_guided.cpp, AP_Arming).
+
+    Modes modelled: STABILIZE, ALT_HOLD, LOITER, POSHOLD (pilot modes: without RC input they
+    descend, as SITL does with the throttle stick at minimum), GUIDED, RTL, LAND, BRAKE.
+    Others (AUTO without a mission, ACRO, …) are refused with FAILED and a STATUSTEXT.
+    """
+
+    autopilot_id = MavAutopilot.ARDUPILOTMEGA
+    flavour = "ardupilot"
+    PILOT_MODES: ClassVar[frozenset[int]] = frozenset({0, 2, 5, 16})
+    POSITION_MODES: ClassVar[frozenset[int]] = frozenset({4, 5, 6, 16, 17})
+    ARMABLE: ClassVar[frozenset[int]] = frozenset({0, 2, 4, 5, 16})
+    TAKEOFF_MODES: ClassVar[frozenset[int]] = frozenset({2, 4, 5, 16})
+    MODELLED: ClassVar[frozenset[int]] = frozenset({0, 2, 4, 5, 6, 9, 16, 17})
+    INITIAL_MODE: ClassVar[int] = 0  # STABILIZE
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        _init_requested(self)
+        self.p = self.cfg.ardupilot
+        self.custom_mode = self.INITIAL_MODE
+        self.pilot_holding = False
+        self.takeoff_active = False
+
+    def boot_s(self) -> float:
+        """ArduCopter boot time (`ArduPilotParams.boot_s`)."""
+        return self.p.boot_s
+
+    def position_estimate_s(self) -> float:
+        """Time to an EKF origin (`ArduPilotParams.position_estimate_s`)."""
+        return self.p.position_estimate_s
+
+    def default_streams(self) -> dict[int, float]:
+        """Nothing but HEARTBEAT until asked: ArduCopter's stream rates default to 0."""
+        return {}
+
+    def base_mode(self) -> int:
+        """CUSTOM_MODE_ENABLED | STABILIZE | MANUAL_INPUT, + GUIDED in position modes, + ARMED."""
+        mode = MavModeFlag.CUSTOM_MODE_ENABLED | MavModeFlag.STABILIZE_ENABLED
+        mode |= MavModeFlag.MANUAL_INPUT_ENABLED
+        if self.custom_mode in self.POSITION_MODES:
+            mode |= MavModeFlag.GUIDED_ENABLED
+        if self.armed:
+            mode |= MavModeFlag.SAFETY_ARMED
+        return int(mode)
+
+    def resting_status(self) -> int:
+        """STANDBY on the ground, ACTIVE in the air."""
+        return MavState.STANDBY if self.landed else MavState.ACTIVE
+
+    def under_external_control(self) -> bool:
+        """GUIDED."""
+        return self.custom_mode == 4
+
+    def on_request_data_stream(self, msg: Any, now_s: float) -> None:
+        """REQUEST_DATA_STREAM: set every message of the group(s) to req_message_rate Hz."""
+        stream, rate, start = int(msg.req_stream_id), int(msg.req_message_rate), msg.start_stop
+        groups = REQUEST_DATA_STREAM_GROUPS.keys() if stream == 0 else [stream]
+        for g in groups:
+            for mid in REQUEST_DATA_STREAM_GROUPS.get(g, ()):
+                if start and rate > 0:
+                    self.set_interval(mid, 1.0 / rate, now_s)
+                else:
+                    self.set_interval(mid, None, now_s)
+
+    def command_handlers(self) -> dict[int, Callable[[Command, float], tuple[int, str]]]:
+        """Shared commands + CONDITION_YAW and DO_CHANGE_SPEED."""
+        handlers = super().command_handlers()
+        handlers[MavCmd.CONDITION_YAW] = self.cmd_condition_yaw
+        handlers[MavCmd.DO_CHANGE_SPEED] = self.cmd_change_speed
+        return handlers
+
+    def _enter(self, mode: int, now_s: float) -> tuple[int, str]:
+        if mode not in self.MODELLED:
+            name = _copter_name(mode)
+            return MavResult.FAILED, f"Mode change to {name} failed: not in this mock"
+        if mode in self.POSITION_MODES and not self.position_ok(now_s):
+            return (
+                MavResult.FAILED,
+                f"Mode change to {_copter_name(mode)} failed: requires position",
+            )
+        self.custom_mode = mode
+        self.pilot_holding = False
+        self.takeoff_active = False
+        self._apply_mode()
+        return MavResult.ACCEPTED, ""
+
+    def _apply_mode(self) -> None:
+        mode, p = self.custom_mode, self.p
+        if mode == 9:  # LAND
+            self.fly_land(p.wpnav_speed_dn_m_s, p.land_speed_m_s, p.land_alt_low_m)
+        elif mode == 6:  # RTL
+            if self.landed:
+                self.fly_hold()
+            else:
+                self.fly_return(p.rtl_alt_m, p.rtl_speed_m_s, p.wpnav_speed_up_m_s)
+        elif mode in self.PILOT_MODES and not self.pilot_holding and not self.landed:
+            self.fly_land(PILOT_DESCENT_M_S, PILOT_DESCENT_M_S, 0.0)
+        else:  # GUIDED, BRAKE, a pilot holding the sticks: stop and hold
+            self.fly_hold()
+
+    def cmd_set_mode(self, cmd: Command, now_s: float) -> tuple[int, str]:
+        """p1 must have CUSTOM_MODE_ENABLED, p2 = mode number; refusals → FAILED."""
+        if not int(cmd.params[0]) & MavModeFlag.CUSTOM_MODE_ENABLED:
+            return MavResult.FAILED, ""
+        mode = int(cmd.params[1])
+        if self.booting(now_s):  # accepted, then overwritten by the initial mode at boot end
+            self.custom_mode = mode
+            return MavResult.ACCEPTED, ""
+        return self._enter(mode, now_s)
+
+    def cmd_arm_disarm(self, cmd: Command, now_s: float) -> tuple[int, str]:
+        """Arm in STABILIZE/ALT_HOLD/LOITER/POSHOLD/GUIDED once the EKF has a position."""
+        arm, force = cmd.params[0] >= 0.5, int(cmd.params[1]) == ARM_FORCE_MAGIC
+        if arm:
+            if self.armed:
+                return MavResult.ACCEPTED, ""
+            if not force:
+                if self.booting(now_s) or not self.position_ok(now_s):
+                    return MavResult.FAILED, "PreArm: Need Position Estimate"
+                if self.custom_mode not in self.ARMABLE:
+                    return MavResult.FAILED, "Arm: Mode not armable"
+            self.do_arm(now_s)
+            return MavResult.ACCEPTED, ""
+        if not self.armed:
+            return MavResult.ACCEPTED, ""
+        if not self.landed and not force:
+            return MavResult.FAILED, "Disarm: vehicle is flying (force to override)"
+        self.do_disarm()
+        return MavResult.ACCEPTED, ""
+
+    def cmd_takeoff(self, cmd: Command, now_s: float) -> tuple[int, str]:
+        """p7 = height above home, m; armed, landed, take-off mode; COMMAND_INT frame 3."""
+        if not self.stream_frame_ok(cmd.frame, (MavFrame.GLOBAL_RELATIVE_ALT,)):
+            return MavResult.DENIED, ""
+        height = cmd.params[6]
+        if not self.armed or not self.landed or self.custom_mode not in self.TAKEOFF_MODES:
+            return MavResult.FAILED, ""
+        if not math.isfinite(height) or height <= 0.0:
+            return MavResult.FAILED, ""
+        self.takeoff_active = True
+        self.fly_climb(height, self.p.wpnav_speed_up_m_s)
+        return MavResult.ACCEPTED, ""
+
+    def cmd_land(self, cmd: Command, now_s: float) -> tuple[int, str]:
+        """→ LAND (9)."""
+        return self._enter(9, now_s)
+
+    def cmd_rtl(self, cmd: Command, now_s: float) -> tuple[int, str]:
+        """→ RTL (6)."""
+        return self._enter(6, now_s)
+
+    def cmd_condition_yaw(self, cmd: Command, now_s: float) -> tuple[int, str]:
+        """p1 angle 0–360°, p2 rate °/s, p3 direction −1/0/1, p4 0 absolute / 1 relative."""
+        angle, _rate, direction, relative = cmd.params[:4]
+        if not 0.0 <= angle <= 360.0 or not -1.0 <= direction <= 1.0 or self.landed:
+            return MavResult.FAILED, ""
+        f, i = self.frames, self.index
+        base = float(f.yaw_rad[i]) if relative else 0.0
+        sign = -1.0 if relative and direction < 0 else 1.0
+        f.yaw_mode[i] = YawMode.ANGLE
+        f.yaw_target_rad[i] = wrap_yaw(base + sign * math.radians(angle))
+        return MavResult.ACCEPTED, ""
+
+    def cmd_change_speed(self, cmd: Command, now_s: float) -> tuple[int, str]:
+        """p2 speed m/s (> 0) for position targets."""
+        if not cmd.params[1] > 0:
+            return MavResult.DENIED, ""
+        self.frames.speed_limit_m_s[self.index] = cmd.params[1]
+        return MavResult.ACCEPTED, ""
+
+    def on_setpoint(self, sp: Setpoint, now_s: float) -> bool:
+        """GUIDED only; invalid → stop and hold; on the ground nothing moves."""
+        if self.custom_mode != 4:
+            return self.ignore_setpoint("not in GUIDED")
+        if not sp.valid:
+            if not self.landed:
+                self.fly_hold()
+            self.setpoint = None
+            return self.ignore_setpoint(f"invalid: {sp.reason}")
+        if sp.has_accel and sp.vel_ned_m_s is None and sp.pos_ned_m is None:
+            return self.ignore_setpoint("acceleration-only targets are not modelled")
+        self.last_setpoint_s = now_s
+        self.setpoint = sp
+        if not self.armed or (self.landed and not self.takeoff_active):
+            return self.ignore_setpoint("on the ground")
+        self.takeoff_active = False
+        self.fly_setpoint(sp, default_yaw=YawMode.TRAVEL)
+        return True
+
+    def tick(self, now_s: float) -> None:
+        """Boot, GUID_TIMEOUT, take-off end, landing, RTL phases, DISARM_DELAY."""
+        f, i, p = self.frames, self.index, self.p
+        if not self.booting(now_s) and self._boot_pending:
+            self._boot_pending = False
+            self.custom_mode = self.INITIAL_MODE  # overwrites a mode set during boot
+        timed_out = now_s - self.last_setpoint_s > p.guid_timeout_s
+        if self.custom_mode == 4 and timed_out and f.guidance[i] == Guidance.VELOCITY:
+            self.stop_velocity()  # GUID_TIMEOUT: stop, stay in GUIDED
+        if self.takeoff_active and f.guidance[i] == Guidance.CLIMB and self.climb_done():
+            self.takeoff_active = False
+            if self.custom_mode in self.PILOT_MODES and not self.pilot_holding:
+                self._apply_mode()
+            else:
+                self.fly_hold()
+        if self.custom_mode == 6 and self.home_reached():
+            self.fly_land(p.wpnav_speed_dn_m_s, p.land_speed_m_s, p.land_alt_low_m)
+        was_flying = self.flew and self._landed_since_s is None
+        super().tick(now_s)
+        if self.armed and self.landed and f.guidance[i] != Guidance.CLIMB:
+            if was_flying and self.custom_mode in (6, 9):
+                self.do_disarm()  # LAND and RTL disarm on touch-down
+            elif was_flying:
+                f.set_idle(i)
+            since = max(self._armed_at_s, self._landed_since_s or now_s)
+            if self.armed and now_s - since >= p.disarm_delay_s:
+                self.do_disarm()
+                self.say(Severity.INFO, "Disarming motors")
+
+    _boot_pending = True
+
+    def pilot_mode(self, mode: str, now_s: float) -> bool:
+        """The pilot selects ``mode`` (a COPTER_MODE name) and holds the sticks centred."""
+        try:
+            number = _COPTER_BY_NAME[mode.upper()]
+        except KeyError:
+            return False
+        self.custom_mode = number
+        self.pilot_holding = True
+        self.takeoff_active = False
+        self._apply_mode()
+        return True
+
+
+def _copter_name(mode: int) -> str:
+    for name, number in _COPTER_BY_NAME.items():
+        if number == mode:
+            return name
+    return str(mode)
+
+
+_COPTER_BY_NAME = {
+    "STABILIZE": 0,
+    "ACRO": 1,
+    "ALT_HOLD": 2,
+    "AUTO": 3,
+    "GUIDED": 4,
+    "LOITER": 5,
+    "RTL": 6,
+    "CIRCLE": 7,
+    "LAND": 9,
+    "POSHOLD": 16,
+    "BRAKE": 17,
+}
+
+
+class Px4Logic(Autopilot):
+    """PX4 v1.14+ multicopter (Commander, mavlink_receiver, the offboard and takeoff docs).
+
+    Modes modelled: MANUAL, ALTCTL, POSCTL, STABILIZED (hold without RC), OFFBOARD, and AUTO
+    TAKEOFF, LOITER (Hold), RTL, LAND. Refused transitions → TEMPORARILY_REJECTED.
+    """
+
+    autopilot_id = MavAutopilot.PX4
+    flavour = "px4"
+    MAIN_MODES: ClassVar[frozenset[int]] = frozenset({1, 2, 3, 4, 6, 7})
+    AUTO_SUBS: ClassVar[frozenset[int]] = frozenset({2, 3, 5, 6})
+    OFFBOARD, AUTO, POSCTL = 6, 4, 3
+    TAKEOFF, LOITER, RTL, LAND = 2, 3, 5, 6
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        _init_requested(self)
+        self.p = self.cfg.px4
+        self.main, self.sub = self.POSCTL, 0
+        self.custom_mode = self._pack()
+        self.failsafe_since_s: float | None = None
+
+    def _pack(self) -> int:
+        return (self.main << 16) | (self.sub << 24)
+
+    def boot_s(self) -> float:
+        """PX4 boot time (`Px4Params.boot_s`)."""
+        return self.p.boot_s
+
+    def position_estimate_s(self) -> float:
+        """Time to a valid global position (`Px4Params.position_estimate_s`)."""
+        return self.p.position_estimate_s
+
+    def default_streams(self) -> dict[int, float]:
+        """PX4's default stream set for a GCS/offboard link (the mock's approximation)."""
+        return {
+            MsgId.SYS_STATUS: 1.0,
+            MsgId.EXTENDED_SYS_STATE: 1.0,
+            MsgId.ATTITUDE: 1 / 20,
+            MsgId.GLOBAL_POSITION_INT: 1 / 10,
+            MsgId.LOCAL_POSITION_NED: 1 / 10,
+            MsgId.GPS_RAW_INT: 1.0,
+            MsgId.HOME_POSITION: 2.0,
+            MsgId.POSITION_TARGET_LOCAL_NED: 1 / 5,
+        }
+
+    def base_mode(self) -> int:
+        """CUSTOM_MODE_ENABLED | MANUAL_INPUT, + STABILIZE, GUIDED, AUTO by mode, + ARMED."""
+        mode = MavModeFlag.CUSTOM_MODE_ENABLED | MavModeFlag.MANUAL_INPUT_ENABLED
+        if self.main != 1:
+            mode |= MavModeFlag.STABILIZE_ENABLED
+        if self.main in (self.POSCTL, self.AUTO, self.OFFBOARD):
+            mode |= MavModeFlag.GUIDED_ENABLED
+        if self.main in (self.AUTO, self.OFFBOARD):
+            mode |= MavModeFlag.AUTO_ENABLED
+        if self.armed:
+            mode |= MavModeFlag.SAFETY_ARMED
+        return int(mode)
+
+    def resting_status(self) -> int:
+        """STANDBY disarmed, ACTIVE armed."""
+        return MavState.ACTIVE if self.armed else MavState.STANDBY
+
+    def under_external_control(self) -> bool:
+        """OFFBOARD."""
+        return self.main == self.OFFBOARD
+
+    def stream_alive(self, now_s: float) -> bool:
+        """A setpoint arrived within COM_OF_LOSS_T."""
+        return now_s - self.last_setpoint_s <= self.p.com_of_loss_t_s
+
+    def _set(self, main: int, sub: int = 0) -> None:
+        self.main, self.sub = main, sub
+        self.custom_mode = self._pack()
+        p = self.p
+        if main == self.AUTO and sub == self.LAND:
+            self.fly_land(p.mpc_land_speed_m_s, p.mpc_land_speed_m_s, 0.0)
+        elif main == self.AUTO and sub == self.RTL:
+            if self.landed:
+                self.fly_hold()
+            else:
+                self.fly_return(p.rtl_return_alt_m, p.rtl_speed_m_s, p.mpc_tko_speed_m_s)
+        elif main == self.AUTO and sub == self.TAKEOFF:
+            if self.armed and self.landed:
+                self.fly_climb(p.mis_takeoff_alt_m, p.mpc_tko_speed_m_s)
+        elif main == self.OFFBOARD and self.setpoint is not None and self.setpoint.valid:
+            self._fly_offboard(self.setpoint)
+        else:
+            self.fly_hold()
+
+    def _fly_offboard(self, sp: Setpoint) -> None:
+        if not self.armed:
+            return
+        climbing = sp.vel_ned_m_s is not None and (sp.vel_ned_m_s[2] < 0)
+        going_up = (
+            sp.pos_ned_m is not None and sp.pos_ned_m[2] < self.frames.pos_ned_m[self.index, 2]
+        )
+        if self.landed and not (climbing or going_up):
+            return
+        self.fly_setpoint(sp, default_yaw=YawMode.HOLD)
+
+    def _enter(self, main: int, sub: int, now_s: float) -> tuple[int, str]:
+        if main == 0:  # a packed word in p2 truncates to 0: accepted, nothing changes
+            return MavResult.ACCEPTED, ""
+        if main not in self.MAIN_MODES or (main == self.AUTO and sub not in self.AUTO_SUBS):
+            return MavResult.TEMPORARILY_REJECTED, "Mode not available in this mock"
+        if main in (self.POSCTL, self.AUTO, self.OFFBOARD) and not self.position_ok(now_s):
+            return MavResult.TEMPORARILY_REJECTED, "Mode requires a global position"
+        if main == self.OFFBOARD and not self.stream_alive(now_s):
+            return MavResult.TEMPORARILY_REJECTED, "Switching to Offboard is not available"
+        self.failsafe, self.failsafe_since_s = False, None
+        self._set(main, sub)
+        return MavResult.ACCEPTED, ""
+
+    def cmd_set_mode(self, cmd: Command, now_s: float) -> tuple[int, str]:
+        """p1 & CUSTOM_MODE_ENABLED, p2 = main mode, p3 = sub mode (cast to uint8)."""
+        if not int(cmd.params[0]) & MavModeFlag.CUSTOM_MODE_ENABLED:
+            return MavResult.DENIED, ""
+        main, sub = int(cmd.params[1]) & 0xFF, int(cmd.params[2]) & 0xFF
+        return self._enter(main, sub, now_s)
+
+    def cmd_arm_disarm(self, cmd: Command, now_s: float) -> tuple[int, str]:
+        """Arming needs a position (in position modes) and, in OFFBOARD, a setpoint stream."""
+        arm, force = cmd.params[0] >= 0.5, int(cmd.params[1]) == ARM_FORCE_MAGIC
+        if arm:
+            if self.armed:
+                return MavResult.ACCEPTED, ""
+            if not force:
+                if self.booting(now_s) or not self.position_ok(now_s):
+                    return MavResult.TEMPORARILY_REJECTED, "Arming denied: no global position"
+                if self.main == self.OFFBOARD and not self.stream_alive(now_s):
+                    return MavResult.TEMPORARILY_REJECTED, "Arming denied: offboard signal lost"
+            self.do_arm(now_s)
+            if self.main == self.AUTO and self.sub == self.TAKEOFF:
+                self._set(self.AUTO, self.TAKEOFF)
+            elif self.main == self.OFFBOARD and self.setpoint is not None:
+                self._fly_offboard(self.setpoint)
+            return MavResult.ACCEPTED, ""
+        if not self.armed:
+            return MavResult.ACCEPTED, ""
+        if not self.landed and not force:
+            return MavResult.TEMPORARILY_REJECTED, "Disarming denied: not landed"
+        self.do_disarm()
+        return MavResult.ACCEPTED, ""
+
+    def cmd_takeoff(self, cmd: Command, now_s: float) -> tuple[int, str]:
+        """Switch to AUTO.TAKEOFF; p7 AMSL altitude if finite, else MIS_TAKEOFF_ALT."""
+        result, text = self._enter(self.AUTO, self.TAKEOFF, now_s)
+        if result == MavResult.ACCEPTED and self.armed and self.landed:
+            alt = cmd.params[6]
+            if math.isfinite(alt):
+                height = alt - (self.origin.alt_m - float(self.frames.home_ned_m[self.index, 2]))
+                self.fly_climb(max(height, 1.0), self.p.mpc_tko_speed_m_s)
+        return result, text
+
+    def cmd_land(self, cmd: Command, now_s: float) -> tuple[int, str]:
+        """→ AUTO.LAND."""
+        return self._enter(self.AUTO, self.LAND, now_s)
+
+    def cmd_rtl(self, cmd: Command, now_s: float) -> tuple[int, str]:
+        """→ AUTO.RTL."""
+        return self._enter(self.AUTO, self.RTL, now_s)
+
+    def on_setpoint(self, sp: Setpoint, now_s: float) -> bool:
+        """Any mode keeps the stream alive; only OFFBOARD flies it."""
+        if not sp.valid:
+            return self.ignore_setpoint(f"invalid: {sp.reason}")
+        self.last_setpoint_s = now_s
+        self.setpoint = sp
+        if self.main != self.OFFBOARD:
+            return self.ignore_setpoint("not in OFFBOARD (kept as proof of life)")
+        if not self.armed:
+            return self.ignore_setpoint("disarmed")
+        self._fly_offboard(sp)
+        return True
+
+    _FAILSAFE_ACTIONS: ClassVar[dict[str, tuple[int, int]]] = {
+        "position": (3, 0),
+        "hold": (4, 3),
+        "return": (4, 5),
+        "land": (4, 6),
+    }
+
+    def tick(self, now_s: float) -> None:
+        """COM_OF_LOSS_T, COM_FAIL_ACT_T, take-off end, RTL landing, auto-disarm."""
+        f, i, p = self.frames, self.index, self.p
+        if self.main == self.OFFBOARD and not self.stream_alive(now_s):
+            self.failsafe, self.failsafe_since_s = True, now_s
+            self._set(self.AUTO, self.LOITER)  # Hold first ...
+        if (
+            self.failsafe_since_s is not None
+            and now_s - self.failsafe_since_s >= p.com_fail_act_t_s
+        ):
+            main, sub = self._FAILSAFE_ACTIONS[p.com_obl_rc_act]  # ... then the action
+            self.failsafe_since_s = None
+            self._set(main, sub)
+        taking_off = self.main == self.AUTO and self.sub == self.TAKEOFF and not self.landed
+        if taking_off and f.guidance[i] == Guidance.CLIMB and self.climb_done():
+            self._set(self.AUTO, self.LOITER)
+        if self.main == self.AUTO and self.sub == self.RTL and self.home_reached():
+            self.fly_land(p.mpc_land_speed_m_s, p.mpc_land_speed_m_s, 0.0)
+        super().tick(now_s)
+        if self.armed and self.landed and f.guidance[i] != Guidance.CLIMB:
+            if self.flew and self._landed_since_s is not None:
+                f.set_idle(i)
+                if now_s - self._landed_since_s >= p.com_disarm_land_s:
+                    self.do_disarm()
+            elif not self.flew and now_s - self._armed_at_s >= p.com_disarm_prflt_s:
+                self.do_disarm()
+                self.say(Severity.INFO, "Disarmed: no takeoff")
+        if not self.armed and self.landed and self.failsafe and self.failsafe_since_s is None:
+            self.failsafe = False
+
+    def pilot_mode(self, mode: str, now_s: float) -> bool:
+        """The pilot selects ``mode``: POSCTL, ALTCTL, MANUAL, STABILIZED, HOLD, RTL, LAND."""
+        table = {
+            "POSCTL": (3, 0),
+            "ALTCTL": (2, 0),
+            "MANUAL": (1, 0),
+            "STABILIZED": (7, 0),
+            "HOLD": (4, 3),
+            "LOITER": (4, 3),
+            "RTL": (4, 5),
+            "LAND": (4, 6),
+        }
+        if mode.upper() not in table:
+            return False
+        self.failsafe, self.failsafe_since_s = False, None
+        self._set(*table[mode.upper()])
+        return True
+
+
+def make_autopilot(
+    index: int, cfg: SitlConfig, frames: Airframes, origin: GeoPoint, factory: Any, emit: Emit
+) -> Autopilot:
+    """The flavour's logic for vehicle ``index``."""
+    cls: type[Autopilot] = ArduCopterLogic if cfg.flavour == "ardupilot" else Px4Logic
+    return cls(index, cfg, frames, origin, factory, emit)

@@ -1,0 +1,201 @@
+"""Settings of the SITL mock: one frozen dataclass per concern, every default named once.
+
+Autopilot parameters carry the real parameter's name and default (ArduCopter `Parameters.cpp`,
+PX4 `commander_params.yaml` and the PX4 docs); values that are the mock's own choices say so.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Literal
+
+from remarl_fc.frames import GeoPoint
+
+Flavour = Literal["ardupilot", "px4"]
+FLAVOURS: tuple[Flavour, ...] = ("ardupilot", "px4")
+
+DEFAULT_HOME = GeoPoint(47.397742, 8.545594, 488.0)
+"""Home of the arena origin: the PX4 SITL default location (Zurich), lat/lon degrees, AMSL m."""
+
+ARDUPILOT_BASE_PORT = 14550
+"""ArduPilot SITL layout: instance i listens on 14550 + 10·i (every port +10 per instance)."""
+
+ARDUPILOT_PORT_STEP = 10
+PX4_BASE_PORT = 18570
+"""PX4 SITL layout: instance i's GCS link listens on 18570 + i and sends to 14540 + i."""
+
+PX4_PORT_STEP = 1
+
+
+@dataclass(frozen=True)
+class ArduPilotParams:
+    """ArduCopter parameters the mock honours (names and defaults of ArduCopter 4.x)."""
+
+    guid_timeout_s: float = 3.0
+    """GUID_TIMEOUT: velocity/acceleration targets are zeroed after this long without one."""
+    disarm_delay_s: float = 10.0
+    """DISARM_DELAY: auto-disarm this long after landing or arming on the ground."""
+    wpnav_speed_up_m_s: float = 2.5
+    """WPNAV_SPEED_UP: take-off climb rate (250 cm/s)."""
+    wpnav_speed_dn_m_s: float = 1.5
+    """WPNAV_SPEED_DN: descent rate above LAND_ALT_LOW (150 cm/s)."""
+    land_speed_m_s: float = 0.5
+    """LAND_SPEED: final descent rate (50 cm/s)."""
+    land_alt_low_m: float = 10.0
+    """LAND_ALT_LOW: below this the final descent rate applies (1000 cm)."""
+    rtl_alt_m: float = 15.0
+    """RTL_ALT: RTL climbs to at least this height above home first (1500 cm)."""
+    rtl_speed_m_s: float = 5.0
+    """WPNAV_SPEED: horizontal speed of RTL (500 cm/s)."""
+    boot_s: float = 2.0
+    """Time in MAV_STATE_BOOT after start; a mode set then is ACKed and then overwritten by
+    the initial mode, as measured on ArduCopter SITL (≈ 2.3 s there)."""
+    position_estimate_s: float = 5.0
+    """Time after start until the EKF has an absolute position (arming, GUIDED and
+    LOCAL_POSITION_NED wait for it). 20–40 s on ArduCopter SITL; shorter here to keep tests
+    quick — raise it to rehearse a slow start."""
+
+
+@dataclass(frozen=True)
+class Px4Params:
+    """PX4 parameters the mock honours (names and defaults of PX4 v1.14–v1.16)."""
+
+    com_of_loss_t_s: float = 1.0
+    """COM_OF_LOSS_T: OFFBOARD is left this long after the last setpoint."""
+    com_fail_act_t_s: float = 5.0
+    """COM_FAIL_ACT_T: a failsafe holds this long before its action."""
+    com_obl_rc_act: Literal["position", "hold", "return", "land"] = "position"
+    """COM_OBL_RC_ACT: the offboard-loss action (0 Position, 5 Hold, 3 Return, 4 Land)."""
+    com_disarm_prflt_s: float = 10.0
+    """COM_DISARM_PRFLT: auto-disarm this long after arming without taking off."""
+    com_disarm_land_s: float = 2.0
+    """COM_DISARM_LAND: auto-disarm this long after landing."""
+    mis_takeoff_alt_m: float = 2.5
+    """MIS_TAKEOFF_ALT: take-off height above home when NAV_TAKEOFF gives none."""
+    mpc_tko_speed_m_s: float = 1.5
+    """MPC_TKO_SPEED: take-off climb rate."""
+    mpc_land_speed_m_s: float = 0.7
+    """MPC_LAND_SPEED: landing descent rate."""
+    rtl_return_alt_m: float = 30.0
+    """RTL_RETURN_ALT: RTL climbs to at least this height above home first."""
+    rtl_speed_m_s: float = 5.0
+    """Horizontal speed of RTL (the mock's choice; PX4 flies it at MPC_XY_CRUISE)."""
+    boot_s: float = 1.0
+    """Time in MAV_STATE_BOOT after start (the mock's choice)."""
+    position_estimate_s: float = 3.0
+    """Time after start until a global position is valid (the mock's choice)."""
+
+
+@dataclass(frozen=True)
+class VehicleModelConfig:
+    """The simulated multirotor: first-order velocity and yaw tracking with limits.
+
+    Time constants and limits are the mock's, tuned to the step responses measured on
+    ArduCopter SITL (90 % of a 3.6 m/s step after 1.85 s; a 90° yaw step within 5° after
+    1.65 s); ATC_SLEW_YAW (6000 cdeg/s) bounds the yaw rate.
+    """
+
+    velocity_tau_s: float = 0.8
+    """Velocity tracking time constant."""
+    max_accel_m_s2: float = 5.0
+    """Horizontal acceleration limit."""
+    max_vert_accel_m_s2: float = 2.5
+    """Vertical acceleration limit."""
+    max_speed_m_s: float = 20.0
+    """Horizontal speed limit."""
+    max_climb_m_s: float = 5.0
+    """Vertical speed limit, up and down."""
+    yaw_tau_s: float = 0.35
+    """Yaw tracking time constant."""
+    max_yaw_rate_rad_s: float = math.radians(60.0)
+    """Yaw rate limit: ATC_SLEW_YAW, 6000 cdeg/s."""
+    position_gain_1_s: float = 0.8
+    """Position-target controller gain (m/s per m of error), capped by `max_speed_m_s`."""
+    gust_m_s: float = 0.0
+    """Standard deviation of the gust velocity the controllers leave uncorrected (0 = calm);
+    steady wind is cancelled by the autopilot's loops and not modelled."""
+    gust_tau_s: float = 3.0
+    """Correlation time of the gusts (Ornstein–Uhlenbeck)."""
+    gps_noise_m: float = 0.0
+    """Standard deviation of the horizontal noise on reported positions (0 = exact)."""
+
+    def __post_init__(self) -> None:
+        for name in ("velocity_tau_s", "yaw_tau_s", "gust_tau_s", "max_accel_m_s2"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"{name} must be > 0, not {getattr(self, name)}")
+        for name in ("gust_m_s", "gps_noise_m"):
+            if getattr(self, name) < 0:
+                raise ValueError(f"{name} must be ≥ 0, not {getattr(self, name)}")
+
+
+@dataclass(frozen=True)
+class SitlConfig:
+    """A mock fleet.
+
+    Attributes are documented below; `remarl-fc sitl --help` mirrors them.
+    """
+
+    vehicles: int = 1
+    """Number of vehicles (system ids 1..N)."""
+    flavour: Flavour = "ardupilot"
+    """Which autopilot to imitate."""
+    host: str = "127.0.0.1"
+    """Address every vehicle binds."""
+    base_port: int | None = None
+    """Port of vehicle 0; None = the flavour's SITL default (14550 ArduPilot, 18570 PX4)."""
+    port_step: int | None = None
+    """Port increment per vehicle; None = the flavour's (10 ArduPilot, 1 PX4)."""
+    out: tuple[str, int] | None = None
+    """Address every vehicle also sends to from the start (PX4 style), or None to send only
+    to the peer it last heard from (ArduPilot style)."""
+    out_step: int = 0
+    """Port increment of `out` per vehicle (1 = PX4's 14540 + i; 0 = one client hears all)."""
+    home: GeoPoint = DEFAULT_HOME
+    """Arena origin: the simulator's (0, 0) at ground level."""
+    speedup: float = 1.0
+    """Simulated seconds per wall second (time_boot_ms follows the simulated clock)."""
+    physics_hz: float = 50.0
+    """Vehicle model and ground-truth rate, simulated Hz."""
+    heartbeat_hz: float = 1.0
+    """HEARTBEAT rate (1 Hz on both autopilots)."""
+    adsb_hz: float = 2.0
+    """ADSB_VEHICLE rate per intruder."""
+    cruise_alt_m: float = 20.0
+    """Height above the origin at which scenario intruders fly."""
+    seed: int = 0
+    """Seed of the mock's random generator (intruder spawn, noise, faults)."""
+    model: VehicleModelConfig = field(default_factory=VehicleModelConfig)
+    ardupilot: ArduPilotParams = field(default_factory=ArduPilotParams)
+    px4: Px4Params = field(default_factory=Px4Params)
+
+    def __post_init__(self) -> None:
+        if self.flavour not in FLAVOURS:
+            raise ValueError(f"flavour {self.flavour!r} is not one of {', '.join(FLAVOURS)}")
+        if not 1 <= self.vehicles <= 250:
+            raise ValueError(f"vehicles must be 1..250 (system ids), not {self.vehicles}")
+        if not self.speedup > 0:
+            raise ValueError(f"speedup must be > 0, not {self.speedup}")
+        if not self.physics_hz >= 10:
+            raise ValueError(f"physics_hz must be ≥ 10, not {self.physics_hz}")
+        last = self.port(self.vehicles - 1)
+        if self.port(0) != 0 and not 1 <= last <= 65535:
+            raise ValueError(f"ports {self.port(0)}..{last} do not fit in 1..65535")
+
+    def port(self, index: int) -> int:
+        """UDP port vehicle ``index`` binds (0 = any free port for every vehicle)."""
+        if self.base_port == 0:
+            return 0
+        base = self.base_port
+        if base is None:
+            base = ARDUPILOT_BASE_PORT if self.flavour == "ardupilot" else PX4_BASE_PORT
+        step = self.port_step
+        if step is None:
+            step = ARDUPILOT_PORT_STEP if self.flavour == "ardupilot" else PX4_PORT_STEP
+        return base + step * index
+
+    def out_address(self, index: int) -> tuple[str, int] | None:
+        """Where vehicle ``index`` sends before (and besides) hearing a peer."""
+        if self.out is None:
+            return None
+        return self.out[0], self.out[1] + self.out_step * index

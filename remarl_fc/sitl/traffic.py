@@ -1,0 +1,119 @@
+"""Intruders: a scenario's obstacles flying as ADS-B traffic.
+
+They spawn and move exactly as in the simulator — `sim.spawn.spawn_obstacles` places them and
+gives their velocities, `sim.kinematics.straight_points` moves them — mapped from the
+simulator's frame (x east, y north) into the arena's NED frame at the cruise height. They wait
+at their spawn points until the swarm starts its mission (the first vehicle moving faster than
+`START_SPEED_M_S` horizontally, or an explicit start time), so that take-off time does not
+eat the scenario's geometry.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from remarl_fc.frames import GeoPoint, course_and_speed, ned_to_geodetic, sim_to_ne, to_deg_e7
+from remarl_fc.mavlink.consts import (
+    ADSB_ALTITUDE_TYPE_GEOMETRIC,
+    ADSB_EMITTER_TYPE_UAV,
+    AdsbFlag,
+)
+from sim.config import ScenarioConfig
+from sim.kinematics import straight_points
+from sim.spawn import spawn_obstacles
+
+FloatArray = NDArray[np.float64]
+
+START_SPEED_M_S = 1.0
+"""Traffic starts when the first vehicle flies faster than this horizontally."""
+
+ICAO_BASE = 0xC0_0000
+"""ICAO address of intruder k: ICAO_BASE + k (a block no real aircraft of this mock uses)."""
+
+ADSB_FLAGS = int(
+    AdsbFlag.VALID_COORDS
+    | AdsbFlag.VALID_ALTITUDE
+    | AdsbFlag.VALID_HEADING
+    | AdsbFlag.VALID_VELOCITY
+    | AdsbFlag.VALID_CALLSIGN
+    | AdsbFlag.SIMULATED
+    | AdsbFlag.VERTICAL_VELOCITY_VALID
+)
+"""ADSB_VEHICLE.flags of every intruder report (SIMULATED set, as ArduPilot SITL's are)."""
+
+
+class Traffic:
+    """M intruders of a scenario.
+
+    Args:
+        scenario: where they spawn and how fast they fly.
+        rng: draws the spawn jitter and heading perturbation (as the simulator does).
+        cruise_alt_m: height above the origin they fly at.
+        start_s: fixed start time, or None to start with the swarm.
+    """
+
+    def __init__(
+        self,
+        scenario: ScenarioConfig,
+        rng: np.random.Generator,
+        cruise_alt_m: float,
+        start_s: float | None = None,
+    ) -> None:
+        pos, vel = spawn_obstacles(scenario, rng, 1)  # (1, M, 2) in the simulator frame
+        self.spawn_ne_m = sim_to_ne(pos[0])  # (M, 2)
+        self.vel_ne_m_s = sim_to_ne(vel[0])
+        self.down_m = -cruise_alt_m
+        self.start_s = start_s
+        self.count = len(self.spawn_ne_m)
+
+    def maybe_start(self, now_s: float, vehicle_vel_ned: FloatArray) -> None:
+        """Start the clock when the first vehicle moves (no-op once started)."""
+        if self.start_s is not None or self.count == 0:
+            return
+        speed = np.hypot(vehicle_vel_ned[:, 0], vehicle_vel_ned[:, 1])
+        if speed.size and float(speed.max()) > START_SPEED_M_S:
+            self.start_s = now_s
+
+    def positions_ned(self, now_s: float) -> FloatArray:
+        """(M, 3) intruder positions at ``now_s``."""
+        elapsed = 0.0 if self.start_s is None else max(0.0, now_s - self.start_s)
+        ne = straight_points(self.spawn_ne_m, self.vel_ne_m_s, elapsed, np.ones(1))[:, 0, :]
+        down = np.full((self.count, 1), self.down_m)
+        return np.concatenate([ne, down], axis=1)
+
+    def velocities_ned(self, now_s: float) -> FloatArray:
+        """(M, 3) intruder velocities (zero before the start)."""
+        moving = self.start_s is not None and now_s >= self.start_s
+        vel = self.vel_ne_m_s if moving else np.zeros_like(self.vel_ne_m_s)
+        return np.concatenate([vel, np.zeros((self.count, 1))], axis=1)
+
+    def reports(self, factory: Any, origin: GeoPoint, now_s: float) -> list[Any]:
+        """One ADSB_VEHICLE per intruder: degE7, altitude mm AMSL, heading cdeg, cm/s."""
+        pos, vel = self.positions_ned(now_s), self.velocities_ned(now_s)
+        lat, lon, alt = ned_to_geodetic(pos[:, 0], pos[:, 1], pos[:, 2], origin)
+        course, speed = course_and_speed(vel[:, 0], vel[:, 1])
+        out = []
+        for k in range(self.count):
+            heading_cdeg = round(math.degrees(float(course[k])) * 100) % 36000
+            out.append(
+                factory.adsb_vehicle_encode(
+                    ICAO_BASE + k,
+                    int(to_deg_e7(lat[k])),
+                    int(to_deg_e7(lon[k])),
+                    ADSB_ALTITUDE_TYPE_GEOMETRIC,
+                    round(float(alt[k]) * 1000),
+                    heading_cdeg,
+                    round(float(speed[k]) * 100),
+                    0,
+                    f"OBST{k:04d}".encode(),
+                    ADSB_EMITTER_TYPE_UAV,
+                    0,
+                    ADSB_FLAGS,
+                    0,
+                )
+            )
+        return out

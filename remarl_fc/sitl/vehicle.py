@@ -1,0 +1,248 @@
+"""The mock's multirotors: every vehicle's kinematics in one batched numpy step.
+
+Positions are local NED in metres from the arena origin (down = 0 on the ground); yaw is in
+radians clockwise from north. Each vehicle follows a *guidance* set by its autopilot logic —
+hold a point, fly a velocity, go to a position, climb for take-off, land, return — which
+becomes a commanded velocity; the airframe tracks it to first order with acceleration and
+speed limits, and tracks its yaw target with a rate limit. No per-vehicle Python loop runs
+here: the physics rate is independent of the fleet size.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from enum import IntEnum
+
+import numpy as np
+from numpy.typing import NDArray
+
+from remarl_fc.sitl.config import VehicleModelConfig
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+BoolArray = NDArray[np.bool_]
+
+GROUND_DOWN_M = 0.0
+"""Down coordinate of the ground (flat terrain at the origin's altitude)."""
+
+LANDED_SPEED_M_S = 0.3
+"""Touch-down: below this sink rate at the ground the vehicle counts as landed."""
+
+
+class Guidance(IntEnum):
+    """What a vehicle's velocity command follows."""
+
+    IDLE = 0  # on the ground, motors off or spinning: no motion
+    HOLD = 1  # hold `hold_ned_m` (position hold, brake, loiter)
+    VELOCITY = 2  # fly `vel_target_m_s` (GUIDED / OFFBOARD velocity setpoints)
+    POSITION = 3  # go to `pos_target_ned_m`
+    CLIMB = 4  # take-off: climb at `climb_m_s` to `pos_target_ned_m` down, holding x/y
+    LAND = 5  # descend at `descent rates` holding x/y
+    RETURN = 6  # climb to `return_alt_m`, fly home, then descend
+
+
+class YawMode(IntEnum):
+    """How the yaw command is formed."""
+
+    HOLD = 0  # keep `yaw_target_rad`
+    ANGLE = 1  # turn to `yaw_target_rad`
+    RATE = 2  # turn at `yaw_rate_target_rad_s`
+    TRAVEL = 3  # face the direction of horizontal travel
+
+
+@dataclass
+class Airframes:
+    """State and commands of N vehicles; every array has the vehicle index first.
+
+    Attributes:
+        pos_ned_m (N, 3), vel_ned_m_s (N, 3): true state.
+        yaw_rad (N,), yaw_rate_rad_s (N,): true heading (CW from north) and its rate.
+        home_ned_m (N, 3): each vehicle's home (its spawn point on the ground).
+        guidance (N,): `Guidance` values. hold_ned_m, pos_target_ned_m (N, 3); vel_target_m_s
+            (N, 3); climb_m_s (N,) take-off climb rate; speed_limit_m_s (N,) for POSITION and
+            RETURN; return_alt_m (N,) RETURN climbs to at least this height.
+        yaw_mode (N,): `YawMode` values; yaw_target_rad, yaw_rate_target_rad_s (N,).
+        gust_m_s (N, 3): current uncorrected gust velocity.
+        landed (N,): on the ground.
+    """
+
+    pos_ned_m: FloatArray
+    vel_ned_m_s: FloatArray
+    yaw_rad: FloatArray
+    yaw_rate_rad_s: FloatArray
+    home_ned_m: FloatArray
+    guidance: IntArray
+    hold_ned_m: FloatArray
+    pos_target_ned_m: FloatArray
+    vel_target_m_s: FloatArray
+    climb_m_s: FloatArray
+    speed_limit_m_s: FloatArray
+    return_alt_m: FloatArray
+    fast_descent_m_s: FloatArray
+    slow_descent_m_s: FloatArray
+    slow_below_m: FloatArray
+    yaw_mode: IntArray
+    yaw_target_rad: FloatArray
+    yaw_rate_target_rad_s: FloatArray
+    gust_m_s: FloatArray
+    landed: BoolArray
+
+    @classmethod
+    def on_ground(cls, home_ned_m: FloatArray, yaw_rad: FloatArray) -> Airframes:
+        """N vehicles standing at their homes (N, 3) facing ``yaw_rad`` (N,), motors idle."""
+        n = len(home_ned_m)
+        home = np.asarray(home_ned_m, dtype=np.float64).copy()
+        home[:, 2] = GROUND_DOWN_M
+        z3, z1 = np.zeros((n, 3)), np.zeros(n)
+        yaw = np.asarray(yaw_rad, dtype=np.float64).copy()
+        return cls(
+            pos_ned_m=home.copy(),
+            vel_ned_m_s=z3.copy(),
+            yaw_rad=yaw,
+            yaw_rate_rad_s=z1.copy(),
+            home_ned_m=home,
+            guidance=np.full(n, int(Guidance.IDLE)),
+            hold_ned_m=home.copy(),
+            pos_target_ned_m=home.copy(),
+            vel_target_m_s=z3.copy(),
+            climb_m_s=z1.copy(),
+            speed_limit_m_s=z1.copy(),
+            return_alt_m=z1.copy(),
+            fast_descent_m_s=z1.copy(),
+            slow_descent_m_s=z1.copy(),
+            slow_below_m=z1.copy(),
+            yaw_mode=np.full(n, int(YawMode.HOLD)),
+            yaw_target_rad=yaw.copy(),
+            yaw_rate_target_rad_s=z1.copy(),
+            gust_m_s=z3.copy(),
+            landed=np.ones(n, dtype=bool),
+        )
+
+    def __len__(self) -> int:
+        return len(self.yaw_rad)
+
+    def height_m(self) -> FloatArray:
+        """(N,) height above the ground, metres."""
+        return GROUND_DOWN_M - self.pos_ned_m[:, 2]
+
+    def set_hold(self, i: int) -> None:
+        """Vehicle i holds where it is (position, height and heading)."""
+        self.guidance[i] = Guidance.HOLD
+        self.hold_ned_m[i] = self.pos_ned_m[i]
+        self.yaw_mode[i] = YawMode.HOLD
+        self.yaw_target_rad[i] = self.yaw_rad[i]
+
+    def set_idle(self, i: int) -> None:
+        """Vehicle i sits on the ground without moving."""
+        self.guidance[i] = Guidance.IDLE
+        self.vel_target_m_s[i] = 0.0
+        self.yaw_mode[i] = YawMode.HOLD
+        self.yaw_target_rad[i] = self.yaw_rad[i]
+
+
+def _clip_norm(v: FloatArray, limit: FloatArray | float) -> FloatArray:
+    """Scale rows of v (..., k) so their norm is at most ``limit``."""
+    norm = np.linalg.norm(v, axis=-1, keepdims=True)
+    lim = np.asarray(limit, dtype=np.float64)
+    if lim.ndim:
+        lim = lim[..., None]
+    scale = np.minimum(1.0, lim / np.maximum(norm, 1e-12))
+    out: FloatArray = v * scale
+    return out
+
+
+def wrap_pi(angle: FloatArray) -> FloatArray:
+    """Wrap radians to [-π, π).
+
+    >>> round(float(wrap_pi(np.array(3 * math.pi / 2))), 4)
+    -1.5708
+    """
+    return (np.asarray(angle) + math.pi) % (2 * math.pi) - math.pi
+
+
+def commanded_velocity(a: Airframes, cfg: VehicleModelConfig) -> FloatArray:
+    """(N, 3) velocity command of every vehicle from its guidance."""
+    g = a.guidance
+    cmd = np.zeros_like(a.vel_ned_m_s)
+    gain = cfg.position_gain_1_s
+
+    hold = g == Guidance.HOLD
+    cmd[hold] = gain * (a.hold_ned_m[hold] - a.pos_ned_m[hold])
+
+    vel = g == Guidance.VELOCITY
+    cmd[vel] = a.vel_target_m_s[vel]
+
+    pos = g == Guidance.POSITION
+    cmd[pos] = gain * (a.pos_target_ned_m[pos] - a.pos_ned_m[pos])
+    cmd[pos, :2] = _clip_norm(cmd[pos, :2], a.speed_limit_m_s[pos])
+
+    climb = g == Guidance.CLIMB
+    cmd[climb, :2] = gain * (a.hold_ned_m[climb, :2] - a.pos_ned_m[climb, :2])
+    cmd[climb, 2] = -a.climb_m_s[climb]
+
+    land = g == Guidance.LAND
+    cmd[land, :2] = gain * (a.hold_ned_m[land, :2] - a.pos_ned_m[land, :2])
+    height = a.height_m()
+    slow = height < a.slow_below_m
+    cmd[land, 2] = np.where(slow[land], a.slow_descent_m_s[land], a.fast_descent_m_s[land])
+
+    ret = g == Guidance.RETURN
+    if ret.any():
+        to_home = a.home_ned_m[ret, :2] - a.pos_ned_m[ret, :2]
+        low = height[ret] < a.return_alt_m[ret] - 0.5
+        horiz = _clip_norm(gain * to_home, a.speed_limit_m_s[ret])
+        horiz[low] = 0.0
+        vert = np.where(low, -a.climb_m_s[ret], 0.0)
+        cmd[ret, :2] = horiz
+        cmd[ret, 2] = vert
+    return cmd
+
+
+def step(a: Airframes, cfg: VehicleModelConfig, dt_s: float, rng: np.random.Generator) -> None:
+    """Advance every vehicle by ``dt_s`` seconds in place."""
+    cmd = commanded_velocity(a, cfg)
+    cmd[:, :2] = _clip_norm(cmd[:, :2], cfg.max_speed_m_s)
+    cmd[:, 2] = np.clip(cmd[:, 2], -cfg.max_climb_m_s, cfg.max_climb_m_s)
+
+    # first-order velocity tracking, acceleration-limited
+    accel = (cmd - a.vel_ned_m_s) / cfg.velocity_tau_s
+    accel[:, :2] = _clip_norm(accel[:, :2], cfg.max_accel_m_s2)
+    accel[:, 2] = np.clip(accel[:, 2], -cfg.max_vert_accel_m_s2, cfg.max_vert_accel_m_s2)
+    a.vel_ned_m_s += accel * dt_s
+
+    if cfg.gust_m_s > 0:  # Ornstein–Uhlenbeck gusts
+        theta = dt_s / cfg.gust_tau_s
+        noise = rng.standard_normal(a.gust_m_s.shape) * cfg.gust_m_s * math.sqrt(2 * theta)
+        a.gust_m_s += -theta * a.gust_m_s + noise
+        a.gust_m_s[a.landed] = 0.0
+
+    idle = (a.guidance == Guidance.IDLE) | a.landed & (cmd[:, 2] >= 0)
+    a.vel_ned_m_s[idle] = 0.0
+    a.pos_ned_m += (a.vel_ned_m_s + a.gust_m_s) * dt_s
+
+    # the ground
+    below = a.pos_ned_m[:, 2] >= GROUND_DOWN_M
+    a.pos_ned_m[below, 2] = GROUND_DOWN_M
+    touching = below & (a.vel_ned_m_s[:, 2] >= -1e-9)
+    a.vel_ned_m_s[touching, 2] = 0.0
+    a.landed = touching & (np.linalg.norm(a.vel_ned_m_s[:, :2], axis=1) < LANDED_SPEED_M_S)
+    a.landed &= cmd[:, 2] >= 0
+
+    # yaw
+    rate = np.zeros_like(a.yaw_rad)
+    angle = a.yaw_mode == YawMode.ANGLE
+    hold = a.yaw_mode == YawMode.HOLD
+    track = angle | hold
+    rate[track] = wrap_pi(a.yaw_target_rad[track] - a.yaw_rad[track]) / cfg.yaw_tau_s
+    ratem = a.yaw_mode == YawMode.RATE
+    rate[ratem] = a.yaw_rate_target_rad_s[ratem]
+    travel = a.yaw_mode == YawMode.TRAVEL
+    speed = np.hypot(a.vel_ned_m_s[:, 0], a.vel_ned_m_s[:, 1])
+    moving = travel & (speed > 0.5)
+    course = np.arctan2(a.vel_ned_m_s[:, 1], a.vel_ned_m_s[:, 0])
+    rate[moving] = wrap_pi(course[moving] - a.yaw_rad[moving]) / cfg.yaw_tau_s
+    rate = np.clip(rate, -cfg.max_yaw_rate_rad_s, cfg.max_yaw_rate_rad_s)
+    rate[a.landed & (a.guidance == Guidance.IDLE)] = 0.0
+    a.yaw_rate_rad_s = rate
+    a.yaw_rad = wrap_pi(a.yaw_rad + rate * dt_s)
