@@ -15,6 +15,7 @@ from typing import Any
 
 from remarl_fc._version import __version__
 from remarl_fc.errors import ConfigError, RemarlError
+from remarl_fc.sitl.cli import add_bench_parser, add_sitl_parser
 
 EXIT_USAGE = 2
 """Exit status for bad input (also argparse's)."""
@@ -319,6 +320,8 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--seed", type=int, default=0)
     b.add_argument("--json", action="store_true", help="print one JSON object")
     b.set_defaults(handler=_cmd_bench_sim)
+    add_bench_parser(bench)
+    add_sitl_parser(sub)
     return parser
 
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import asyncio
 import collections
+import socket
 from collections.abc import Callable
 from types import TracebackType
 from typing import Self
@@ -64,6 +65,9 @@ class UdpEndpoint:
         on_datagram: called with (data, sender) for every datagram; None queues them for
             `recv` instead.
         name: how errors name this endpoint (``udp:127.0.0.1:14550``).
+        receive_buffer_bytes: ask the OS for this receive buffer (it may grant less: Linux caps
+            it at net.core.rmem_max); a ground station hearing a whole fleet needs more than
+            the default to ride out bursts.
 
     Not reentrant: one ``async with`` at a time.
     """
@@ -74,10 +78,12 @@ class UdpEndpoint:
         *,
         on_datagram: DatagramHandler | None = None,
         name: str | None = None,
+        receive_buffer_bytes: int | None = None,
     ) -> None:
         self.local = local
         self.name = name or f"udp:{local[0]}:{local[1]}"
         self.on_datagram = on_datagram
+        self.receive_buffer_bytes = receive_buffer_bytes
         self.errors = 0
         self.dropped = 0
         self.sent = 0
@@ -101,6 +107,9 @@ class UdpEndpoint:
             ) from exc
         self._transport = transport
         self._failure = None
+        if self.receive_buffer_bytes is not None:
+            sock = transport.get_extra_info("socket")
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, self.receive_buffer_bytes)
         return self
 
     async def __aexit__(

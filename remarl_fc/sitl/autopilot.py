@@ -528,6 +528,7 @@ class ArduCopterLogic(Autopilot):
     TAKEOFF_MODES: ClassVar[frozenset[int]] = frozenset({2, 4, 5, 16})
     MODELLED: ClassVar[frozenset[int]] = frozenset({0, 2, 4, 5, 6, 9, 16, 17})
     INITIAL_MODE: ClassVar[int] = 0  # STABILIZE
+    supported_streams = Autopilot.supported_streams | {MsgId.EKF_STATUS_REPORT}
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
@@ -727,7 +728,8 @@ class ArduCopterLogic(Autopilot):
                 self.do_disarm()  # LAND and RTL disarm on touch-down
             elif was_flying:
                 f.set_idle(i)
-            since = max(self._armed_at_s, self._landed_since_s or now_s)
+            landed_at = self._landed_since_s if self._landed_since_s is not None else now_s
+            since = max(self._armed_at_s, landed_at)
             if self.armed and now_s - since >= p.disarm_delay_s:
                 self.do_disarm()
                 self.say(Severity.INFO, "Disarming motors")

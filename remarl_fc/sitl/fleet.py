@@ -258,13 +258,16 @@ class SitlFleet:
             self._tick(
                 self.now_s(),
                 autopilot=k % autopilot_every == 0,
-                beat=k % heartbeat_every == 1 % heartbeat_every,
+                beat_phase=k % heartbeat_every,
+                beat_every=heartbeat_every,
                 adsb=k % adsb_every == 0,
             )
             if self.now_s() >= self._time_limit_s or (self._until_done and self.finished()):
                 self._done.set()
 
-    def _tick(self, now: float, *, autopilot: bool, beat: bool, adsb: bool) -> None:
+    def _tick(
+        self, now: float, *, autopilot: bool, beat_phase: int, beat_every: int, adsb: bool
+    ) -> None:
         f = self.frames
         self._apply_faults(now)
         step(f, self.cfg.model, self._dt, self.rng)
@@ -279,6 +282,8 @@ class SitlFleet:
             if self.peers[i] is None and self.outs[i] is None:
                 ap.due_streams(now)  # nobody listens: keep the schedule, build nothing
                 continue
+            # each vehicle beats at its own phase, as independent autopilots do (no bursts)
+            beat = beat_phase == (i * beat_every) // self.n
             if beat and not self.faults.heartbeat_muted(i, now):
                 self._send(i, heartbeat(ap.factory, ap))
             for mid in ap.due_streams(now) + ap.requested:

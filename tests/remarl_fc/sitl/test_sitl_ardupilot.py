@@ -1,0 +1,229 @@
+"""The ArduCopter flavour of the mock, walked with real MAVLink bytes over UDP."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from remarl_fc.frames import from_deg_e7, geodetic_to_ned
+from remarl_fc.mavlink.consts import (
+    EKF_GOOD,
+    TYPE_MASK_VELOCITY_YAW,
+    CopterMode,
+    MavCmd,
+    MavFrame,
+    MavModeFlag,
+    MavResult,
+    MavState,
+    MsgId,
+    TypeMask,
+)
+
+pytestmark = [pytest.mark.asyncio, pytest.mark.network, pytest.mark.timeout(120)]
+
+
+async def arm_and_take_off(gcs, height_m: float = 20.0) -> None:
+    await gcs.wait_ready()
+    ack = await gcs.command(MavCmd.DO_SET_MODE, 1, CopterMode.GUIDED)
+    assert ack.result == MavResult.ACCEPTED
+    ack = await gcs.command(MavCmd.COMPONENT_ARM_DISARM, 1)
+    assert ack.result == MavResult.ACCEPTED
+    ack = await gcs.command(MavCmd.NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, height_m)
+    assert ack.result == MavResult.ACCEPTED
+    await gcs.command(MavCmd.SET_MESSAGE_INTERVAL, MsgId.GLOBAL_POSITION_INT, 100_000)
+    await gcs.wait_for("GLOBAL_POSITION_INT", lambda m: m.relative_alt > (height_m - 0.3) * 1000)
+
+
+def velocity_yaw(gcs, vn: float, ve: float, yaw: float, mask: int = TYPE_MASK_VELOCITY_YAW):
+    return gcs.f.set_position_target_local_ned_encode(
+        0, 1, 1, MavFrame.LOCAL_NED, mask, 0, 0, 0, vn, ve, 0, 0, 0, 0, yaw, 0
+    )
+
+
+async def test_heartbeat_only_until_streams_are_requested(sitl):
+    async with sitl() as (fleet, gcs):
+        gcs.hello()
+        hb = await gcs.wait_for("HEARTBEAT")
+        assert (hb.type, hb.autopilot) == (2, 3)
+        assert hb.base_mode & MavModeFlag.CUSTOM_MODE_ENABLED
+        await gcs.wait_sim(3.0)
+        kinds = {m.get_type() for _, m in gcs.heard}
+        assert kinds == {"HEARTBEAT"}, "ArduCopter sends nothing else until asked"
+        ack = await gcs.command(MavCmd.SET_MESSAGE_INTERVAL, MsgId.ATTITUDE, 50_000)
+        assert ack.result == MavResult.ACCEPTED
+        assert (ack.target_system, ack.target_component) == (255, 190)
+        t0 = fleet.now_s()
+        await gcs.wait_sim(2.0)
+        rate = gcs.count("ATTITUDE", since_s=t0 + 0.2) / (fleet.now_s() - t0 - 0.2)
+        assert 17.0 <= rate <= 23.0
+        # REQUEST_DATA_STREAM(POSITION, 5 Hz) turns on the position group
+        gcs.send(gcs.f.request_data_stream_encode(1, 1, 6, 5, 1))
+        await gcs.wait_for("GLOBAL_POSITION_INT")
+        # −1 disables
+        await gcs.command(MavCmd.SET_MESSAGE_INTERVAL, MsgId.ATTITUDE, -1)
+        t1 = fleet.now_s()
+        await gcs.wait_sim(1.0)
+        assert gcs.count("ATTITUDE", since_s=t1 + 0.2) == 0
+
+
+async def test_boot_mode_is_overwritten_and_arming_waits_for_position(sitl):
+    async with sitl() as (fleet, gcs):
+        gcs.hello()
+        hb = await gcs.wait_for("HEARTBEAT")
+        assert hb.system_status == MavState.BOOT
+        ack = await gcs.command(MavCmd.DO_SET_MODE, 1, CopterMode.GUIDED)
+        assert ack.result == MavResult.ACCEPTED  # accepted during boot ...
+        await gcs.wait_sim(fleet.cfg.ardupilot.boot_s)
+        hb = await gcs.heartbeat_after(fleet.now_s())
+        assert hb.custom_mode == CopterMode.STABILIZE  # ... then overwritten
+        ack = await gcs.command(MavCmd.COMPONENT_ARM_DISARM, 1)
+        assert ack.result == MavResult.FAILED
+        text = await gcs.wait_for("STATUSTEXT")
+        assert "PreArm: Need Position Estimate" in text.text
+        ack = await gcs.command(MavCmd.DO_SET_MODE, 1, CopterMode.GUIDED)
+        assert ack.result == MavResult.FAILED  # GUIDED needs a position
+        await gcs.wait_ready()
+        assert (await gcs.command(MavCmd.DO_SET_MODE, 1, CopterMode.LAND)).result == 0
+        ack = await gcs.command(MavCmd.COMPONENT_ARM_DISARM, 1)
+        assert ack.result == MavResult.FAILED
+        assert "Mode not armable" in (await gcs.wait_for("STATUSTEXT")).text
+        ack = await gcs.command(MavCmd.COMPONENT_ARM_DISARM, 1, 21196)  # forced
+        assert ack.result == MavResult.ACCEPTED
+
+
+async def test_mode_change_shows_only_in_the_next_heartbeat(sitl):
+    async with sitl() as (fleet, gcs):
+        gcs.hello()
+        await gcs.wait_ready()
+        await gcs.wait_for("HEARTBEAT")
+        ack = await gcs.command(MavCmd.DO_SET_MODE, 1, CopterMode.GUIDED)
+        t_ack = fleet.now_s()
+        assert ack.result == MavResult.ACCEPTED
+        beats = [t for t, m in gcs.heard if m.get_type() == "HEARTBEAT"]
+        hb = await gcs.heartbeat_after(t_ack)
+        assert hb.custom_mode == CopterMode.GUIDED
+        assert hb.base_mode & MavModeFlag.GUIDED_ENABLED
+        # no extra heartbeat was sent because of the change: the period stays 1 s
+        later = [t for t, m in gcs.heard if m.get_type() == "HEARTBEAT"]
+        gaps = np.diff(sorted(set(beats + later)))
+        assert gaps.min() > 0.9
+
+
+async def test_takeoff_refusals_and_command_int_frame(sitl):
+    async with sitl() as (fleet, gcs):
+        gcs.hello()
+        await gcs.wait_ready()
+        await gcs.command(MavCmd.DO_SET_MODE, 1, CopterMode.GUIDED)
+        ack = await gcs.command(MavCmd.NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, 10)
+        assert ack.result == MavResult.FAILED  # not armed
+        await gcs.command(MavCmd.COMPONENT_ARM_DISARM, 1)
+        cmd_int = gcs.f.command_int_encode(
+            1, 1, MavFrame.GLOBAL, MavCmd.NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, 0, 0, 10.0
+        )
+        gcs.send(cmd_int)
+        ack = await gcs.wait_for("COMMAND_ACK", lambda m: m.command == MavCmd.NAV_TAKEOFF)
+        assert ack.result == MavResult.DENIED  # COMMAND_INT must use GLOBAL_RELATIVE_ALT
+        ack = await gcs.command(64_000)  # not a command anyone knows
+        assert ack.result == MavResult.UNSUPPORTED
+        # exactly one ACK per command
+        await gcs.wait_sim(0.5)
+        acks = [m.command for _, m in gcs.heard if m.get_type() == "COMMAND_ACK"]
+        assert acks.count(MavCmd.NAV_TAKEOFF) == 2 and acks.count(64_000) == 1
+
+
+async def test_guided_velocity_and_yaw_2503_and_units(sitl):
+    async with sitl() as (fleet, gcs):
+        gcs.hello()
+        await arm_and_take_off(gcs)
+        yaw = math.radians(90)
+        for _ in range(40):  # 4 simulated s at 10 Hz
+            gcs.send(velocity_yaw(gcs, 3.0, 2.0, yaw))
+            await gcs.wait_sim(0.1)
+        vel = fleet.frames.vel_ned_m_s[0]
+        assert vel[0] == pytest.approx(3.0, abs=0.1) and vel[1] == pytest.approx(2.0, abs=0.1)
+        assert math.degrees(fleet.frames.yaw_rad[0]) == pytest.approx(90.0, abs=2.0)
+        gcs.fresh()
+        gpi = await gcs.wait_for("GLOBAL_POSITION_INT")
+        assert gpi.vx == pytest.approx(300, abs=15) and gpi.vy == pytest.approx(200, abs=15)
+        assert gpi.hdg == pytest.approx(9000, abs=300)
+        home = fleet.homes[0]
+        n, e, d = geodetic_to_ned(from_deg_e7(gpi.lat), from_deg_e7(gpi.lon), gpi.alt / 1000, home)
+        truth = fleet.frames.pos_ned_m[0] - fleet.frames.home_ned_m[0]
+        assert float(n) == pytest.approx(truth[0], abs=1.0)
+        assert float(e) == pytest.approx(truth[1], abs=1.0)
+        assert gpi.relative_alt == pytest.approx(-truth[2] * 1000, abs=1000)
+        await gcs.command(MavCmd.SET_MESSAGE_INTERVAL, MsgId.POSITION_TARGET_LOCAL_NED, 200_000)
+        echo = await gcs.wait_for("POSITION_TARGET_LOCAL_NED")
+        assert echo.type_mask == TYPE_MASK_VELOCITY_YAW and echo.vx == pytest.approx(3.0)
+        await gcs.command(MavCmd.SET_MESSAGE_INTERVAL, MsgId.EKF_STATUS_REPORT, 500_000)
+        ekf = await gcs.wait_for("EKF_STATUS_REPORT")
+        assert ekf.flags & EKF_GOOD == EKF_GOOD
+
+
+async def test_guid_timeout_stops_but_stays_guided(sitl):
+    async with sitl() as (fleet, gcs):
+        gcs.hello()
+        await arm_and_take_off(gcs, 10.0)
+        for _ in range(20):
+            gcs.send(velocity_yaw(gcs, 0.0, 4.0, 0.0))
+            await gcs.wait_sim(0.1)
+        assert fleet.frames.vel_ned_m_s[0, 1] == pytest.approx(4.0, abs=0.2)
+        await gcs.wait_sim(2.5)  # < GUID_TIMEOUT (3 s): still flying
+        assert fleet.frames.vel_ned_m_s[0, 1] > 3.5
+        await gcs.wait_sim(3.0)  # > 3 s + deceleration: stopped
+        assert np.hypot(*fleet.frames.vel_ned_m_s[0, :2]) < 0.3
+        assert fleet.vehicles[0].custom_mode == CopterMode.GUIDED
+        gcs.send(velocity_yaw(gcs, 0.0, 4.0, 0.0))  # the next setpoint resumes
+        await gcs.wait_sim(2.5)
+        assert fleet.frames.vel_ned_m_s[0, 1] > 3.0
+
+
+async def test_single_ignore_bit_makes_the_setpoint_invalid_and_stops(sitl):
+    async with sitl() as (fleet, gcs):
+        gcs.hello()
+        await arm_and_take_off(gcs, 10.0)
+        for _ in range(20):
+            gcs.send(velocity_yaw(gcs, 4.0, 0.0, 0.0))
+            await gcs.wait_sim(0.1)
+        trap = TYPE_MASK_VELOCITY_YAW | TypeMask.VZ_IGNORE  # 2535
+        for _ in range(30):
+            gcs.send(velocity_yaw(gcs, 4.0, 0.0, 0.0, mask=trap))
+            await gcs.wait_sim(0.1)
+        assert np.hypot(*fleet.frames.vel_ned_m_s[0, :2]) < 0.3
+        counters = fleet.vehicles[0].counters
+        assert counters.setpoints_ignored >= 30
+        # outside GUIDED setpoints are silently ignored
+        await gcs.command(MavCmd.DO_SET_MODE, 1, CopterMode.BRAKE)
+        before = counters.ignored_reasons["not in GUIDED"]
+        gcs.send(velocity_yaw(gcs, 4.0, 0.0, 0.0))
+        await gcs.wait_sim(0.3)
+        assert counters.ignored_reasons["not in GUIDED"] == before + 1
+
+
+async def test_auto_disarm_on_the_ground(sitl):
+    async with sitl() as (fleet, gcs):
+        gcs.hello()
+        await gcs.wait_ready()
+        await gcs.command(MavCmd.DO_SET_MODE, 1, CopterMode.GUIDED)
+        await gcs.command(MavCmd.COMPONENT_ARM_DISARM, 1)
+        t_arm = fleet.now_s()
+        hb = await gcs.heartbeat_after(t_arm)
+        assert hb.base_mode & MavModeFlag.SAFETY_ARMED
+        await gcs.wait_sim(fleet.cfg.ardupilot.disarm_delay_s + 0.5)
+        hb = await gcs.heartbeat_after(fleet.now_s())
+        assert not hb.base_mode & MavModeFlag.SAFETY_ARMED
+        texts = [m.text for _, m in gcs.heard if m.get_type() == "STATUSTEXT"]
+        assert "Disarming motors" in texts
+
+
+async def test_land_disarms_at_touchdown(sitl):
+    async with sitl() as (fleet, gcs):
+        gcs.hello()
+        await arm_and_take_off(gcs, 5.0)
+        ack = await gcs.command(MavCmd.NAV_LAND)
+        assert ack.result == MavResult.ACCEPTED
+        await gcs.wait_sim(15.0)
+        assert fleet.vehicles[0].landed and not fleet.vehicles[0].armed
+        assert fleet.finished()
