@@ -64,7 +64,6 @@ class MavResult(IntEnum):
     UNSUPPORTED = 3
     FAILED = 4
     IN_PROGRESS = 5
-    CANCELLED = 6
 
 
 class MavModeFlag(IntFlag):

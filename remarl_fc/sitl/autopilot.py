@@ -47,6 +47,9 @@ PILOT_DESCENT_M_S = 2.5
 """Sink rate of an ArduCopter pilot mode with the throttle stick at minimum (no RC), as
 measured on ArduCopter SITL."""
 
+CLIMB_DONE_M = 0.3
+"""A take-off is complete within this distance below its height (the climb slows into it)."""
+
 MAX_INTERVAL_HZ = 50.0
 """Highest message rate a stream can be set to (the physics rate caps it anyway)."""
 
@@ -457,9 +460,16 @@ class Autopilot:
         f.climb_m_s[i] = climb_m_s
 
     def climb_done(self) -> bool:
-        """A take-off climb has reached its height."""
+        """A take-off climb is within `CLIMB_DONE_M` of its height."""
         f, i = self.frames, self.index
-        return bool(f.pos_ned_m[i, 2] <= f.pos_target_ned_m[i, 2] + 0.1)
+        return bool(f.pos_ned_m[i, 2] <= f.pos_target_ned_m[i, 2] + CLIMB_DONE_M)
+
+    def finish_climb(self) -> None:
+        """Hold at the take-off height (not where the climb happens to be)."""
+        f, i = self.frames, self.index
+        target = f.pos_target_ned_m[i, 2]
+        f.set_hold(i)
+        f.hold_ned_m[i, 2] = target
 
     def home_reached(self) -> bool:
         """A return has arrived over home."""
@@ -506,6 +516,16 @@ class Autopilot:
     def stream_frame_ok(self, frame: int | None, allowed: tuple[int, ...]) -> bool:
         """COMMAND_INT frame check (COMMAND_LONG has none)."""
         return frame is None or frame in allowed
+
+
+def forced(param2: float) -> bool:
+    """COMPONENT_ARM_DISARM p2 is the force magic; NaN (an unset parameter, as MAVSDK sends it)
+    is not (ArduPilot compares floats, PX4 rounds p2; neither converts NaN to a number).
+
+    >>> forced(21196.0), forced(float("nan")), forced(0.0)
+    (True, False, False)
+    """
+    return abs(param2 - ARM_FORCE_MAGIC) < 0.5
 
 
 def _init_requested(ap: Autopilot) -> None:
@@ -627,7 +647,7 @@ class ArduCopterLogic(Autopilot):
 
     def cmd_arm_disarm(self, cmd: Command, now_s: float) -> tuple[int, str]:
         """Arm in STABILIZE/ALT_HOLD/LOITER/POSHOLD/GUIDED once the EKF has a position."""
-        arm, force = cmd.params[0] >= 0.5, int(cmd.params[1]) == ARM_FORCE_MAGIC
+        arm, force = cmd.params[0] >= 0.5, forced(cmd.params[1])
         if arm:
             if self.armed:
                 return MavResult.ACCEPTED, ""
@@ -718,7 +738,7 @@ class ArduCopterLogic(Autopilot):
             if self.custom_mode in self.PILOT_MODES and not self.pilot_holding:
                 self._apply_mode()
             else:
-                self.fly_hold()
+                self.finish_climb()
         if self.custom_mode == 6 and self.home_reached():
             self.fly_land(p.wpnav_speed_dn_m_s, p.land_speed_m_s, p.land_alt_low_m)
         was_flying = self.flew and self._landed_since_s is None
@@ -894,7 +914,7 @@ class Px4Logic(Autopilot):
 
     def cmd_arm_disarm(self, cmd: Command, now_s: float) -> tuple[int, str]:
         """Arming needs a position (in position modes) and, in OFFBOARD, a setpoint stream."""
-        arm, force = cmd.params[0] >= 0.5, int(cmd.params[1]) == ARM_FORCE_MAGIC
+        arm, force = cmd.params[0] >= 0.5, forced(cmd.params[1])
         if arm:
             if self.armed:
                 return MavResult.ACCEPTED, ""
@@ -970,6 +990,7 @@ class Px4Logic(Autopilot):
         taking_off = self.main == self.AUTO and self.sub == self.TAKEOFF and not self.landed
         if taking_off and f.guidance[i] == Guidance.CLIMB and self.climb_done():
             self._set(self.AUTO, self.LOITER)
+            self.finish_climb()
         if self.main == self.AUTO and self.sub == self.RTL and self.home_reached():
             self.fly_land(p.mpc_land_speed_m_s, p.mpc_land_speed_m_s, 0.0)
         super().tick(now_s)

@@ -179,7 +179,8 @@ def commanded_velocity(a: Airframes, cfg: VehicleModelConfig) -> FloatArray:
 
     climb = g == Guidance.CLIMB
     cmd[climb, :2] = gain * (a.hold_ned_m[climb, :2] - a.pos_ned_m[climb, :2])
-    cmd[climb, 2] = -a.climb_m_s[climb]
+    climb_err = a.pos_target_ned_m[climb, 2] - a.pos_ned_m[climb, 2]  # < 0 below the target
+    cmd[climb, 2] = np.maximum(-a.climb_m_s[climb], gain * climb_err)
 
     land = g == Guidance.LAND
     cmd[land, :2] = gain * (a.hold_ned_m[land, :2] - a.pos_ned_m[land, :2])

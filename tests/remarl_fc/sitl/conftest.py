@@ -9,6 +9,7 @@ from typing import Any
 
 import pytest_asyncio
 
+from remarl_fc.errors import LinkError
 from remarl_fc.mavlink.codec import Codec, SigningConfig
 from remarl_fc.mavlink.udp import Address, UdpEndpoint
 from remarl_fc.sitl.config import SitlConfig
@@ -40,17 +41,17 @@ class Gcs:
         while (left := end - time.monotonic()) > 0:
             try:
                 data, addr = await self.ep.recv(left)
-            except Exception:  # noqa: BLE001 - a quiet link is fine here
+            except LinkError:  # a quiet link is fine here
                 return
             for m in self.codec.decode(data, addr):
                 self.heard.append((self.fleet.now_s(), m))
 
     async def wait_for(
-        self, mtype: str, pred: Callable[[Any], bool] = lambda m: True, timeout: float = WAIT_S
+        self, mtype: str, pred: Callable[[Any], bool] = lambda m: True, limit_s: float = WAIT_S
     ) -> Any:
         """The next message of type ``mtype`` satisfying ``pred`` after the last one returned
-        (or after the last command sent); raises after ``timeout``."""
-        end = time.monotonic() + timeout
+        (or after the last command sent); raises after ``limit_s``."""
+        end = time.monotonic() + limit_s
         while True:
             for k in range(self.cursor, len(self.heard)):
                 m = self.heard[k][1]
@@ -58,7 +59,7 @@ class Gcs:
                     self.cursor = k + 1
                     return m
             if time.monotonic() > end:
-                raise AssertionError(f"no {mtype} matching within {timeout} s")
+                raise AssertionError(f"no {mtype} matching within {limit_s} s")
             await self.pump(0.02)
 
     async def wait_sim(self, sim_s: float) -> None:

@@ -112,7 +112,7 @@ async def test_mode_change_shows_only_in_the_next_heartbeat(sitl):
 
 
 async def test_takeoff_refusals_and_command_int_frame(sitl):
-    async with sitl() as (fleet, gcs):
+    async with sitl() as (_fleet, gcs):
         gcs.hello()
         await gcs.wait_ready()
         await gcs.command(MavCmd.DO_SET_MODE, 1, CopterMode.GUIDED)
@@ -149,7 +149,7 @@ async def test_guided_velocity_and_yaw_2503_and_units(sitl):
         assert gpi.vx == pytest.approx(300, abs=15) and gpi.vy == pytest.approx(200, abs=15)
         assert gpi.hdg == pytest.approx(9000, abs=300)
         home = fleet.homes[0]
-        n, e, d = geodetic_to_ned(from_deg_e7(gpi.lat), from_deg_e7(gpi.lon), gpi.alt / 1000, home)
+        n, e, _d = geodetic_to_ned(from_deg_e7(gpi.lat), from_deg_e7(gpi.lon), gpi.alt / 1000, home)
         truth = fleet.frames.pos_ned_m[0] - fleet.frames.home_ned_m[0]
         assert float(n) == pytest.approx(truth[0], abs=1.0)
         assert float(e) == pytest.approx(truth[1], abs=1.0)
