@@ -37,3 +37,20 @@ def test_cli_and_sim_import_without_torch():
         "assert 'torch' not in sys.modules and 'policies' not in sys.modules"
     )
     subprocess.run([sys.executable, "-c", code], check=True)
+
+
+def test_sitl_runs_with_torch_unimportable(tmp_path):
+    """`remarl-fc sitl` and the MAVLink layer work on a machine without torch."""
+    code = (
+        "import sys, importlib.abc\n"
+        "class Block(importlib.abc.MetaPathFinder):\n"
+        "    def find_spec(self, name, path, target=None):\n"
+        "        if name.split('.')[0] in ('torch', 'policies'):\n"
+        "            raise ImportError('blocked: ' + name)\n"
+        "sys.meta_path.insert(0, Block())\n"
+        "import remarl_fc.sitl.fleet, remarl_fc.sitl.bench, remarl_fc.mavlink.udp\n"
+        "from remarl_fc.cli import main\n"
+        "raise SystemExit(main(['sitl', '--scenario', '3u1o', '--base-port', '0',\n"
+        "                       '--speedup', '50', '--timeout', '1', '--json']))\n"
+    )
+    subprocess.run([sys.executable, "-c", code], check=True, cwd=tmp_path, capture_output=True)

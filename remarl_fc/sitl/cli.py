@@ -192,9 +192,10 @@ async def _serve(
     fleet = SitlFleet(
         cfg, scenario=scenario, faults=faults, signing_key=key, traffic_start_s=args.traffic_start
     )
-    finished = False
+    finished = started = False
     try:
         async with fleet:
+            started = True
             if not args.json:
                 for i, (host, port) in enumerate(fleet.addresses):
                     out = cfg.out_address(i)
@@ -202,9 +203,10 @@ async def _serve(
                     print(f"vehicle {i + 1} ({cfg.flavour}): udp {host}:{port}{to}", flush=True)
             finished = await fleet.wait(until_done=args.until_done, timeout_s=args.timeout)
     finally:
-        summary.update(fleet.summary())
-        if args.summary:
-            write_json_atomic(args.summary, summary)
+        if started:  # a fleet that never bound its ports has nothing to report
+            summary.update(fleet.summary())
+            if args.summary:
+                write_json_atomic(args.summary, summary)
     return finished
 
 

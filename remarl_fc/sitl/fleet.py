@@ -372,7 +372,7 @@ class SitlFleet:
             codec = self.codecs[i].stats
             entry: dict[str, Any] = {
                 "system_id": ap.system_id,
-                "port": self._ports[i],
+                "port": self._ports[i] if i < len(self._ports) else self.cfg.port(i),
                 "home": dataclasses.asdict(self.homes[i]),
                 "armed": ap.armed,
                 "custom_mode": ap.custom_mode,

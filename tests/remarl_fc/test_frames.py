@@ -93,5 +93,5 @@ def test_course_of_east_is_90_degrees():
 
 @pytest.mark.parametrize("text", ["1,2", "a,b,c", "95,0,0", "0,200,0"])
 def test_bad_home_is_a_clear_error(text):
-    with pytest.raises(ValueError, match="LAT|latitude|longitude"):
+    with pytest.raises(ValueError, match=r"LAT|latitude|longitude"):
         GeoPoint.parse(text)

@@ -93,11 +93,10 @@ def test_travel_yaw_faces_the_velocity():
 
 def msg(**kw):
     f = Codec(255, 190).factory
-    fields = dict(
-        time_boot_ms=0, target_system=1, target_component=1, coordinate_frame=1,
-        type_mask=TYPE_MASK_VELOCITY_YAW, x=0.0, y=0.0, z=0.0, vx=1.0, vy=2.0, vz=0.0,
-        afx=0.0, afy=0.0, afz=0.0, yaw=0.5, yaw_rate=0.0,
-    )  # fmt: skip
+    fields = {"time_boot_ms": 0, "target_system": 1, "target_component": 1}
+    fields |= {"coordinate_frame": 1, "type_mask": TYPE_MASK_VELOCITY_YAW}
+    fields |= {"x": 0.0, "y": 0.0, "z": 0.0, "vx": 1.0, "vy": 2.0, "vz": 0.0}
+    fields |= {"afx": 0.0, "afy": 0.0, "afz": 0.0, "yaw": 0.5, "yaw_rate": 0.0}
     fields.update(kw)
     return f.set_position_target_local_ned_encode(*fields.values())
 
@@ -171,7 +170,7 @@ def test_fault_specs(parser, text, expected):
 
 @pytest.mark.parametrize("text", ["1:2", "x:1:2", "0:5:1", "0:a:b", "-1:0:1"])
 def test_bad_fault_specs_say_what_is_expected(text):
-    with pytest.raises(ValueError, match="VEHICLE|vehicle|window|seconds|negative"):
+    with pytest.raises(ValueError, match=r"VEHICLE|vehicle|window|seconds|negative"):
         parse_window(text)
 
 
