@@ -519,8 +519,10 @@ class Autopilot:
 
 
 def forced(param2: float) -> bool:
-    """COMPONENT_ARM_DISARM p2 is the force magic; NaN (an unset parameter, as MAVSDK sends it)
-    is not (ArduPilot compares floats, PX4 rounds p2; neither converts NaN to a number).
+    """Whether COMPONENT_ARM_DISARM p2 is the force magic (21196).
+
+    NaN (an unset parameter, as MAVSDK and PX4's own commands send it) is not: ArduPilot
+    compares floats and PX4 rounds p2; neither converts NaN to a number.
 
     >>> forced(21196.0), forced(float("nan")), forced(0.0)
     (True, False, False)

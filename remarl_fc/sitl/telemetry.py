@@ -45,6 +45,11 @@ SENSORS_PRESENT = 0x0020_002F
 """MAV_SYS_STATUS_SENSOR bits reported present/enabled/healthy: 3-D gyro (1), accel (2),
 mag (4), absolute pressure (8), GPS (32) and AHRS (0x200000)."""
 
+PREARM_CHECK = 0x1000_0000
+"""MAV_SYS_STATUS_PREARM_CHECK: present and enabled always, healthy while armed or while the
+arming checks pass — ArduPilot's `GCS::update_sensor_status_flags` and PX4's Commander both
+report it; MAVSDK's `Health.is_armable` reads it."""
+
 BATTERY_VOLTAGE_MV = 16_200
 """Reported battery voltage: a 4S pack at rest, millivolts."""
 
@@ -137,10 +142,13 @@ class TelemetryBuilder:
 
     def sys_status(self, i: int, ap: Autopilot, now_s: float) -> Any:
         """SYS_STATUS (1): sensors, load d%, battery mV / cA / %, comm drop rate c%."""
+        ready = ap.position_ok(now_s) and not ap.booting(now_s)
         health = SENSORS_PRESENT if ap.position_ok(now_s) else SENSORS_PRESENT & ~0x20
+        if ap.armed or ready:
+            health |= PREARM_CHECK
         return self.factory.sys_status_encode(
-            SENSORS_PRESENT,
-            SENSORS_PRESENT,
+            SENSORS_PRESENT | PREARM_CHECK,
+            SENSORS_PRESENT | PREARM_CHECK,
             health,
             200,
             BATTERY_VOLTAGE_MV,

@@ -26,6 +26,9 @@ BoolArray = NDArray[np.bool_]
 GROUND_DOWN_M = 0.0
 """Down coordinate of the ground (flat terrain at the origin's altitude)."""
 
+BRAKE_DONE_M_S = 0.2
+"""A braking vehicle holds where it is once slower than this (BRAKE / Hold stop in place)."""
+
 LANDED_SPEED_M_S = 0.3
 """Touch-down: below this sink rate at the ground the vehicle counts as landed."""
 
@@ -87,6 +90,7 @@ class Airframes:
     yaw_rate_target_rad_s: FloatArray
     gust_m_s: FloatArray
     landed: BoolArray
+    braking: BoolArray
 
     @classmethod
     def on_ground(cls, home_ned_m: FloatArray, yaw_rad: FloatArray) -> Airframes:
@@ -117,6 +121,7 @@ class Airframes:
             yaw_rate_target_rad_s=z1.copy(),
             gust_m_s=z3.copy(),
             landed=np.ones(n, dtype=bool),
+            braking=np.zeros(n, dtype=bool),
         )
 
     def __len__(self) -> int:
@@ -127,9 +132,10 @@ class Airframes:
         return GROUND_DOWN_M - self.pos_ned_m[:, 2]
 
     def set_hold(self, i: int) -> None:
-        """Vehicle i holds where it is (position, height and heading)."""
+        """Vehicle i brakes to a stop and holds where it stopped (height and heading kept)."""
         self.guidance[i] = Guidance.HOLD
         self.hold_ned_m[i] = self.pos_ned_m[i]
+        self.braking[i] = True
         self.yaw_mode[i] = YawMode.HOLD
         self.yaw_target_rad[i] = self.yaw_rad[i]
 
@@ -169,6 +175,8 @@ def commanded_velocity(a: Airframes, cfg: VehicleModelConfig) -> FloatArray:
 
     hold = g == Guidance.HOLD
     cmd[hold] = gain * (a.hold_ned_m[hold] - a.pos_ned_m[hold])
+    brake = hold & a.braking
+    cmd[brake, :2] = 0.0  # stop first; the hold point is where the vehicle stops
 
     vel = g == Guidance.VELOCITY
     cmd[vel] = a.vel_target_m_s[vel]
@@ -221,6 +229,11 @@ def step(a: Airframes, cfg: VehicleModelConfig, dt_s: float, rng: np.random.Gene
     idle = (a.guidance == Guidance.IDLE) | a.landed & (cmd[:, 2] >= 0)
     a.vel_ned_m_s[idle] = 0.0
     a.pos_ned_m += (a.vel_ned_m_s + a.gust_m_s) * dt_s
+
+    stopped = a.braking & (np.hypot(a.vel_ned_m_s[:, 0], a.vel_ned_m_s[:, 1]) < BRAKE_DONE_M_S)
+    a.hold_ned_m[stopped, :2] = a.pos_ned_m[stopped, :2]
+    a.braking &= ~stopped
+    a.braking &= a.guidance == Guidance.HOLD
 
     # the ground
     below = a.pos_ned_m[:, 2] >= GROUND_DOWN_M
