@@ -85,13 +85,38 @@ def swarm_layout(cfg: ScenarioConfig) -> SwarmLayout:
     targets = np.stack([np.full(cfg.uav.count, cfg.uav.target_x_m), positions[:, 1]], axis=-1)
     delta = targets - positions
     headings = np.arctan2(delta[:, 1], delta[:, 0])
+    velocity, virtual_centre = virtual_centre_and_velocity(
+        positions, targets, cfg.uav.speed_m_s, cfg.field.swarm_lead_m
+    )
+    return SwarmLayout(positions, headings, targets, velocity, virtual_centre)
+
+
+def virtual_centre_and_velocity(
+    positions_m: FloatArray, targets_m: FloatArray, speed_m_s: float, lead_m: float
+) -> tuple[FloatArray, FloatArray]:
+    """The swarm's pre-planned velocity v_s and virtual centre p* for UAVs at ``positions_m``.
+
+    v_s has the UAV speed along the mean of the directions to the targets; p* lies on the line
+    through the centroid along v_s, ``lead_m`` ahead of the foremost UAV.
+
+    Args:
+        positions_m, targets_m: (N, 2).
+
+    Returns:
+        (velocity (2,), centre (2,)).
+
+    >>> v, c = virtual_centre_and_velocity(np.array([[0.0, 0.0], [0.0, 10.0]]),
+    ...                                    np.array([[100.0, 0.0], [100.0, 10.0]]), 10.0, 50.0)
+    >>> v.tolist(), c.tolist()
+    ([10.0, 0.0], [50.0, 5.0])
+    """
+    delta = targets_m - positions_m
+    headings = np.arctan2(delta[:, 1], delta[:, 0])
     mean_dir = np.array([np.cos(headings).mean(), np.sin(headings).mean()])
     mean_dir /= np.linalg.norm(mean_dir)
-    velocity = cfg.uav.speed_m_s * mean_dir
-    centroid = positions.mean(axis=0)
-    front = float(((positions - centroid) @ mean_dir).max())  # the foremost UAV, along v
-    virtual_centre = centroid + (front + cfg.field.swarm_lead_m) * mean_dir
-    return SwarmLayout(positions, headings, targets, velocity, virtual_centre)
+    centroid = positions_m.mean(axis=0)
+    front = float(((positions_m - centroid) @ mean_dir).max())  # the foremost UAV, along v
+    return speed_m_s * mean_dir, centroid + (front + lead_m) * mean_dir
 
 
 def min_pairwise_distance(points_m: FloatArray) -> float:

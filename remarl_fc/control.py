@@ -1,0 +1,186 @@
+"""The swarm controller: telemetry snapshot → policy decision → constant-rate arcs → setpoints.
+
+Pure and clock-free: every method takes the time. Once per decision step dt the controller
+builds every controlled vehicle's observation with the simulator's own builder
+(`sim.observation.build_observations`), asks the policy for heading changes, and starts each
+vehicle on the arc the simulator would fly: heading h(t) = h₀ + a·(t − t₀)/dt at constant
+speed. Between decisions `setpoint` samples that arc as a NED velocity and yaw (what
+SET_POSITION_TARGET_LOCAL_NED with type_mask 2503 carries).
+
+The frames are the simulator's (x east, y north, heading counter-clockwise from east); the
+mission's north/east metres and NED yaw are converted in `remarl_fc.frames` only.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+import numpy as np
+from numpy.typing import NDArray
+
+from remarl_fc.frames import heading_to_yaw, ne_to_sim, sim_to_ne
+from sim.observation import ObservationLayout, build_observations
+from sim.spawn import virtual_centre_and_velocity
+
+FloatArray = NDArray[np.float64]
+
+
+class PolicyLike(Protocol):
+    """What the controller needs of a policy (`remarl_fc.policy_io.Policy`)."""
+
+    @property
+    def layout(self) -> ObservationLayout:
+        """Observation rows and scales."""
+        ...
+
+    def act(self, obs: NDArray[np.floating[Any]]) -> NDArray[np.float32]:
+        """(..., N, size) observations → (..., N) actions in [−1, 1]."""
+        ...
+
+
+@dataclass(frozen=True)
+class ControlSpec:
+    """Constants of the controlled swarm, from the policy file.
+
+    Attributes:
+        speed_m_s: the constant flight speed. dt_s: the decision step. max_turn_rad: the
+        heading change of a full action. lead_m: how far ahead of the swarm the virtual centre
+        lies (`FieldConfig.swarm_lead_m`). arrival_m: distance to a target that counts as
+        reached (d_col, as in the simulator).
+    """
+
+    speed_m_s: float
+    dt_s: float
+    max_turn_rad: float
+    lead_m: float
+    arrival_m: float
+
+    @classmethod
+    def from_policy_meta(cls, meta: dict[str, Any]) -> ControlSpec:
+        """Read the constants out of a policy file's metadata."""
+        return cls(
+            speed_m_s=float(meta["speed_m_s"]),
+            dt_s=float(meta["dt_s"]),
+            max_turn_rad=float(meta["action"]["max_turn_rad"]),
+            lead_m=float(meta["scenario_config"]["field"]["swarm_lead_m"]),
+            arrival_m=float(meta["d_col_m"]),
+        )
+
+
+@dataclass(frozen=True)
+class Decision:
+    """One decision of the swarm (for the log).
+
+    Attributes:
+        t: decision time. obs: (N, size) observations. action: (N,) in [−1, 1].
+        turn_rad: (N,) heading change over the coming step. heading_rad: (N,) at t.
+        positions_ne_m: (N, 2) as used. obstacles_ne_m: (M, 2) as used.
+    """
+
+    t: float
+    obs: NDArray[np.float32]
+    action: NDArray[np.float32]
+    turn_rad: FloatArray
+    heading_rad: FloatArray
+    positions_ne_m: FloatArray
+    obstacles_ne_m: FloatArray
+
+
+class SwarmController:
+    """Flies N vehicles (policy slots 0..N−1) toward their targets.
+
+    Args:
+        policy: the policy (numpy inference).
+        spec: speed, dt, turn bound, virtual-centre lead, arrival distance.
+        targets_ne_m: (N, 2) targets, north/east metres in the mission frame.
+    """
+
+    def __init__(self, policy: PolicyLike, spec: ControlSpec, targets_ne_m: FloatArray) -> None:
+        self.policy, self.spec = policy, spec
+        self.targets_xy = ne_to_sim(np.asarray(targets_ne_m, dtype=np.float64))
+        n = len(self.targets_xy)
+        self.n = n
+        self.h0 = np.zeros(n)
+        self.turn = np.zeros(n)
+        self.t0 = np.zeros(n)
+        self.centre0 = np.zeros(2)
+        self.swarm_vel = np.zeros(2)
+        self.t_start = 0.0
+        self.started = False
+
+    def start(self, positions_ne_m: FloatArray, now: float) -> None:
+        """Fix the swarm's virtual centre and velocity, and head each vehicle to its target."""
+        pos = ne_to_sim(np.asarray(positions_ne_m, dtype=np.float64))
+        delta = self.targets_xy - pos
+        self.h0 = np.arctan2(delta[:, 1], delta[:, 0])
+        self.turn[:] = 0.0
+        self.t0[:] = now
+        self.swarm_vel, self.centre0 = virtual_centre_and_velocity(
+            pos, self.targets_xy, self.spec.speed_m_s, self.spec.lead_m
+        )
+        self.t_start = now
+        self.started = True
+
+    def heading_at(self, now: float) -> FloatArray:
+        """(N,) heading on each vehicle's current arc (straight on after the arc's end)."""
+        frac = np.clip((now - self.t0) / self.spec.dt_s, 0.0, 1.0)
+        heading: FloatArray = self.h0 + self.turn * frac
+        return heading
+
+    def centre_at(self, now: float) -> FloatArray:
+        """(2,) the virtual centre p*, moving with the swarm's pre-planned velocity."""
+        out: FloatArray = self.centre0 + self.swarm_vel * (now - self.t_start)
+        return out
+
+    def decide(
+        self,
+        now: float,
+        positions_ne_m: FloatArray,
+        obstacles_ne_m: FloatArray,
+        obstacle_vel_ne_m_s: FloatArray,
+    ) -> Decision:
+        """Decide every vehicle's next arc.
+
+        Args:
+            now: decision time (s, the controller's clock).
+            positions_ne_m: (N, 2) current positions (rows of vehicles not flown are ignored).
+            obstacles_ne_m, obstacle_vel_ne_m_s: (M, 2) intruders and vehicles that are not
+                (or no longer) members of the swarm, predicted to ``now``.
+        """
+        layout = self.policy.layout
+        heading = self.heading_at(now)
+        pos = ne_to_sim(np.asarray(positions_ne_m, dtype=np.float64))
+        pos = np.where(np.isfinite(pos), pos, 0.0)
+        vel = self.spec.speed_m_s * np.stack([np.cos(heading), np.sin(heading)], axis=-1)
+        obs_xy = ne_to_sim(np.asarray(obstacles_ne_m, dtype=np.float64).reshape(-1, 2))
+        obs_v = ne_to_sim(np.asarray(obstacle_vel_ne_m_s, dtype=np.float64).reshape(-1, 2))
+        built = build_observations(
+            layout,
+            pos[None],
+            heading[None],
+            vel[None],
+            self.targets_xy[None],
+            self.centre_at(now)[None],
+            obs_xy[None],
+            obs_v[None],
+        )
+        flat = built.flat()
+        action = np.clip(self.policy.act(flat)[0], -1.0, 1.0).astype(np.float32)
+        turn = action.astype(np.float64) * self.spec.max_turn_rad
+        self.h0, self.turn, self.t0[:] = heading, turn, now
+        return Decision(
+            now, flat[0], action, turn, heading, np.asarray(positions_ne_m), sim_to_ne(obs_xy)
+        )
+
+    def setpoint(self, slot: int, now: float) -> tuple[float, float, float]:
+        """(north m/s, east m/s, yaw rad) of vehicle ``slot`` on its arc now."""
+        h = float(self.heading_at(now)[slot])
+        v = self.spec.speed_m_s
+        return v * math.sin(h), v * math.cos(h), float(heading_to_yaw(h))
+
+    def reached(self, slot: int, position_ne_m: FloatArray) -> bool:
+        """Within the arrival distance of its target (horizontal)."""
+        xy = ne_to_sim(np.asarray(position_ne_m, dtype=np.float64))
+        return bool(np.hypot(*(xy - self.targets_xy[slot])) < self.spec.arrival_m)

@@ -1,0 +1,318 @@
+"""A MAVLink connection for the runtime: URL in, decoded messages out, by system id.
+
+URLs take pymavlink's forms:
+
+* ``udpin:HOST:PORT``, ``udp:HOST:PORT``, ``HOST:PORT``: bind and listen; reply to wherever
+  each system was heard;
+* ``udpout:HOST:PORT``: send to a fixed address (and listen on the socket it sends from);
+* ``tcp:HOST:PORT``: connect to a TCP server (an autopilot's or SITL's serial-over-TCP port);
+* ``serial:DEVICE[:BAUD]``, ``/dev/ttyX[,BAUD]``: a serial port (default 57600 baud).
+
+Several vehicles may share one link: messages are dispatched by their source system id, and
+`MavlinkLink.send` addresses a vehicle by its system id (on UDP, to the address that system was
+last heard from). Everything is callback-driven in the event loop — the datagram protocol, a
+stream protocol for TCP, a file-descriptor reader for serial — so the link owns no task and
+nothing blocks. Every frame in and out can be written to a ``.tlog`` (`TlogWriter`).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import os
+import struct
+import termios
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from types import TracebackType
+from typing import IO, Any, Self
+
+from remarl_fc.errors import LinkLost
+from remarl_fc.mavlink.codec import Codec, Message, SigningConfig
+from remarl_fc.mavlink.udp import Address, UdpEndpoint, parse_host_port
+
+MessageHandler = Callable[[Message, float], None]
+"""Called with (message, monotonic receive time s) for every valid message."""
+
+DEFAULT_BAUD = 57600
+"""Serial baud rate when the URL gives none (the usual telemetry radio rate)."""
+
+BAUD_CONSTANTS = {
+    9600: termios.B9600,
+    19200: termios.B19200,
+    38400: termios.B38400,
+    57600: termios.B57600,
+    115200: termios.B115200,
+    230400: termios.B230400,
+    460800: getattr(termios, "B460800", termios.B230400),
+    921600: getattr(termios, "B921600", termios.B230400),
+}
+
+
+@dataclass(frozen=True)
+class LinkAddress:
+    """A parsed connection URL."""
+
+    kind: str  # "udpin", "udpout", "tcp", "serial"
+    host: str = ""
+    port: int = 0
+    device: str = ""
+    baud: int = DEFAULT_BAUD
+
+    @classmethod
+    def parse(cls, url: str) -> LinkAddress:
+        """Parse a pymavlink-style URL (see the module docstring).
+
+        >>> LinkAddress.parse("udpin:0.0.0.0:14550")
+        LinkAddress(kind='udpin', host='0.0.0.0', port=14550, device='', baud=57600)
+        >>> LinkAddress.parse("/dev/ttyUSB0,921600").baud
+        921600
+        """
+        head, sep, rest = url.partition(":")
+        if head in ("udpin", "udp", "udpout", "tcp") and sep:
+            host, port = parse_host_port(rest, what=f"connection {url!r}")
+            return cls(
+                "udpout" if head == "udpout" else "tcp" if head == "tcp" else "udpin", host, port
+            )
+        if head == "serial" and sep:
+            device, _, baud = rest.partition(":")
+            return cls("serial", device=device, baud=_baud(baud or str(DEFAULT_BAUD), url))
+        if url.startswith("/dev/") or url.upper().startswith("COM"):
+            device, _, baud = url.partition(",")
+            return cls("serial", device=device, baud=_baud(baud or str(DEFAULT_BAUD), url))
+        if sep and rest.isdigit():
+            host, port = parse_host_port(url, what=f"connection {url!r}")
+            return cls("udpin", host, port)
+        raise ValueError(
+            f"connection {url!r} is not one of udpin:HOST:PORT, udpout:HOST:PORT, "
+            "tcp:HOST:PORT, serial:DEVICE[:BAUD] or /dev/ttyX[,BAUD]"
+        )
+
+
+def _baud(text: str, url: str) -> int:
+    try:
+        baud = int(text)
+    except ValueError as exc:
+        raise ValueError(f"connection {url!r}: baud {text!r} is not a number") from exc
+    if baud not in BAUD_CONSTANTS:
+        raise ValueError(f"connection {url!r}: baud {baud} is not one of {sorted(BAUD_CONSTANTS)}")
+    return baud
+
+
+class TlogWriter:
+    """Appends frames to a ``.tlog``: each an 8-byte big-endian µs wall-clock stamp + the frame.
+
+    The format pymavlink's tools (mavlogdump, MAVExplorer) read.
+    """
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        self._fh: IO[bytes] | None = None
+
+    def open(self) -> None:
+        """Open for appending (creating folders)."""
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._fh = self.path.open("ab")
+
+    def write(self, frame: bytes) -> None:
+        """Log one frame now."""
+        if self._fh is not None:
+            self._fh.write(struct.pack(">Q", int(time.time() * 1e6)) + frame)
+
+    def close(self) -> None:
+        """Flush and close (idempotent)."""
+        if self._fh is not None:
+            self._fh.close()
+            self._fh = None
+
+
+class _Stream(asyncio.Protocol):
+    def __init__(self, link: MavlinkLink) -> None:
+        self.link = link
+
+    def data_received(self, data: bytes) -> None:
+        self.link._received(data, "stream")
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        self.link._lost(exc or ConnectionError("closed by the peer"))
+
+
+class MavlinkLink:
+    """One connection to one or more vehicles (an async context manager).
+
+    Args:
+        url: a connection URL (module docstring).
+        codec: this side's MAVLink identity (system id, component id, signing).
+        on_message: called for every valid message with its monotonic receive time.
+        tlog: where to log every frame in and out, or None.
+    """
+
+    def __init__(
+        self,
+        url: str,
+        codec: Codec,
+        on_message: MessageHandler,
+        *,
+        tlog: TlogWriter | None = None,
+    ) -> None:
+        self.url, self.codec, self.on_message, self.tlog = url, codec, on_message, tlog
+        self.address = LinkAddress.parse(url)
+        self.where: dict[int, Any] = {}  # system id → address it was heard from
+        self.failure: BaseException | None = None
+        self._udp: UdpEndpoint | None = None
+        self._transport: asyncio.Transport | None = None
+        self._fd: int | None = None
+        self._loop: asyncio.AbstractEventLoop | None = None
+
+    async def __aenter__(self) -> Self:
+        a = self.address
+        self._loop = loop = asyncio.get_running_loop()
+        if self.tlog is not None:
+            self.tlog.open()
+        try:
+            if a.kind == "udpin":
+                self._udp = UdpEndpoint((a.host, a.port), on_datagram=self._received, name=self.url)
+                await self._udp.__aenter__()
+            elif a.kind == "udpout":
+                self._udp = UdpEndpoint(("0.0.0.0", 0), on_datagram=self._received, name=self.url)
+                await self._udp.__aenter__()
+            elif a.kind == "tcp":
+                try:
+                    transport, _ = await loop.create_connection(
+                        lambda: _Stream(self), a.host, a.port
+                    )
+                except OSError as exc:
+                    raise LinkLost(
+                        f"cannot connect ({exc.strerror or exc})", link=self.url
+                    ) from exc
+                self._transport = transport
+            else:
+                self._fd = _open_serial(a.device, a.baud, self.url)
+                loop.add_reader(self._fd, self._read_serial)
+        except BaseException:
+            if self.tlog is not None:
+                self.tlog.close()
+            raise
+        return self
+
+    async def __aexit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Close the connection and the log (idempotent)."""
+        if self._udp is not None:
+            self._udp.close()
+            self._udp = None
+        if self._transport is not None:
+            self._transport.close()
+            self._transport = None
+        if self._fd is not None:
+            if self._loop is not None:
+                self._loop.remove_reader(self._fd)
+            os.close(self._fd)
+            self._fd = None
+        if self.tlog is not None:
+            self.tlog.close()
+
+    @property
+    def local_address(self) -> Address | None:
+        """The bound UDP address (for udpin/udpout), else None."""
+        return self._udp.local_address if self._udp is not None else None
+
+    def send(self, msg: Message, system_id: int | None = None) -> bool:
+        """Encode and send ``msg`` toward ``system_id`` (None: every system heard / the peer).
+
+        Returns:
+            False when a udpin link has not heard that system yet (nowhere to send).
+
+        Raises:
+            LinkLost: the connection has failed.
+        """
+        if self.failure is not None:
+            raise LinkLost(f"the connection failed: {self.failure}", link=self.url)
+        frame = self.codec.encode(msg)
+        if self.tlog is not None:
+            self.tlog.write(frame)
+        a = self.address
+        if self._udp is not None:
+            if a.kind == "udpout":
+                self._udp.send(frame, (a.host, a.port))
+                return True
+            if system_id is not None:
+                dest = self.where.get(system_id)
+                if dest is None:
+                    return False
+                self._udp.send(frame, dest)
+                return True
+            for dest in set(self.where.values()):
+                self._udp.send(frame, dest)
+            return bool(self.where)
+        if self._transport is not None:
+            self._transport.write(frame)
+            return True
+        if self._fd is not None:
+            try:
+                os.write(self._fd, frame)
+            except BlockingIOError:
+                return False  # the UART buffer is full: drop, as a radio would
+            except OSError as exc:
+                self._lost(exc)
+                raise LinkLost(f"serial write failed ({exc.strerror})", link=self.url) from exc
+            return True
+        raise LinkLost("the connection is closed", link=self.url)
+
+    def _received(self, data: bytes, addr: Any) -> None:
+        now = time.monotonic()
+        for msg in self.codec.decode(data, addr):
+            if self.tlog is not None:
+                self.tlog.write(msg.get_msgbuf())
+            self.where[msg.get_srcSystem()] = addr
+            self.on_message(msg, now)
+
+    def _read_serial(self) -> None:
+        assert self._fd is not None
+        try:
+            data = os.read(self._fd, 4096)
+        except BlockingIOError:
+            return
+        except OSError as exc:
+            self._lost(exc)
+            return
+        if data:
+            self._received(data, "serial")
+
+    def _lost(self, exc: BaseException) -> None:
+        self.failure = exc
+        if self._fd is not None and self._loop is not None:
+            self._loop.remove_reader(self._fd)
+
+
+def _open_serial(device: str, baud: int, url: str) -> int:
+    try:
+        fd = os.open(device, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
+    except OSError as exc:
+        raise LinkLost(f"cannot open {device} ({exc.strerror})", link=url) from exc
+    try:
+        attrs = termios.tcgetattr(fd)
+        speed = BAUD_CONSTANTS[baud]
+        attrs[0] = 0  # iflag: raw
+        attrs[1] = 0  # oflag
+        attrs[2] = termios.CS8 | termios.CREAD | termios.CLOCAL  # cflag
+        attrs[3] = 0  # lflag
+        attrs[4] = attrs[5] = speed
+        termios.tcsetattr(fd, termios.TCSANOW, attrs)
+    except termios.error as exc:
+        os.close(fd)
+        raise LinkLost(f"{device} is not a serial port ({exc})", link=url) from exc
+    return fd
+
+
+def gcs_codec(system_id: int, component_id: int, signing: SigningConfig | None) -> Codec:
+    """The controller's MAVLink identity."""
+    return Codec(system_id, component_id, signing=signing)

@@ -1,0 +1,291 @@
+"""Mission files for ``remarl-fc fly``: who flies which policy slot, where to, from which origin.
+
+A mission is a TOML file::
+
+    speed_m_s = 10.0          # must equal the policy's UAV speed
+    dt_s = 2.0                # optional; must equal the policy's decision step
+
+    [origin]                  # the shared local frame: north/east metres from here
+    lat_deg = 47.397742
+    lon_deg = 8.545594
+    alt_m = 488.0             # AMSL of the ground at the origin
+
+    [geofence]                # optional: hold a vehicle about to leave it
+    radius_m = 600.0          # around the origin (and/or polygon_ne_m = [[n, e], ...])
+    max_alt_m = 60.0          # above the origin
+
+    [[vehicle]]
+    system_id = 1
+    slot = 0                  # the policy agent that flies it
+    target = { north_m = 150.0, east_m = 270.0 }   # or { lat_deg = ..., lon_deg = ... }
+    alt_m = 20.0              # cruise height above the origin
+
+Every error names the file and the key and says what is expected.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from remarl_fc.errors import ConfigError, PolicySpecMismatch
+from remarl_fc.frames import GeoPoint, geodetic_to_ned, heading_to_yaw, sim_to_ne
+from sim.config import ScenarioConfig
+from sim.spawn import swarm_layout
+
+FloatArray = NDArray[np.float64]
+
+DEFAULT_ALT_M = 20.0
+"""Cruise height above the origin when a vehicle gives none, metres."""
+
+
+class MissionError(ConfigError):
+    """A mission file that cannot be flown.
+
+    Attributes:
+        source: the file; key: the offending key ("" for the whole file).
+    """
+
+    def __init__(self, message: str, *, source: str, key: str = "") -> None:
+        where = f"{source}: {key}: " if key else f"{source}: "
+        super().__init__(where + message)
+        self.source, self.key = source, key
+
+
+@dataclass(frozen=True)
+class VehiclePlan:
+    """One vehicle of a mission.
+
+    Attributes:
+        system_id: its MAVLink system id. slot: the policy agent index that flies it.
+        target_ne_m: (2,) target, north/east metres from the origin.
+        alt_m: cruise height above the origin.
+    """
+
+    system_id: int
+    slot: int
+    target_ne_m: tuple[float, float]
+    alt_m: float
+
+
+@dataclass(frozen=True)
+class Geofence:
+    """Where the swarm may fly: a circle around the origin and/or a polygon, and a ceiling."""
+
+    radius_m: float | None = None
+    polygon_ne_m: tuple[tuple[float, float], ...] | None = None
+    max_alt_m: float | None = None
+
+    def inside(self, ne_m: FloatArray, alt_m: float | None = None) -> bool:
+        """Whether a point (north, east) metres from the origin is inside the fence."""
+        n, e = float(ne_m[0]), float(ne_m[1])
+        if self.radius_m is not None and math.hypot(n, e) > self.radius_m:
+            return False
+        if self.max_alt_m is not None and alt_m is not None and alt_m > self.max_alt_m:
+            return False
+        if self.polygon_ne_m is not None:
+            inside = False
+            pts = self.polygon_ne_m
+            for (n1, e1), (n2, e2) in zip(pts, pts[1:] + pts[:1], strict=True):
+                if (e1 > e) != (e2 > e) and n < (n2 - n1) * (e - e1) / (e2 - e1) + n1:
+                    inside = not inside
+            return inside
+        return True
+
+
+@dataclass(frozen=True)
+class Mission:
+    """A whole mission (see the module docstring)."""
+
+    origin: GeoPoint
+    speed_m_s: float
+    vehicles: tuple[VehiclePlan, ...]
+    dt_s: float | None = None
+    geofence: Geofence | None = None
+    source: str = "<mission>"
+
+    def by_slot(self) -> list[VehiclePlan]:
+        """The vehicles ordered by policy slot."""
+        return sorted(self.vehicles, key=lambda v: v.slot)
+
+    def targets_ne_m(self) -> FloatArray:
+        """(N, 2) targets in slot order."""
+        return np.array([v.target_ne_m for v in self.by_slot()], dtype=np.float64)
+
+    def check_policy(self, agents: int, speed_m_s: float, dt_s: float) -> None:
+        """Refuse a mission that does not fit the policy; the error names the value."""
+        checks = [
+            ("number of vehicles", agents, len(self.vehicles)),
+            ("speed_m_s", speed_m_s, self.speed_m_s),
+        ]
+        if self.dt_s is not None:
+            checks.append(("dt_s", dt_s, self.dt_s))
+        for name, expected, actual in checks:
+            if not math.isclose(float(expected), float(actual)):
+                raise PolicySpecMismatch(self.source, name, expected, actual)
+        slots = sorted(v.slot for v in self.vehicles)
+        if slots != list(range(agents)):
+            raise MissionError(
+                f"vehicle slots are {slots}; the policy has slots 0..{agents - 1}, one each",
+                source=self.source,
+                key="vehicle.slot",
+            )
+
+    @classmethod
+    def from_scenario(
+        cls, cfg: ScenarioConfig, origin: GeoPoint, alt_m: float = DEFAULT_ALT_M
+    ) -> Mission:
+        """The mission a scenario describes: its targets, from the arena origin, system ids 1..N.
+
+        The mock (`remarl-fc sitl --scenario`) places vehicle i at the scenario's spawn i with
+        the same origin, so this mission flies the scenario on the mock.
+        """
+        layout = swarm_layout(cfg)
+        targets = sim_to_ne(layout.targets_m)
+        plans = tuple(
+            VehiclePlan(i + 1, i, (float(t[0]), float(t[1])), alt_m) for i, t in enumerate(targets)
+        )
+        return cls(origin, cfg.uav.speed_m_s, plans, cfg.dt_s, None, f"scenario {cfg.name}")
+
+
+def initial_yaw_rad(mission: Mission, positions_ne_m: FloatArray) -> FloatArray:
+    """(N,) NED yaw from each vehicle's position toward its target (slot order)."""
+    delta = mission.targets_ne_m() - positions_ne_m
+    heading = np.arctan2(delta[:, 0], delta[:, 1])  # simulator heading: atan2(north, east)
+    return heading_to_yaw(heading)
+
+
+def load_mission(path: str | Path) -> Mission:
+    """Read and validate a mission file.
+
+    Raises:
+        MissionError: the file is missing, not TOML, or a key is missing or wrong.
+    """
+    p = Path(path)
+    src = str(p)
+    try:
+        data = tomllib.loads(p.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise MissionError(f"cannot read the file ({exc.strerror})", source=src) from exc
+    except tomllib.TOMLDecodeError as exc:
+        raise MissionError(f"not valid TOML ({exc})", source=src) from exc
+    return mission_from_dict(data, source=src)
+
+
+def _number(
+    table: dict[str, Any], key: str, src: str, prefix: str, *, positive: bool = False
+) -> float:
+    if key not in table:
+        raise MissionError("missing", source=src, key=prefix + key)
+    value = table[key]
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        raise MissionError(f"must be a number, got {value!r}", source=src, key=prefix + key)
+    if positive and value <= 0:
+        raise MissionError(f"must be > 0, got {value}", source=src, key=prefix + key)
+    return float(value)
+
+
+def _table(data: dict[str, Any], key: str, src: str) -> dict[str, Any]:
+    value = data.get(key)
+    if not isinstance(value, dict):
+        raise MissionError("missing or not a table ([" + key + "])", source=src, key=key)
+    return value
+
+
+def mission_from_dict(data: dict[str, Any], *, source: str) -> Mission:
+    """Validate parsed TOML into a `Mission` (see the module docstring)."""
+    known = {"speed_m_s", "dt_s", "origin", "geofence", "vehicle", "policy", "description"}
+    for key in data:
+        if key not in known:
+            raise MissionError(
+                f"unknown key; known: {', '.join(sorted(known))}", source=source, key=key
+            )
+    o = _table(data, "origin", source)
+    try:
+        origin = GeoPoint(
+            _number(o, "lat_deg", source, "origin."),
+            _number(o, "lon_deg", source, "origin."),
+            _number(o, "alt_m", source, "origin."),
+        )
+    except ValueError as exc:
+        if isinstance(exc, MissionError):
+            raise
+        raise MissionError(str(exc), source=source, key="origin") from exc
+    speed = _number(data, "speed_m_s", source, "", positive=True)
+    dt = _number(data, "dt_s", source, "", positive=True) if "dt_s" in data else None
+    raw = data.get("vehicle")
+    if not isinstance(raw, list) or not raw:
+        raise MissionError("give at least one [[vehicle]] table", source=source, key="vehicle")
+    plans = [_vehicle(v, k, origin, source) for k, v in enumerate(raw)]
+    ids = [p.system_id for p in plans]
+    if len(set(ids)) != len(ids):
+        raise MissionError(f"system ids repeat: {ids}", source=source, key="vehicle.system_id")
+    fence = _geofence(data["geofence"], source) if "geofence" in data else None
+    return Mission(origin, speed, tuple(plans), dt, fence, source)
+
+
+def _vehicle(v: Any, k: int, origin: GeoPoint, src: str) -> VehiclePlan:
+    prefix = f"vehicle[{k}]."
+    if not isinstance(v, dict):
+        raise MissionError("must be a table", source=src, key=f"vehicle[{k}]")
+    sysid = _number(v, "system_id", src, prefix)
+    slot = _number(v, "slot", src, prefix)
+    if sysid != int(sysid) or not 1 <= sysid <= 255:
+        raise MissionError(
+            f"must be an integer 1..255, got {sysid}", source=src, key=prefix + "system_id"
+        )
+    if slot != int(slot) or slot < 0:
+        raise MissionError(f"must be an integer ≥ 0, got {slot}", source=src, key=prefix + "slot")
+    target = v.get("target")
+    if not isinstance(target, dict):
+        raise MissionError(
+            "missing: give { north_m, east_m } or { lat_deg, lon_deg }",
+            source=src,
+            key=prefix + "target",
+        )
+    if "north_m" in target or "east_m" in target:
+        ne = (
+            _number(target, "north_m", src, prefix + "target."),
+            _number(target, "east_m", src, prefix + "target."),
+        )
+    else:
+        lat = _number(target, "lat_deg", src, prefix + "target.")
+        lon = _number(target, "lon_deg", src, prefix + "target.")
+        n, e, _ = geodetic_to_ned(lat, lon, origin.alt_m, origin)
+        ne = (float(n), float(e))
+    alt = _number(v, "alt_m", src, prefix, positive=True) if "alt_m" in v else DEFAULT_ALT_M
+    return VehiclePlan(int(sysid), int(slot), ne, alt)
+
+
+def _geofence(g: Any, src: str) -> Geofence:
+    if not isinstance(g, dict):
+        raise MissionError("must be a table", source=src, key="geofence")
+    radius = _number(g, "radius_m", src, "geofence.", positive=True) if "radius_m" in g else None
+    ceiling = _number(g, "max_alt_m", src, "geofence.", positive=True) if "max_alt_m" in g else None
+    polygon = None
+    if "polygon_ne_m" in g:
+        pts = g["polygon_ne_m"]
+        ok = (
+            isinstance(pts, list)
+            and len(pts) >= 3
+            and all(
+                isinstance(p, list) and len(p) == 2 and all(isinstance(c, int | float) for c in p)
+                for p in pts
+            )
+        )
+        if not ok:
+            raise MissionError(
+                "must be a list of at least 3 [north, east] pairs",
+                source=src,
+                key="geofence.polygon_ne_m",
+            )
+        polygon = tuple((float(p[0]), float(p[1])) for p in pts)
+    if radius is None and polygon is None and ceiling is None:
+        raise MissionError("give radius_m, polygon_ne_m or max_alt_m", source=src, key="geofence")
+    return Geofence(radius, polygon, ceiling)

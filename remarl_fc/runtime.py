@@ -1,0 +1,730 @@
+"""``remarl-fc fly``: the asyncio runtime that flies a swarm policy on ArduPilot or PX4.
+
+    async with SwarmRuntime(cfg, policy) as rt:   # links open; on any exit: every vehicle holds
+        await rt.run()
+
+One `asyncio.TaskGroup` owns every task, each named ``remarl.<what>``:
+
+* ``heartbeat`` — the controller's HEARTBEAT at 1 Hz (MAV_TYPE_ONBOARD_CONTROLLER);
+* ``mission`` — prepare every vehicle (streams, position, optional take-off, take control),
+  then the decision loop: every dt, one policy decision for the whole swarm;
+* ``setpoints`` — at ≥ 10 Hz, each controlled vehicle's point on its arc as
+  SET_POSITION_TARGET_LOCAL_NED velocity + yaw (type_mask 2503), after the safety checks:
+  stale telemetry (> `FlyConfig.stale_s`) → the vehicle is no longer commanded and becomes an
+  obstacle at its last track, and is told to hold when it comes back; a mode the pilot chose →
+  released, never fought; a geofence breach ahead → hold; target reached → hold and release.
+
+Receiving is callback-driven (`remarl_fc.mavlink.link`). Every wait has a deadline on the
+monotonic clock and raises (`LinkTimeout`, `CommandRejected`); on any exit — the end of the
+mission, an error, Ctrl-C — every vehicle still under control is sent the hold mode.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import enum
+import json
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import TracebackType
+from typing import IO, Any, Literal, Self
+
+import numpy as np
+
+from remarl_fc.control import ControlSpec, Decision, PolicyLike, SwarmController
+from remarl_fc.errors import CommandRejected, LinkTimeout, RemarlError
+from remarl_fc.mavlink.codec import Codec, SigningConfig
+from remarl_fc.mavlink.consts import (
+    TYPE_MASK_VELOCITY_YAW,
+    CopterMode,
+    MavAutopilot,
+    MavCmd,
+    MavComponent,
+    MavFrame,
+    MavModeFlag,
+    MavResult,
+    MavState,
+    MavType,
+    MsgId,
+    Px4AutoSubMode,
+    Px4MainMode,
+    px4_mode_parts,
+)
+from remarl_fc.mavlink.link import MavlinkLink, TlogWriter
+from remarl_fc.mission import Mission
+from remarl_fc.tracking import TrafficPicture, VehicleTrack
+
+HoldMode = Literal["brake", "loiter"]
+
+TELEMETRY: dict[int, float] = {
+    MsgId.GLOBAL_POSITION_INT: 10.0,
+    MsgId.ATTITUDE: 10.0,
+    MsgId.EKF_STATUS_REPORT: 2.0,
+    MsgId.EXTENDED_SYS_STATE: 1.0,
+}
+"""Messages the runtime asks every vehicle for, Hz (SET_MESSAGE_INTERVAL)."""
+
+PX4_TELEMETRY = frozenset({MsgId.GLOBAL_POSITION_INT, MsgId.ATTITUDE, MsgId.EXTENDED_SYS_STATE})
+"""The subset PX4 has (no EKF_STATUS_REPORT)."""
+
+ACK_TIMEOUT_S = 1.0
+"""Wait for one COMMAND_ACK before retrying, s."""
+
+ACK_RETRIES = 3
+"""Attempts per command (COMMAND_LONG.confirmation counts them)."""
+
+CLIMB_RATE_M_S = 1.5
+"""PX4 take-off climb in OFFBOARD (MPC_TKO_SPEED's default)."""
+
+TAKEOFF_DONE_FRACTION = 0.95
+"""A take-off is done at this fraction of its height."""
+
+
+class Clock:
+    """The runtime's time: monotonic, optionally scaled to follow a faster-than-real mock.
+
+    Args:
+        speedup: simulated seconds per wall second (1 for real vehicles).
+    """
+
+    def __init__(self, speedup: float = 1.0) -> None:
+        if not speedup > 0:
+            raise ValueError(f"speedup must be > 0, not {speedup}")
+        self.speedup = speedup
+        self._t0 = time.monotonic()
+
+    def now(self) -> float:
+        """Seconds since the clock started (scaled)."""
+        return (time.monotonic() - self._t0) * self.speedup
+
+    def at(self, t_mono: float) -> float:
+        """A monotonic stamp on this clock."""
+        return (t_mono - self._t0) * self.speedup
+
+    async def sleep(self, seconds: float) -> None:
+        """Sleep ``seconds`` of this clock."""
+        await asyncio.sleep(max(0.0, seconds) / self.speedup)
+
+    def timeout(self, seconds: float) -> asyncio.Timeout:
+        """`asyncio.timeout` for ``seconds`` of this clock."""
+        return asyncio.timeout(seconds / self.speedup)
+
+
+class Status(enum.StrEnum):
+    """Where a vehicle is in the flight."""
+
+    WAITING = "waiting"
+    TAKING_OFF = "taking-off"
+    READY = "ready"
+    CONTROLLED = "controlled"
+    LOST = "lost"  # telemetry stale: not commanded, an obstacle at its last track
+    HELD = "held"  # told to hold after a loss, a breach or the end
+    REACHED = "reached"  # at its target: held and released
+    PILOT = "pilot"  # the pilot took it: released, never fought
+
+
+@dataclass(frozen=True)
+class FlyConfig:
+    """Settings of one flight (the CLI fills them; defaults are the safe ones)."""
+
+    connections: tuple[str, ...]
+    mission: Mission
+    takeoff_m: float | None = None
+    """Take off to this height above the origin first (None: vehicles are already flying)."""
+    dry_run: bool = False
+    """Compute and log setpoints, send no command and no setpoint."""
+    log_dir: Path | None = None
+    """Write flight.tlog and decisions.jsonl here."""
+    signing: SigningConfig | None = None
+    setpoint_hz: float = 10.0
+    """Setpoint stream rate (≥ 10 Hz: ArduPilot stops after GUID_TIMEOUT, PX4 after 1 s)."""
+    stale_s: float = 1.0
+    """Telemetry older than this marks a vehicle lost."""
+    hold: HoldMode = "brake"
+    """ArduPilot hold mode: BRAKE holds position and height without RC; LOITER needs the
+    pilot's sticks (without RC ArduCopter descends in LOITER). PX4 always uses Hold."""
+    ready_timeout_s: float = 90.0
+    """Wait this long for heartbeats, telemetry and a position."""
+    takeoff_timeout_s: float = 60.0
+    adsb_band_m: float = 50.0
+    """Intruders within ±this height of a vehicle are obstacles."""
+    system_id: int = 255
+    """The controller's MAVLink system id (ArduPilot's MAV_GCS_SYSID default)."""
+    component_id: int = MavComponent.ONBOARD_COMPUTER
+    speedup: float = 1.0
+    """Scale every period and deadline (only to fly a mock running faster than real time)."""
+    max_flight_s: float = 600.0
+    """Hold everything after this long under control."""
+
+    def __post_init__(self) -> None:
+        if not self.connections:
+            raise ValueError("give at least one --connection")
+        if self.setpoint_hz < 10.0:
+            raise ValueError(f"setpoint_hz must be ≥ 10 Hz, not {self.setpoint_hz}")
+        if self.takeoff_m is not None and not self.takeoff_m > 0:
+            raise ValueError(f"takeoff height must be > 0 m, not {self.takeoff_m}")
+
+
+@dataclass
+class Member:
+    """One vehicle of the flight, as the runtime sees it."""
+
+    slot: int
+    system_id: int
+    track: VehicleTrack
+    status: Status = Status.WAITING
+    link: MavlinkLink | None = None
+    climb_target_m: float | None = None  # PX4 offboard take-off
+    prestream: bool = False  # PX4: stream zero-velocity setpoints before OFFBOARD
+    sent: int = 0
+    events: list[tuple[float, str]] = field(default_factory=list)
+
+
+class SwarmRuntime:
+    """The flight (see the module docstring).
+
+    Args:
+        cfg: flight settings.
+        policy: the policy (numpy).
+        spec: control constants (from the policy file).
+        on_status: called with a one-line-per-vehicle status at every decision (the demo).
+    """
+
+    def __init__(
+        self,
+        cfg: FlyConfig,
+        policy: PolicyLike,
+        spec: ControlSpec,
+        *,
+        on_status: Callable[[str], None] | None = None,
+    ) -> None:
+        self.cfg, self.policy, self.spec = cfg, policy, spec
+        self.clock = Clock(cfg.speedup)
+        self.on_status = on_status
+        mission = cfg.mission
+        self.members = [
+            Member(p.slot, p.system_id, VehicleTrack(p.system_id, mission.origin))
+            for p in mission.by_slot()
+        ]
+        self.by_sysid = {m.system_id: m for m in self.members}
+        self.traffic = TrafficPicture(mission.origin)
+        self.controller = SwarmController(policy, spec, mission.targets_ne_m())
+        self.codec = Codec(cfg.system_id, cfg.component_id, signing=cfg.signing)
+        self.links: list[MavlinkLink] = []
+        self._acks: dict[tuple[int, int], asyncio.Future[Any]] = {}
+        self._stack: contextlib.AsyncExitStack | None = None
+        self._log: IO[str] | None = None
+        self._done = asyncio.Event()
+        self.decisions = 0
+        self.setpoint_deadline_misses = 0
+        self.decide_s: list[float] = []
+        """Wall time of each swarm decision (observation + inference), s."""
+        self.tick_s: list[float] = []
+        """Wall time of each setpoint tick (checks + setpoints for every vehicle), s."""
+        self._to_hold: asyncio.Queue[Member] = asyncio.Queue()
+
+    # -- lifetime -----------------------------------------------------------------------
+
+    async def __aenter__(self) -> Self:
+        if self._stack is not None:
+            raise RuntimeError("this SwarmRuntime is already open")
+        stack = contextlib.AsyncExitStack()
+        await stack.__aenter__()
+        try:
+            log_dir = self.cfg.log_dir
+            if log_dir is not None:
+                log_dir.mkdir(parents=True, exist_ok=True)
+                self._log = stack.enter_context((log_dir / "decisions.jsonl").open("w"))
+            for k, url in enumerate(self.cfg.connections):
+                tlog = None
+                if log_dir is not None:
+                    name = "flight.tlog" if len(self.cfg.connections) == 1 else f"link{k}.tlog"
+                    tlog = TlogWriter(log_dir / name)
+                link = MavlinkLink(url, self.codec, self._receiver(k), tlog=tlog)
+                self.links.append(await stack.enter_async_context(link))
+        except BaseException:
+            await stack.aclose()
+            raise
+        self._stack = stack
+        return self
+
+    async def __aexit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        try:
+            await self.hold_all(reason=f"exit ({exc_type.__name__})" if exc_type else "exit")
+        finally:
+            stack, self._stack = self._stack, None
+            if stack is not None:
+                await stack.aclose()
+
+    # -- receiving ----------------------------------------------------------------------
+
+    def _receiver(self, k: int) -> Callable[[Any, float], None]:
+        def on_message(msg: Any, t_mono: float) -> None:
+            self._on_message(k, msg, self.clock.at(t_mono))
+
+        return on_message
+
+    def _on_message(self, k: int, msg: Any, now: float) -> None:
+        mid = msg.get_msgId()
+        if mid == MsgId.ADSB_VEHICLE:
+            self.traffic.update(msg, now)
+            return
+        member = self.by_sysid.get(msg.get_srcSystem())
+        if member is None or msg.get_srcComponent() != MavComponent.AUTOPILOT1:
+            return
+        if member.link is None:
+            member.link = self.links[k]
+        member.track.update(msg, now)
+        if mid == MsgId.COMMAND_ACK:
+            fut = self._acks.get((member.system_id, int(msg.command)))
+            if fut is not None and not fut.done():
+                fut.set_result(msg)
+
+    # -- sending ------------------------------------------------------------------------
+
+    def _send(self, member: Member, msg: Any) -> bool:
+        if self.cfg.dry_run and msg.get_msgId() != MsgId.HEARTBEAT:
+            return False
+        links = [member.link] if member.link is not None else self.links
+        return any(link.send(msg, member.system_id) for link in links)
+
+    async def command(self, member: Member, cmd: int, *params: float) -> None:
+        """COMMAND_LONG with retries; returns on ACCEPTED.
+
+        Raises:
+            CommandRejected: any other result (with the vehicle's STATUSTEXT reason).
+            LinkTimeout: no ACK after `ACK_RETRIES` attempts.
+        """
+        if self.cfg.dry_run:
+            return
+        p = [*params, *([0.0] * (7 - len(params)))]
+        key = (member.system_id, cmd)
+        sent_at = self.clock.now()
+        for attempt in range(ACK_RETRIES):
+            fut: asyncio.Future[Any] = asyncio.get_running_loop().create_future()
+            self._acks[key] = fut
+            msg = self.codec.factory.command_long_encode(
+                member.system_id, MavComponent.AUTOPILOT1, cmd, attempt, *p
+            )
+            self._send(member, msg)
+            try:
+                async with self.clock.timeout(ACK_TIMEOUT_S):
+                    ack = await fut
+            except TimeoutError:
+                continue
+            finally:
+                self._acks.pop(key, None)
+            if ack.result == MavResult.ACCEPTED:
+                return
+            await self.clock.sleep(0.2)  # the reason's STATUSTEXT may follow the ACK
+            raise CommandRejected(
+                command=cmd,
+                command_name=_name(MavCmd, cmd),
+                result=int(ack.result),
+                result_name=_name(MavResult, int(ack.result)),
+                system_id=member.system_id,
+                reason=member.track.last_text(sent_at),
+            )
+        raise LinkTimeout(
+            link=self.cfg.connections[0],
+            waited_for=f"COMMAND_ACK of {_name(MavCmd, cmd)} from vehicle {member.system_id}",
+            timeout_s=ACK_TIMEOUT_S * ACK_RETRIES,
+        )
+
+    async def wait_until(self, what: str, pred: Callable[[], bool], timeout_s: float) -> None:
+        """Poll ``pred`` until true; raise `LinkTimeout` naming ``what`` after ``timeout_s``."""
+        try:
+            async with self.clock.timeout(timeout_s):
+                while not pred():
+                    await self.clock.sleep(0.05)
+        except TimeoutError as exc:
+            raise LinkTimeout(
+                link=", ".join(self.cfg.connections), waited_for=what, timeout_s=timeout_s
+            ) from exc
+
+    async def set_mode(self, member: Member, mode: str) -> None:
+        """DO_SET_MODE in the vehicle's encoding, confirmed by the next HEARTBEAT."""
+        t = member.track
+        if mode == "hold" and not t.is_px4:
+            mode = self.cfg.hold
+        params, check = _mode_command(t.is_px4, mode)
+        await self.command(member, MavCmd.DO_SET_MODE, *params)
+        if not self.cfg.dry_run:
+            await self.wait_until(
+                f"vehicle {member.system_id} HEARTBEAT in {mode}",
+                lambda: check(t.custom_mode),
+                3.0,
+            )
+
+    # -- the flight ---------------------------------------------------------------------
+
+    async def run(self) -> None:
+        """Prepare, take control, fly until every vehicle is done; hold on the way out."""
+        try:
+            await self._run_group()
+        except ExceptionGroup as group:  # one task failed: surface the project's error itself
+            first = _first_leaf(group)
+            if isinstance(first, RemarlError):
+                raise first from group
+            raise
+
+    async def _run_group(self) -> None:
+        try:
+            async with asyncio.TaskGroup() as tg:
+                tg.create_task(self._heartbeat_loop(), name="remarl.heartbeat")
+                tg.create_task(self._setpoint_loop(), name="remarl.setpoints")
+                tg.create_task(self._hold_loop(), name="remarl.holds")
+                tg.create_task(self._mission(), name="remarl.mission")
+        except* _FlightOver:  # the mission ended normally: the group cancelled the loops
+            pass
+
+    async def _heartbeat_loop(self) -> None:
+        f = self.codec.factory
+        while not self._done.is_set():
+            hb = f.heartbeat_encode(
+                MavType.ONBOARD_CONTROLLER, MavAutopilot.INVALID, 0, 0, MavState.ACTIVE
+            )
+            for link in self.links:
+                link.send(hb)
+            await self.clock.sleep(1.0)
+
+    async def _mission(self) -> None:
+        try:
+            await self._prepare()
+            await self._fly()
+            while not self._to_hold.empty():  # let the last holds go out
+                await self.clock.sleep(0.1)
+        finally:
+            self._done.set()
+        raise _FlightOver
+
+    async def _prepare(self) -> None:
+        cfg = self.cfg
+        await self.wait_until(
+            "a HEARTBEAT from every vehicle of the mission",
+            lambda: all(m.track.autopilot is not None for m in self.members),
+            cfg.ready_timeout_s,
+        )
+        async with asyncio.TaskGroup() as tg:
+            for m in self.members:
+                tg.create_task(self._prepare_one(m), name=f"remarl[{m.system_id}].prepare")
+        positions = np.array([m.track.ne_m for m in self.members])
+        self.controller.start(positions, self.clock.now())
+        for m in self.members:
+            m.status = Status.CONTROLLED
+            self._event(m, "under control")
+
+    async def _prepare_one(self, m: Member) -> None:
+        t, cfg = m.track, self.cfg
+        if cfg.dry_run:  # nothing is sent: fly the setpoints on paper from where it is
+            await self.wait_until(
+                f"vehicle {m.system_id}: a position",
+                lambda: math.isfinite(t.t_position),
+                cfg.ready_timeout_s,
+            )
+            m.status = Status.READY
+            return
+        for mid, hz in TELEMETRY.items():
+            if t.is_px4 and mid not in PX4_TELEMETRY:
+                continue
+            await self.command(m, MavCmd.SET_MESSAGE_INTERVAL, int(mid), 1e6 / hz)
+        await self.wait_until(
+            f"vehicle {m.system_id}: out of boot with a position (EKF flags on ArduPilot)",
+            lambda: t.system_status != MavState.BOOT and t.position_ok(),
+            cfg.ready_timeout_s,
+        )
+        if cfg.takeoff_m is not None:
+            m.status = Status.TAKING_OFF
+            self._event(m, f"taking off to {cfg.takeoff_m:g} m")
+            await (self._takeoff_px4(m) if t.is_px4 else self._takeoff_ardupilot(m))
+        else:
+            if t.height_m < 1.0 or t.landed_state == 1:
+                raise RemarlError(
+                    f"vehicle {m.system_id} is on the ground; use --takeoff ALT_M to take off"
+                )
+            if t.is_px4:
+                m.prestream = True
+                await self.clock.sleep(0.5)
+            await self.set_mode(m, "external")
+        m.prestream = False
+        m.status = Status.READY
+
+    async def _takeoff_ardupilot(self, m: Member) -> None:
+        alt = float(self.cfg.takeoff_m or 0.0)
+        await self.set_mode(m, "external")
+        await self.command(m, MavCmd.COMPONENT_ARM_DISARM, 1)
+        await self.wait_until(f"vehicle {m.system_id} armed", lambda: m.track.armed, 3.0)
+        await self.command(m, MavCmd.NAV_TAKEOFF, 0, 0, 0, math.nan, 0, 0, alt)
+        await self._wait_height(m, alt)
+
+    async def _takeoff_px4(self, m: Member) -> None:
+        alt = float(self.cfg.takeoff_m or 0.0)
+        m.prestream = True  # zero-velocity setpoints: OFFBOARD needs a stream first
+        await self.clock.sleep(0.5)
+        await self.set_mode(m, "external")
+        await self.command(m, MavCmd.COMPONENT_ARM_DISARM, 1)
+        await self.wait_until(f"vehicle {m.system_id} armed", lambda: m.track.armed, 3.0)
+        m.climb_target_m = alt
+        await self._wait_height(m, alt)
+        m.climb_target_m = None
+
+    async def _wait_height(self, m: Member, alt: float) -> None:
+        await self.wait_until(
+            f"vehicle {m.system_id} at {TAKEOFF_DONE_FRACTION:.0%} of {alt:g} m",
+            lambda: m.track.height_m >= TAKEOFF_DONE_FRACTION * alt,
+            self.cfg.takeoff_timeout_s,
+        )
+
+    async def _fly(self) -> None:
+        dt = self.spec.dt_s
+        t_next = self.clock.now()
+        end = t_next + self.cfg.max_flight_s
+        while any(m.status in (Status.CONTROLLED, Status.LOST) for m in self.members):
+            now = self.clock.now()
+            if now > end:
+                await self.hold_all(reason="max flight time")
+                return
+            self._decide(now)
+            t_next += dt
+            await self.clock.sleep(t_next - self.clock.now())
+
+    def _obstacles(self, now: float, height_m: float) -> tuple[np.ndarray, np.ndarray]:
+        pos, vel = [], []
+        for intr in self.traffic.current(now, height_m, self.cfg.adsb_band_m):
+            pos.append(intr.predicted_ne_m(now))
+            vel.append(intr.vel_ne_m_s)
+        for m in self.members:
+            if m.status in (Status.LOST, Status.PILOT, Status.HELD) and math.isfinite(
+                m.track.t_position
+            ):
+                pos.append(m.track.predicted_ne_m(now))
+                vel.append(m.track.vel_ned_m_s[:2])
+        if not pos:
+            return np.zeros((0, 2)), np.zeros((0, 2))
+        return np.array(pos), np.array(vel)
+
+    def _decide(self, now: float) -> None:
+        positions = np.array([m.track.predicted_ne_m(now) for m in self.members])
+        heights = [m.track.height_m for m in self.members if math.isfinite(m.track.height_m)]
+        obstacles, obstacle_vel = self._obstacles(now, float(np.mean(heights)) if heights else 0.0)
+        t0 = time.perf_counter()
+        decision = self.controller.decide(now, positions, obstacles, obstacle_vel)
+        self.decide_s.append(time.perf_counter() - t0)
+        self.decisions += 1
+        self._log_decision(decision)
+        if self.on_status is not None:
+            self.on_status(self.status_line(now))
+
+    def status_line(self, now: float) -> str:
+        """One line per vehicle: status, position, height, distance to target."""
+        lines = []
+        targets = self.cfg.mission.targets_ne_m()
+        for m in self.members:
+            t = m.track
+            gap = (
+                float(np.hypot(*(t.ne_m - targets[m.slot])))
+                if math.isfinite(t.t_position)
+                else math.nan
+            )
+            lines.append(
+                f"t={now:6.1f}s vehicle {m.system_id}: {m.status.value:10} "
+                f"N {t.ne_m[0]:7.1f} E {t.ne_m[1]:7.1f} up {t.height_m:5.1f} m, "
+                f"{gap:6.1f} m to target"
+            )
+        return "\n".join(lines)
+
+    # -- setpoints and safety -----------------------------------------------------------
+
+    async def _setpoint_loop(self) -> None:
+        period = 1.0 / self.cfg.setpoint_hz
+        t_next = self.clock.now()
+        while not self._done.is_set():
+            now = self.clock.now()
+            if now - t_next > period:
+                self.setpoint_deadline_misses += 1
+                t_next = now
+            t0 = time.perf_counter()
+            for m in self.members:
+                self._tick_member(m, now)
+            self.tick_s.append(time.perf_counter() - t0)
+            t_next += period
+            await self.clock.sleep(t_next - self.clock.now())
+
+    def _tick_member(self, m: Member, now: float) -> None:
+        t = m.track
+        if m.prestream or m.climb_target_m is not None:
+            vz = 0.0
+            if (
+                m.climb_target_m is not None
+                and t.height_m < TAKEOFF_DONE_FRACTION * m.climb_target_m
+            ):
+                vz = -CLIMB_RATE_M_S
+            yaw = t.yaw_rad if math.isfinite(t.yaw_rad) else 0.0
+            self._stream(m, 0.0, 0.0, vz, yaw)
+            return
+        if m.status == Status.LOST and t.position_age_s(now) <= self.cfg.stale_s:
+            self._event(m, "telemetry back: told to hold, not resumed")
+            m.status = Status.HELD
+            self._spawn_hold(m)
+            return
+        if m.status != Status.CONTROLLED:
+            return
+        if t.position_age_s(now) > self.cfg.stale_s:
+            m.status = Status.LOST
+            self._event(m, f"telemetry stale for {t.position_age_s(now):.1f} s: an obstacle now")
+            return
+        if not self.cfg.dry_run and not t.in_external_control_mode():
+            m.status = Status.PILOT
+            self._event(m, f"mode changed to {t.custom_mode} by someone else: released")
+            return
+        if self.controller.reached(m.slot, t.ne_m):
+            m.status = Status.REACHED
+            self._event(m, "target reached: hold and release")
+            self._spawn_hold(m)
+            return
+        fence = self.cfg.mission.geofence
+        if fence is not None:
+            vn, ve, _ = self.controller.setpoint(m.slot, now)
+            ahead = t.ne_m + np.array([vn, ve]) * self.spec.dt_s
+            if not fence.inside(ahead, t.height_m):
+                m.status = Status.HELD
+                self._event(m, "geofence breach ahead: hold")
+                self._spawn_hold(m)
+                return
+        vn, ve, yaw = self.controller.setpoint(m.slot, now)
+        self._stream(m, vn, ve, 0.0, yaw)
+
+    def _stream(self, m: Member, vn: float, ve: float, vd: float, yaw: float) -> None:
+        msg = self.codec.factory.set_position_target_local_ned_encode(
+            int(self.clock.now() * 1000) & 0xFFFF_FFFF, m.system_id, MavComponent.AUTOPILOT1,
+            MavFrame.LOCAL_NED, TYPE_MASK_VELOCITY_YAW, 0.0, 0.0, 0.0, vn, ve, vd,
+            0.0, 0.0, 0.0, yaw, 0.0,
+        )  # fmt: skip
+        if self._send(m, msg):
+            m.sent += 1
+
+    def _spawn_hold(self, m: Member) -> None:
+        self._to_hold.put_nowait(m)  # the holds task sends it (commands wait for their ACK)
+
+    async def _hold_loop(self) -> None:
+        while True:
+            m = await self._to_hold.get()
+            await self._hold(m)
+
+    async def _hold(self, m: Member) -> None:
+        try:
+            await self.set_mode(m, "hold")
+            self._event(m, "holding")
+        except RemarlError as exc:
+            self._event(m, f"hold command failed: {exc}")
+
+    async def hold_all(self, *, reason: str) -> None:
+        """Send the hold mode to every vehicle still flown by this runtime (never raises)."""
+        flown = [
+            m
+            for m in self.members
+            if m.status in (Status.CONTROLLED, Status.TAKING_OFF, Status.READY)
+        ]
+        for m in flown:
+            m.status = Status.HELD
+            self._event(m, f"{reason}: hold")
+        if self.cfg.dry_run or not flown:
+            return
+        results = await asyncio.gather(*(self._hold(m) for m in flown), return_exceptions=True)
+        for m, r in zip(flown, results, strict=True):
+            if isinstance(r, BaseException):
+                self._event(m, f"hold failed: {r!r}")
+
+    # -- logs ---------------------------------------------------------------------------
+
+    def _event(self, m: Member, text: str) -> None:
+        now = self.clock.now()
+        m.events.append((now, text))
+        if self._log is not None:
+            self._log.write(
+                json.dumps({"t": round(now, 3), "system_id": m.system_id, "event": text}) + "\n"
+            )
+
+    def _log_decision(self, d: Decision) -> None:
+        if self._log is None:
+            return
+        for m in self.members:
+            k = m.slot
+            vn, ve, yaw = self.controller.setpoint(k, d.t)
+            row = {
+                "t": round(d.t, 3),
+                "system_id": m.system_id,
+                "slot": k,
+                "status": m.status.value,
+                "ne_m": [round(float(v), 2) for v in d.positions_ne_m[k]],
+                "height_m": round(m.track.height_m, 2),
+                "obs": [round(float(v), 4) for v in d.obs[k]],
+                "action": round(float(d.action[k]), 4),
+                "turn_rad": round(float(d.turn_rad[k]), 4),
+                "heading_rad": round(float(d.heading_rad[k]), 4),
+                "setpoint": {"vn": round(vn, 3), "ve": round(ve, 3), "yaw": round(yaw, 4)},
+                "obstacles_ne_m": [[round(float(v), 2) for v in p] for p in d.obstacles_ne_m],
+                "decide_ms": round(self.decide_s[-1] * 1000, 3) if self.decide_s else None,
+            }
+            self._log.write(json.dumps(row) + "\n")
+
+    def summary(self) -> dict[str, Any]:
+        """What happened to each vehicle."""
+        return {
+            "decisions": self.decisions,
+            "setpoint_deadline_misses": self.setpoint_deadline_misses,
+            "vehicles": [
+                {
+                    "system_id": m.system_id,
+                    "slot": m.slot,
+                    "status": m.status.value,
+                    "setpoints_sent": m.sent,
+                    "telemetry_rejected": dict(m.track.rejected),
+                    "events": [[round(t, 2), e] for t, e in m.events],
+                }
+                for m in self.members
+            ],
+        }
+
+
+class _FlightOver(Exception):
+    """Raised by the mission task when the flight is over, to stop the other tasks."""
+
+
+def _first_leaf(group: BaseExceptionGroup[Any]) -> BaseException:
+    first = group.exceptions[0]
+    return _first_leaf(first) if isinstance(first, BaseExceptionGroup) else first
+
+
+def _name(enum_cls: Any, value: int) -> str:
+    try:
+        return str(enum_cls(value).name)
+    except ValueError:
+        return str(value)
+
+
+def _mode_command(px4: bool, mode: str) -> tuple[tuple[float, ...], Callable[[int], bool]]:
+    """(DO_SET_MODE params, HEARTBEAT.custom_mode check) for "external" or "hold"."""
+    if px4:
+        main, sub = {
+            "external": (Px4MainMode.OFFBOARD, 0),
+            "hold": (Px4MainMode.AUTO, Px4AutoSubMode.LOITER),
+        }[mode]
+        return (float(MavModeFlag.CUSTOM_MODE_ENABLED), float(main), float(sub)), (
+            lambda cm: px4_mode_parts(cm) == (main, sub)
+        )
+    number = {
+        "external": CopterMode.GUIDED,
+        "brake": CopterMode.BRAKE,
+        "loiter": CopterMode.LOITER,
+    }[mode]
+    return (float(MavModeFlag.CUSTOM_MODE_ENABLED), float(number)), (lambda cm: cm == number)

@@ -1,0 +1,225 @@
+"""What the runtime knows about each vehicle and each intruder: latest values, monotonic stamps.
+
+`VehicleTrack.update` and `TrafficPicture.update` take one decoded MAVLink message and its
+monotonic receive time; nothing here does I/O. Telemetry is converted once, at this boundary,
+into the mission's local frame (north/east metres from the mission origin, height above the
+origin) through `remarl_fc.frames`. Values that cannot be true — NaN, a position without a fix
+(lat = lon = 0), a jump faster than `MAX_SPEED_M_S` — are dropped and counted, never used.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter, deque
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from remarl_fc.frames import GeoPoint, cdeg_to_yaw, from_deg_e7, geodetic_to_ned
+from remarl_fc.mavlink.consts import (
+    EkfFlag,
+    MavAutopilot,
+    MavModeFlag,
+    MsgId,
+    Px4MainMode,
+    px4_mode_parts,
+)
+
+FloatArray = NDArray[np.float64]
+
+MAX_SPEED_M_S = 100.0
+"""Telemetry implying a faster vehicle (reported or between two fixes) is rejected."""
+
+EKF_POSITION_OK = EkfFlag.VELOCITY_HORIZ | EkfFlag.POS_HORIZ_ABS
+"""EKF flags a controller needs before taking control (ArduPilot), with CONST_POS_MODE clear."""
+
+STATUSTEXT_KEPT = 20
+"""Recent STATUSTEXTs kept per vehicle (refusal reasons)."""
+
+
+@dataclass
+class VehicleTrack:
+    """The latest state of one vehicle, in the mission frame, with monotonic stamps (s).
+
+    Attributes:
+        system_id: the vehicle. origin: the mission origin.
+        autopilot: HEARTBEAT.autopilot (3 ArduPilot, 12 PX4) once heard, else None.
+        custom_mode, base_mode, system_status: from the last HEARTBEAT; t_heartbeat its time.
+        ne_m: (2,) north/east from the origin; height_m above the origin; vel_ned_m_s (3,);
+            t_position: time of the last accepted position.
+        yaw_rad: from ATTITUDE (or the GLOBAL_POSITION_INT heading); t_yaw.
+        ekf_flags: last EKF_STATUS_REPORT flags (ArduPilot), or None.
+        landed_state: EXTENDED_SYS_STATE.landed_state, or None.
+        rejected: counts of telemetry dropped as impossible, by reason.
+        seen: counts of messages received, by type name.
+        texts: recent (time, severity, text) STATUSTEXTs.
+    """
+
+    system_id: int
+    origin: GeoPoint
+    autopilot: int | None = None
+    custom_mode: int = 0
+    base_mode: int = 0
+    system_status: int = 0
+    t_heartbeat: float = -math.inf
+    ne_m: FloatArray = field(default_factory=lambda: np.full(2, np.nan))
+    height_m: float = math.nan
+    vel_ned_m_s: FloatArray = field(default_factory=lambda: np.full(3, np.nan))
+    t_position: float = -math.inf
+    yaw_rad: float = math.nan
+    t_yaw: float = -math.inf
+    ekf_flags: int | None = None
+    landed_state: int | None = None
+    rejected: Counter[str] = field(default_factory=Counter)
+    seen: Counter[str] = field(default_factory=Counter)
+    texts: deque[tuple[float, int, str]] = field(
+        default_factory=lambda: deque(maxlen=STATUSTEXT_KEPT)
+    )
+
+    # -- derived ------------------------------------------------------------------------
+
+    @property
+    def armed(self) -> bool:
+        """HEARTBEAT says armed."""
+        return bool(self.base_mode & MavModeFlag.SAFETY_ARMED)
+
+    @property
+    def is_px4(self) -> bool:
+        """The autopilot is PX4 (else ArduPilot conventions apply)."""
+        return self.autopilot == MavAutopilot.PX4
+
+    def in_external_control_mode(self) -> bool:
+        """GUIDED (ArduPilot) or OFFBOARD (PX4), per the last HEARTBEAT."""
+        if self.is_px4:
+            return px4_mode_parts(self.custom_mode)[0] == Px4MainMode.OFFBOARD
+        return self.custom_mode == 4  # COPTER_MODE_GUIDED
+
+    def position_age_s(self, now: float) -> float:
+        """Seconds since the last accepted position."""
+        return now - self.t_position
+
+    def position_ok(self) -> bool:
+        """A position has been received and, on ArduPilot, the EKF reports an absolute one."""
+        if not math.isfinite(self.t_position):
+            return False
+        if self.is_px4 or self.ekf_flags is None:
+            return self.is_px4
+        flags = self.ekf_flags
+        return flags & EKF_POSITION_OK == EKF_POSITION_OK and not flags & EkfFlag.CONST_POS_MODE
+
+    def predicted_ne_m(self, now: float) -> FloatArray:
+        """Position extrapolated at constant velocity to ``now`` (for stale vehicles)."""
+        age = max(0.0, self.position_age_s(now))
+        out: FloatArray = self.ne_m + self.vel_ned_m_s[:2] * age
+        return out
+
+    def last_text(self, since: float) -> str:
+        """The most recent STATUSTEXT received at or after ``since`` ("" if none)."""
+        for t, _, text in reversed(self.texts):
+            if t >= since:
+                return text
+        return ""
+
+    # -- updates ------------------------------------------------------------------------
+
+    def update(self, msg: Any, now: float) -> None:
+        """Take one message from this vehicle's autopilot."""
+        mid = msg.get_msgId()
+        self.seen[msg.get_type()] += 1
+        if mid == MsgId.HEARTBEAT:
+            if msg.autopilot == MavAutopilot.INVALID:
+                return  # another GCS or a companion, not the autopilot
+            self.autopilot = msg.autopilot
+            self.custom_mode, self.base_mode = msg.custom_mode, msg.base_mode
+            self.system_status, self.t_heartbeat = msg.system_status, now
+        elif mid == MsgId.GLOBAL_POSITION_INT:
+            self._position(msg, now)
+        elif mid == MsgId.ATTITUDE:
+            if math.isfinite(msg.yaw) and abs(msg.yaw) <= 2 * math.pi:
+                self.yaw_rad, self.t_yaw = float(msg.yaw), now
+            else:
+                self.rejected["attitude not a number"] += 1
+        elif mid == MsgId.EKF_STATUS_REPORT:
+            self.ekf_flags = int(msg.flags)
+        elif mid == MsgId.EXTENDED_SYS_STATE:
+            self.landed_state = int(msg.landed_state)
+        elif mid == MsgId.STATUSTEXT:
+            self.texts.append((now, int(msg.severity), str(msg.text)))
+
+    def _position(self, msg: Any, now: float) -> None:
+        if msg.lat == 0 and msg.lon == 0:
+            self.rejected["no fix (lat = lon = 0)"] += 1
+            return
+        vel = np.array([msg.vx, msg.vy, msg.vz], dtype=np.float64) / 100.0
+        if np.linalg.norm(vel) > MAX_SPEED_M_S or not (-90e7 <= msg.lat <= 90e7):
+            self.rejected["impossible position or velocity"] += 1
+            return
+        n, e, d = geodetic_to_ned(
+            from_deg_e7(msg.lat), from_deg_e7(msg.lon), msg.alt / 1000.0, self.origin
+        )
+        ne = np.array([float(n), float(e)])
+        if math.isfinite(self.t_position) and now > self.t_position:
+            jump = float(np.linalg.norm(ne - self.ne_m))
+            if jump > MAX_SPEED_M_S * (now - self.t_position) + 5.0:
+                self.rejected["position jump"] += 1
+                return
+        self.ne_m, self.height_m, self.vel_ned_m_s = ne, -float(d), vel
+        self.t_position = now
+        if msg.hdg != 65535 and not math.isfinite(self.t_yaw):
+            self.yaw_rad = float(cdeg_to_yaw(msg.hdg))
+
+
+@dataclass
+class Intruder:
+    """One ADS-B track in the mission frame."""
+
+    ne_m: FloatArray
+    height_m: float
+    vel_ne_m_s: FloatArray
+    t: float
+
+    def predicted_ne_m(self, now: float) -> FloatArray:
+        """Position extrapolated at constant velocity to ``now``."""
+        out: FloatArray = self.ne_m + self.vel_ne_m_s * max(0.0, now - self.t)
+        return out
+
+
+@dataclass
+class TrafficPicture:
+    """ADS-B traffic (ADSB_VEHICLE from any component of any system), by ICAO address.
+
+    Attributes:
+        origin: the mission origin. max_age_s: a track older than this is dropped.
+    """
+
+    origin: GeoPoint
+    max_age_s: float = 5.0
+    tracks: dict[int, Intruder] = field(default_factory=dict)
+    rejected: Counter[str] = field(default_factory=Counter)
+
+    def update(self, msg: Any, now: float) -> None:
+        """Take one ADSB_VEHICLE."""
+        if not msg.flags & 1:  # VALID_COORDS
+            self.rejected["no valid coordinates"] += 1
+            return
+        speed = msg.hor_velocity / 100.0 if msg.flags & 8 else 0.0
+        course = math.radians(msg.heading / 100.0) if msg.flags & 4 else 0.0
+        if speed > MAX_SPEED_M_S * 5:
+            self.rejected["impossible speed"] += 1
+            return
+        n, e, d = geodetic_to_ned(
+            from_deg_e7(msg.lat), from_deg_e7(msg.lon), msg.altitude / 1000.0, self.origin
+        )
+        vel = np.array([speed * math.cos(course), speed * math.sin(course)])
+        age = float(msg.tslc) if msg.tslc else 0.0
+        self.tracks[int(msg.ICAO_address)] = Intruder(
+            np.array([float(n), float(e)]), -float(d), vel, now - age
+        )
+
+    def current(self, now: float, height_m: float, band_m: float) -> list[Intruder]:
+        """Tracks younger than `max_age_s` within ±``band_m`` of ``height_m``."""
+        for icao in [k for k, v in self.tracks.items() if now - v.t > self.max_age_s]:
+            del self.tracks[icao]
+        return [v for v in self.tracks.values() if abs(v.height_m - height_m) <= band_m]
