@@ -15,6 +15,7 @@ from typing import Any
 
 from remarl_fc._version import __version__
 from remarl_fc.errors import ConfigError, RemarlError
+from remarl_fc.flycli import add_parsers as add_fly_parsers
 from remarl_fc.sitl.cli import add_bench_parser, add_sitl_parser
 
 EXIT_USAGE = 2
@@ -322,6 +323,7 @@ def build_parser() -> argparse.ArgumentParser:
     b.set_defaults(handler=_cmd_bench_sim)
     add_bench_parser(bench)
     add_sitl_parser(sub)
+    add_fly_parsers(sub, bench)
     return parser
 
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import asyncio
 import socket
-from collections.abc import Callable
+from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -54,9 +54,16 @@ async def fly_on_mock(
     log_dir: Path | None = None,
     on_status: Callable[[str], None] | None = None,
     seed: int = 0,
-    fleet_hook: Callable[[SitlFleet, SwarmRuntime], Any] | None = None,
+    during: Callable[[SitlFleet, SwarmRuntime], Awaitable[None]] | None = None,
+    fly_options: dict[str, Any] | None = None,
 ) -> MockFlight:
-    """Fly ``policy`` (default: the zoo policy of ``scenario``) on a mock of ``scenario``."""
+    """Fly ``policy`` (default: the zoo policy of ``scenario``) on a mock of ``scenario``.
+
+    Args:
+        during: a coroutine run alongside the flight (tests inject faults with it); it is
+            cancelled when the flight ends.
+        fly_options: extra `FlyConfig` fields.
+    """
     cfg = load_scenario(scenario)
     pol = load_policy(policy or scenario)
     pol.check_scenario(cfg)
@@ -77,13 +84,19 @@ async def fly_on_mock(
         takeoff_m=CRUISE_ALT_M,
         log_dir=log_dir,
         speedup=speedup,
+        **(fly_options or {}),
     )
     spec = ControlSpec.from_policy_meta(pol.meta)
     fleet = SitlFleet(sitl, scenario=cfg, faults=faults)
     runtime = SwarmRuntime(fly, pol, spec, on_status=on_status)
-    async with runtime, fleet:
-        if fleet_hook is not None:
-            fleet_hook(fleet, runtime)
-        await runtime.run()
+    # the fleet outlives the runtime: the runtime's hold commands on exit must reach it
+    async with fleet, runtime:
+        if during is None:
+            await runtime.run()
+        else:
+            async with asyncio.TaskGroup() as tg:
+                side = tg.create_task(during(fleet, runtime), name="demo.during")
+                await runtime.run()
+                side.cancel()
         await asyncio.sleep(1.0 / speedup)  # the last hold commands take effect
     return MockFlight(runtime.summary(), fleet.summary())

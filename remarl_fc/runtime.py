@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import dataclasses
 import enum
 import json
 import math
@@ -70,6 +71,9 @@ TELEMETRY: dict[int, float] = {
 
 PX4_TELEMETRY = frozenset({MsgId.GLOBAL_POSITION_INT, MsgId.ATTITUDE, MsgId.EXTENDED_SYS_STATE})
 """The subset PX4 has (no EKF_STATUS_REPORT)."""
+
+READ_ONLY_COMMANDS = frozenset({MavCmd.SET_MESSAGE_INTERVAL, MavCmd.REQUEST_MESSAGE})
+"""Commands that change nothing on the vehicle: sent even in a dry run (telemetry is needed)."""
 
 ACK_TIMEOUT_S = 1.0
 """Wait for one COMMAND_ACK before retrying, s."""
@@ -239,6 +243,7 @@ class SwarmRuntime:
             if log_dir is not None:
                 log_dir.mkdir(parents=True, exist_ok=True)
                 self._log = stack.enter_context((log_dir / "decisions.jsonl").open("w"))
+                self._log.write(json.dumps({"mission": self._mission_header()}) + "\n")
             for k, url in enumerate(self.cfg.connections):
                 tlog = None
                 if log_dir is not None:
@@ -291,8 +296,8 @@ class SwarmRuntime:
 
     # -- sending ------------------------------------------------------------------------
 
-    def _send(self, member: Member, msg: Any) -> bool:
-        if self.cfg.dry_run and msg.get_msgId() != MsgId.HEARTBEAT:
+    def _send(self, member: Member, msg: Any, *, harmless: bool = False) -> bool:
+        if self.cfg.dry_run and not harmless:
             return False
         links = [member.link] if member.link is not None else self.links
         return any(link.send(msg, member.system_id) for link in links)
@@ -304,7 +309,8 @@ class SwarmRuntime:
             CommandRejected: any other result (with the vehicle's STATUSTEXT reason).
             LinkTimeout: no ACK after `ACK_RETRIES` attempts.
         """
-        if self.cfg.dry_run:
+        harmless = cmd in READ_ONLY_COMMANDS
+        if self.cfg.dry_run and not harmless:
             return
         p = [*params, *([0.0] * (7 - len(params)))]
         key = (member.system_id, cmd)
@@ -315,7 +321,7 @@ class SwarmRuntime:
             msg = self.codec.factory.command_long_encode(
                 member.system_id, MavComponent.AUTOPILOT1, cmd, attempt, *p
             )
-            self._send(member, msg)
+            self._send(member, msg, harmless=harmless)
             try:
                 async with self.clock.timeout(ACK_TIMEOUT_S):
                     ack = await fut
@@ -425,6 +431,10 @@ class SwarmRuntime:
 
     async def _prepare_one(self, m: Member) -> None:
         t, cfg = m.track, self.cfg
+        for mid, hz in TELEMETRY.items():
+            if t.is_px4 and mid not in PX4_TELEMETRY:
+                continue
+            await self.command(m, MavCmd.SET_MESSAGE_INTERVAL, int(mid), 1e6 / hz)
         if cfg.dry_run:  # nothing is sent: fly the setpoints on paper from where it is
             await self.wait_until(
                 f"vehicle {m.system_id}: a position",
@@ -433,10 +443,6 @@ class SwarmRuntime:
             )
             m.status = Status.READY
             return
-        for mid, hz in TELEMETRY.items():
-            if t.is_px4 and mid not in PX4_TELEMETRY:
-                continue
-            await self.command(m, MavCmd.SET_MESSAGE_INTERVAL, int(mid), 1e6 / hz)
         await self.wait_until(
             f"vehicle {m.system_id}: out of boot with a position (EKF flags on ArduPilot)",
             lambda: t.system_status != MavState.BOOT and t.position_ok(),
@@ -645,6 +651,17 @@ class SwarmRuntime:
                 self._event(m, f"hold failed: {r!r}")
 
     # -- logs ---------------------------------------------------------------------------
+
+    def _mission_header(self) -> dict[str, Any]:
+        mission = self.cfg.mission
+        return {
+            "origin": dataclasses.asdict(mission.origin),
+            "targets_ne_m": {str(p.system_id): list(p.target_ne_m) for p in mission.vehicles},
+            "d_col_m": self.spec.arrival_m,
+            "speed_m_s": self.spec.speed_m_s,
+            "dt_s": self.spec.dt_s,
+            "source": mission.source,
+        }
 
     def _event(self, m: Member, text: str) -> None:
         now = self.clock.now()

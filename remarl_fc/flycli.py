@@ -1,0 +1,217 @@
+"""``remarl-fc fly``, ``demo``, ``plot-flight`` and ``bench fly``: parsers and handlers.
+
+Nothing heavy is imported until a handler runs; nothing here imports torch.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import sys
+import tempfile
+from pathlib import Path
+from typing import Any
+
+EXIT_NOT_ALL_REACHED = 4
+"""Exit status of ``fly`` when the flight ended with a vehicle short of its target."""
+
+
+def add_parsers(sub: Any, bench: Any) -> None:
+    """Add ``fly``, ``demo``, ``plot-flight`` and ``bench fly``."""
+    p = sub.add_parser(
+        "fly",
+        help="fly a swarm policy on ArduPilot/PX4 vehicles over MAVLink",
+        description=(
+            "Fly a trained swarm policy: MAVLink telemetry → the policy's observations → "
+            "velocity + heading setpoints at constant speed. Every vehicle still under control "
+            "is told to hold on any exit. Read docs/FLYING.md before a real flight."
+        ),
+    )
+    p.add_argument(
+        "--connection",
+        action="append",
+        required=True,
+        metavar="URL",
+        help="udpin:HOST:PORT, udpout:HOST:PORT, tcp:HOST:PORT, serial:DEV[:BAUD] (repeatable)",
+    )
+    p.add_argument("--policy", required=True, help="zoo name (e.g. 3u2o) or .safetensors file")
+    p.add_argument("--mission", required=True, help="mission TOML (docs/examples/)")
+    p.add_argument("--takeoff", type=float, default=None, metavar="ALT_M", help="take off first")
+    p.add_argument("--dry-run", action="store_true", help="compute and log, send nothing")
+    p.add_argument("--log", default=None, metavar="DIR", help="write flight.tlog + decisions")
+    p.add_argument("--signing-key", default=None, help="MAVLink 2 signing key file")
+    p.add_argument(
+        "--hold",
+        choices=["brake", "loiter"],
+        default="brake",
+        help="ArduPilot hold mode (default brake: holds without RC input)",
+    )
+    p.add_argument("--setpoint-hz", type=float, default=10.0, help="setpoint rate (≥ 10)")
+    p.add_argument("--system-id", type=int, default=255, help="this controller's system id")
+    p.add_argument("--max-flight", type=float, default=600.0, help="hold all after this many s")
+    p.add_argument(
+        "--speedup", type=float, default=1.0, help=argparse.SUPPRESS
+    )  # only to fly a mock running faster than real time
+    p.add_argument("--quiet", action="store_true", help="no live status lines")
+    p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
+    p.set_defaults(handler=cmd_fly)
+
+    p = sub.add_parser(
+        "demo",
+        help="fly the shipped policy on the built-in mock fleet (no SITL, no training)",
+    )
+    p.add_argument("--scenario", default="3u2o", help="scenario with a zoo policy (default 3u2o)")
+    p.add_argument("--flavour", choices=["ardupilot", "px4"], default="ardupilot")
+    p.add_argument("--speedup", type=float, default=2.0, help="simulated s per wall s")
+    p.add_argument("--out", default="flight.png", help="the flight plot (default flight.png)")
+    p.add_argument("--log", default=None, metavar="DIR", help="keep the logs here")
+    p.add_argument("--summary", default=None, help="write the ground truth here (JSON)")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(handler=cmd_demo)
+
+    p = sub.add_parser("plot-flight", help="draw a flight from its log folder")
+    p.add_argument("log", help="the --log folder of fly or demo")
+    p.add_argument("--out", default="flight.png")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(handler=cmd_plot_flight)
+
+    b = bench.add_parser("fly", help="runtime vs the mock: decision and setpoint tick times")
+    b.add_argument("--vehicles", type=int, default=10)
+    b.add_argument("--seconds", type=float, default=10.0, help="seconds under control")
+    b.add_argument("--json", action="store_true", help="print one JSON object")
+    b.set_defaults(handler=cmd_bench_fly)
+
+
+def _status_printer(enabled: bool) -> Any:
+    if not enabled:
+        return None
+
+    def show(text: str) -> None:
+        print(text, flush=True)
+
+    return show
+
+
+def cmd_fly(args: argparse.Namespace) -> int:
+    """Fly; exit 0 when every vehicle reached its target, 4 otherwise."""
+    from remarl_fc.control import ControlSpec
+    from remarl_fc.errors import ConfigError
+    from remarl_fc.mavlink.codec import SigningConfig, load_signing_key
+    from remarl_fc.mission import load_mission
+    from remarl_fc.policy_io import load_policy
+    from remarl_fc.runtime import FlyConfig, SwarmRuntime
+
+    policy = load_policy(args.policy)
+    mission = load_mission(args.mission)
+    spec = ControlSpec.from_policy_meta(policy.meta)
+    mission.check_policy(policy.agents, spec.speed_m_s, spec.dt_s)
+    signing = SigningConfig(load_signing_key(args.signing_key)) if args.signing_key else None
+    try:
+        cfg = FlyConfig(
+            connections=tuple(args.connection),
+            mission=mission,
+            takeoff_m=args.takeoff,
+            dry_run=args.dry_run,
+            log_dir=Path(args.log) if args.log else None,
+            signing=signing,
+            setpoint_hz=args.setpoint_hz,
+            hold=args.hold,
+            system_id=args.system_id,
+            speedup=args.speedup,
+            max_flight_s=args.max_flight,
+        )
+    except ValueError as exc:
+        raise ConfigError(f"fly: {exc}") from exc
+    runtime = SwarmRuntime(
+        cfg, policy, spec, on_status=_status_printer(not (args.quiet or args.json))
+    )
+
+    async def main() -> None:
+        async with runtime:
+            await runtime.run()
+
+    try:
+        asyncio.run(main())
+    except KeyboardInterrupt:
+        print("interrupted: every controlled vehicle was told to hold", file=sys.stderr)
+    summary = runtime.summary()
+    print(json.dumps(summary) if args.json else _fly_text(summary))
+    reached = all(v["status"] == "reached" for v in summary["vehicles"])
+    return 0 if reached else EXIT_NOT_ALL_REACHED
+
+
+def _fly_text(summary: dict[str, Any]) -> str:
+    lines = [f"{summary['decisions']} decisions"]
+    for v in summary["vehicles"]:
+        last = v["events"][-1][1] if v["events"] else ""
+        lines.append(f"vehicle {v['system_id']}: {v['status']} ({last})")
+    return "\n".join(lines)
+
+
+def cmd_demo(args: argparse.Namespace) -> int:
+    """Mock fleet + runtime in one process; plot and ground truth at the end."""
+    from remarl_fc.demo import fly_on_mock
+    from remarl_fc.flightlog import plot_flight
+    from remarl_fc.sitl.groundtruth import write_json_atomic
+
+    with tempfile.TemporaryDirectory(prefix="remarl-demo-") as tmp:
+        log_dir = Path(args.log) if args.log else Path(tmp)
+        flight = asyncio.run(
+            fly_on_mock(
+                args.scenario,
+                flavour=args.flavour,
+                speedup=args.speedup,
+                log_dir=log_dir,
+                on_status=_status_printer(not args.json),
+            )
+        )
+        figure = plot_flight(log_dir, args.out)
+    truth = flight.ground_truth
+    if args.summary:
+        write_json_atomic(args.summary, truth)
+    overall = {k: v for k, v in truth.items() if k != "vehicles"}
+    if args.json:
+        print(json.dumps({"ground_truth": overall, "runtime": flight.runtime, "plot": figure}))
+    else:
+        print(
+            f"\nground truth ({args.flavour} mock, {args.scenario}): "
+            f"{overall['reached_targets']}/{len(truth['vehicles'])} reached their targets, "
+            f"collisions {overall['collisions_vehicle_intruder']} with intruders and "
+            f"{overall['collisions_vehicle_vehicle']} between vehicles; closest approach "
+            f"{overall['min_vehicle_intruder_m']} m to an intruder, "
+            f"{overall['min_vehicle_vehicle_m']} m between vehicles (d_col {overall['d_col_m']} m)"
+            f"\nwrote {figure['out']}"
+        )
+    ok = overall["reached_targets"] == len(truth["vehicles"]) and not (
+        overall["collisions_vehicle_intruder"] or overall["collisions_vehicle_vehicle"]
+    )
+    return 0 if ok else EXIT_NOT_ALL_REACHED
+
+
+def cmd_plot_flight(args: argparse.Namespace) -> int:
+    """Draw a flight log."""
+    from remarl_fc.flightlog import plot_flight
+
+    result = plot_flight(args.log, args.out)
+    print(json.dumps(result) if args.json else f"wrote {result['out']}")
+    return 0
+
+
+def cmd_bench_fly(args: argparse.Namespace) -> int:
+    """Runtime timings against the mock."""
+    from remarl_fc.benchfly import bench_fly
+
+    result = asyncio.run(bench_fly(args.vehicles, args.seconds))
+    if args.json:
+        print(json.dumps(result))
+    else:
+        print(
+            f"{result['vehicles']} vehicles, {result['seconds']} s: setpoint tick "
+            f"p50 {result['tick_ms_p50']:.3f} ms, p99 {result['tick_ms_p99']:.3f} ms "
+            f"({result['tick_us_per_vehicle_p50']:.1f} µs per vehicle); decision p50 "
+            f"{result['decide_ms_p50']:.3f} ms, p99 {result['decide_ms_p99']:.3f} ms; "
+            f"missed setpoint deadlines {result['setpoint_deadline_misses']}; "
+            f"setpoint rate per vehicle {result['setpoints_per_vehicle_hz']:.2f} Hz"
+        )
+    return 0

@@ -1,0 +1,140 @@
+"""Closed-loop flights: the runtime flies the shipped policies on the mock fleet.
+
+Every assertion about safety reads the mock's ground truth (what really happened), not the
+runtime's own account. The mock and the runtime run 4× faster than real time together.
+"""
+
+from __future__ import annotations
+
+import asyncio
+
+import pytest
+
+from remarl_fc.demo import fly_on_mock
+from remarl_fc.mavlink.consts import CopterMode
+from remarl_fc.runtime import Status
+from remarl_fc.sitl.faults import Faults
+
+pytestmark = [pytest.mark.asyncio, pytest.mark.network, pytest.mark.timeout(180)]
+
+SPEEDUP = 4.0
+
+
+def assert_safe_and_arrived(truth: dict, reached: int | None = None) -> None:
+    assert truth["collisions_vehicle_intruder"] == 0
+    assert truth["collisions_vehicle_vehicle"] == 0
+    assert truth["min_vehicle_intruder_m"] >= truth["d_col_m"]
+    assert truth["min_vehicle_vehicle_m"] >= truth["d_col_m"]
+    n = len(truth["vehicles"]) if reached is None else reached
+    assert truth["reached_targets"] == n
+
+
+async def until_controlled(runtime) -> float:
+    await runtime.wait_until(
+        "control", lambda: all(m.status == Status.CONTROLLED for m in runtime.members), 120
+    )
+    return runtime.clock.now()
+
+
+@pytest.mark.parametrize(
+    ("scenario", "flavour"), [("3u2o", "ardupilot"), ("5u2o", "ardupilot"), ("3u2o", "px4")]
+)
+async def test_shipped_policy_flies_the_mock_to_every_target(scenario, flavour, tmp_path):
+    flight = await fly_on_mock(scenario, flavour=flavour, speedup=SPEEDUP, log_dir=tmp_path)
+    truth = flight.ground_truth
+    assert truth["intruders"] == 2
+    assert_safe_and_arrived(truth)
+    assert all(v["status"] == "reached" for v in flight.runtime["vehicles"])
+    assert all(v["link"]["bad_frames"] == 0 for v in truth["vehicles"])
+    # the vehicles were commanded with 2503 setpoints only after take-off, and held at the end
+    hold = CopterMode.BRAKE if flavour == "ardupilot" else 0x03040000
+    assert all(v["custom_mode"] == hold for v in truth["vehicles"])
+    assert (tmp_path / "flight.tlog").stat().st_size > 0
+    assert (tmp_path / "decisions.jsonl").read_text().count('"action"') >= 3 * 10
+
+
+async def test_lossy_late_link_still_no_collision():
+    faults = Faults(loss=0.10, latency_s=0.200)
+    flight = await fly_on_mock("3u2o", speedup=SPEEDUP, faults=faults)
+    assert_safe_and_arrived(flight.ground_truth)
+    assert sum(v["link"]["dropped_in"] for v in flight.ground_truth["vehicles"]) > 0
+
+
+async def test_link_cut_is_detected_within_a_second_and_the_vehicle_is_held():
+    seen: dict[str, float] = {}
+
+    async def cut(fleet, runtime) -> None:
+        await until_controlled(runtime)
+        await asyncio.sleep(4.0 / SPEEDUP)
+        seen["cut_at"] = runtime.clock.now()
+        fleet.faults.cut_link(1, fleet.now_s(), 5.0)  # vehicle 2 (index 1)
+
+    flight = await fly_on_mock("3u2o", speedup=SPEEDUP, during=cut)
+    v2 = next(v for v in flight.runtime["vehicles"] if v["system_id"] == 2)
+    lost = [t for t, e in v2["events"] if e.startswith("telemetry stale")]
+    assert lost, v2["events"]
+    assert lost[0] - seen["cut_at"] <= 1.0 + 0.3  # stale_s + one setpoint tick + jitter
+    assert v2["status"] == "held"
+    assert any("told to hold" in e for _, e in v2["events"])
+    truth = flight.ground_truth
+    assert truth["collisions_vehicle_intruder"] == 0 and truth["collisions_vehicle_vehicle"] == 0
+    others = [v for v in flight.runtime["vehicles"] if v["system_id"] != 2]
+    assert all(v["status"] == "reached" for v in others)
+    assert truth["vehicles"][1]["custom_mode"] == CopterMode.BRAKE
+
+
+async def test_a_mode_the_pilot_takes_is_never_fought():
+    marks: dict[str, int] = {}
+
+    async def pilot(fleet, runtime) -> None:
+        await until_controlled(runtime)
+        await asyncio.sleep(3.0 / SPEEDUP)
+        fleet.faults.switch_mode(0, fleet.now_s(), "LOITER")
+        await asyncio.sleep(2.0 / SPEEDUP)
+        marks["sent"] = fleet.vehicles[0].counters.setpoints_received
+        marks["modes"] = fleet.vehicles[0].counters.commands["DO_SET_MODE"]
+
+    flight = await fly_on_mock("3u2o", speedup=SPEEDUP, during=pilot)
+    v1 = flight.runtime["vehicles"][0]
+    assert v1["status"] == "pilot"
+    truth = flight.ground_truth["vehicles"][0]
+    assert truth["custom_mode"] == CopterMode.LOITER  # still the pilot's mode at the end
+    assert truth["setpoints_received"] == marks["sent"]  # nothing more was sent to it
+    assert truth["commands"]["DO_SET_MODE"] == marks["modes"]
+
+
+async def test_cancellation_leaves_every_vehicle_holding():
+    """Ctrl-C cancels the flight's task (asyncio.run does that): every vehicle must hold."""
+    box = {}
+    flying = asyncio.Event()
+
+    async def watch(fleet, runtime) -> None:
+        box["fleet"] = fleet
+        await until_controlled(runtime)
+        await asyncio.sleep(3.0 / SPEEDUP)
+        flying.set()
+        await asyncio.Event().wait()
+
+    task = asyncio.create_task(fly_on_mock("3u2o", speedup=SPEEDUP, during=watch))
+    await asyncio.wait_for(flying.wait(), 120)
+    task.cancel()
+    with pytest.raises(asyncio.CancelledError):
+        await task
+    truth = box["fleet"].summary()
+    assert all(v["custom_mode"] == CopterMode.BRAKE for v in truth["vehicles"])
+    assert all(v["armed"] and not v["landed"] for v in truth["vehicles"])
+
+
+async def test_dry_run_sends_no_command_and_no_setpoint(tmp_path):
+    flight = await fly_on_mock(
+        "3u2o",
+        speedup=SPEEDUP,
+        log_dir=tmp_path,
+        fly_options={"dry_run": True, "max_flight_s": 6.0},
+    )
+    truth = flight.ground_truth["vehicles"]
+    assert all(v["setpoints_received"] == 0 for v in truth)
+    assert all(set(v["commands"]) == {"SET_MESSAGE_INTERVAL"} for v in truth)
+    assert all(not v["armed"] and v["landed"] for v in truth)
+    assert flight.runtime["decisions"] >= 3
+    assert '"setpoint"' in (tmp_path / "decisions.jsonl").read_text()
