@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import asyncio
 import socket
-from collections.abc import Awaitable, Callable
+from collections.abc import Callable, Coroutine
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -54,7 +54,7 @@ async def fly_on_mock(
     log_dir: Path | None = None,
     on_status: Callable[[str], None] | None = None,
     seed: int = 0,
-    during: Callable[[SitlFleet, SwarmRuntime], Awaitable[None]] | None = None,
+    during: Callable[[SitlFleet, SwarmRuntime], Coroutine[Any, Any, None]] | None = None,
     fly_options: dict[str, Any] | None = None,
 ) -> MockFlight:
     """Fly ``policy`` (default: the zoo policy of ``scenario``) on a mock of ``scenario``.
