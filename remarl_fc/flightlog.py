@@ -106,6 +106,7 @@ def read_flight(log_dir: str | Path) -> FlightRecord:
     veh: dict[int, list[list[float]]] = defaultdict(list)
     intr: dict[int, list[list[float]]] = defaultdict(list)
     t0: float | None = None
+    scale = float(head.get("speedup", 1.0))  # a mock flown faster than real time
     for tlog in tlogs:
         for t, msg in read_tlog(tlog):
             mid = msg.get_msgId()
@@ -118,11 +119,11 @@ def read_flight(log_dir: str | Path) -> FlightRecord:
                     from_deg_e7(msg.lat), from_deg_e7(msg.lon), msg.alt / 1000, origin
                 )
                 t0 = t if t0 is None else t0
-                veh[msg.get_srcSystem()].append([t - t0, float(n), float(e), -float(d)])
+                veh[msg.get_srcSystem()].append([(t - t0) * scale, float(n), float(e), -float(d)])
             elif mid == MsgId.ADSB_VEHICLE and msg.flags & 1:
                 n, e, _ = geodetic_to_ned(from_deg_e7(msg.lat), from_deg_e7(msg.lon), 0.0, origin)
                 t0 = t if t0 is None else t0
-                intr[int(msg.ICAO_address)].append([t - t0, float(n), float(e)])
+                intr[int(msg.ICAO_address)].append([(t - t0) * scale, float(n), float(e)])
     record.vehicles = {k: np.array(sorted(v)) for k, v in veh.items()}
     record.intruders = {k: _dedupe(np.array(sorted(v))) for k, v in intr.items()}
     return record

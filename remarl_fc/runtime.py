@@ -55,7 +55,7 @@ from remarl_fc.mavlink.consts import (
     Px4MainMode,
     px4_mode_parts,
 )
-from remarl_fc.mavlink.link import MavlinkLink, TlogWriter
+from remarl_fc.mavlink.link import LinkAddress, MavlinkLink, TlogWriter
 from remarl_fc.mission import Mission
 from remarl_fc.tracking import TrafficPicture, VehicleTrack
 
@@ -167,6 +167,8 @@ class FlyConfig:
     def __post_init__(self) -> None:
         if not self.connections:
             raise ValueError("give at least one --connection")
+        for url in self.connections:
+            LinkAddress.parse(url)  # a bad URL fails here, before anything is opened
         if self.setpoint_hz < 10.0:
             raise ValueError(f"setpoint_hz must be ≥ 10 Hz, not {self.setpoint_hz}")
         if self.takeoff_m is not None and not self.takeoff_m > 0:
@@ -661,6 +663,7 @@ class SwarmRuntime:
             "speed_m_s": self.spec.speed_m_s,
             "dt_s": self.spec.dt_s,
             "source": mission.source,
+            "speedup": self.cfg.speedup,
         }
 
     def _event(self, m: Member, text: str) -> None:

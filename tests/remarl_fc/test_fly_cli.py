@@ -1,0 +1,86 @@
+"""``remarl-fc fly`` and ``plot-flight`` end to end: the mock in another process, real UDP."""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from remarl_fc.cli import main
+from remarl_fc.demo import free_udp_port
+
+pytestmark = [pytest.mark.network, pytest.mark.timeout(240)]
+
+ROOT = Path(__file__).resolve().parents[2]
+MISSION = ROOT / "docs" / "examples" / "mission-3u2o.toml"
+
+
+def test_fly_the_example_mission_on_a_mock_in_another_process(tmp_path, capsys):
+    port = free_udp_port()
+    truth_file = tmp_path / "truth.json"
+    mock = subprocess.Popen(
+        [sys.executable, "-m", "remarl_fc", "sitl", "--scenario", "3u2o", "--base-port", "0",
+         "--out", f"127.0.0.1:{port}", "--speedup", "4", "--timeout", "200",
+         "--summary", str(truth_file), "--json"],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+    )  # fmt: skip
+    try:
+        status = main(
+            ["fly", "--connection", f"udpin:127.0.0.1:{port}", "--policy", "3u2o",
+             "--mission", str(MISSION), "--takeoff", "20", "--log", str(tmp_path / "log"),
+             "--speedup", "4", "--json"]
+        )  # fmt: skip
+    finally:
+        mock.send_signal(signal.SIGINT)
+        _, err = mock.communicate(timeout=30)
+    summary = json.loads(capsys.readouterr().out)
+    assert status == 0, summary
+    assert [v["status"] for v in summary["vehicles"]] == ["reached"] * 3
+    truth = json.loads(truth_file.read_text())
+    assert truth["collisions_vehicle_intruder"] == 0 == truth["collisions_vehicle_vehicle"]
+    assert truth["reached_targets"] == 3, err
+    assert (
+        main(["plot-flight", str(tmp_path / "log"), "--out", str(tmp_path / "f.png"), "--json"])
+        == 0
+    )
+    plot = json.loads(capsys.readouterr().out)
+    assert plot["vehicles"] == [1, 2, 3] and plot["intruders"] == 2
+    assert plot["min_distance_to_intruder_m"] >= truth["d_col_m"] - 1.0
+    assert (tmp_path / "f.png").stat().st_size > 10_000
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--policy", "5u2o", "--mission", str(MISSION)], "number of vehicles"),
+        (["--policy", "3u2o", "--mission", "missing.toml"], "cannot read the file"),
+        (["--policy", "nope", "--mission", str(MISSION)], "nope"),
+        (["--policy", "3u2o", "--mission", str(MISSION), "--setpoint-hz", "2"], "10 Hz"),
+    ],
+)
+def test_fly_refuses_what_cannot_be_flown(args, message, capsys):
+    assert main(["fly", "--connection", "udpin:127.0.0.1:0", *args]) == 2
+    assert message in capsys.readouterr().err
+
+
+def test_bad_connection_and_bad_log_folder(capsys, tmp_path):
+    args = ["fly", "--connection", "bogus", "--policy", "3u2o", "--mission", str(MISSION)]
+    assert main(args) == 2
+    assert "udpin:HOST:PORT" in capsys.readouterr().err
+    assert main(["plot-flight", str(tmp_path)]) == 2
+    assert "not a flight log folder" in capsys.readouterr().err
+
+
+def test_demo_command(tmp_path, capsys):
+    out = tmp_path / "flight.png"
+    args = ["demo", "--speedup", "4", "--out", str(out), "--summary", str(tmp_path / "t.json")]
+    assert main([*args, "--json"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert result["ground_truth"]["reached_targets"] == 3
+    assert result["plot"]["intruders"] == 2 and out.stat().st_size > 10_000
+    assert json.loads((tmp_path / "t.json").read_text())["finished"] is True
