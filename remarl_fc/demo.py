@@ -10,6 +10,7 @@ closed-loop flights; the demo prints it.
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 import socket
 from collections.abc import Callable, Coroutine
 from dataclasses import dataclass
@@ -17,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from remarl_fc.control import ControlSpec
-from remarl_fc.mission import Mission
+from remarl_fc.mission import Geofence, Mission
 from remarl_fc.policy_io import load_policy
 from remarl_fc.runtime import FlyConfig, SwarmRuntime
 from remarl_fc.sitl.config import DEFAULT_HOME, Flavour, SitlConfig
@@ -56,6 +57,8 @@ async def fly_on_mock(
     seed: int = 0,
     during: Callable[[SitlFleet, SwarmRuntime], Coroutine[Any, Any, None]] | None = None,
     fly_options: dict[str, Any] | None = None,
+    geofence: Geofence | None = None,
+    link_per_vehicle: bool = False,
 ) -> MockFlight:
     """Fly ``policy`` (default: the zoo policy of ``scenario``) on a mock of ``scenario``.
 
@@ -63,6 +66,9 @@ async def fly_on_mock(
         during: a coroutine run alongside the flight (tests inject faults with it); it is
             cancelled when the flight ends.
         fly_options: extra `FlyConfig` fields.
+        geofence: add this fence to the scenario's mission.
+        link_per_vehicle: one ``udpout:`` connection per vehicle port (ArduPilot SITL style)
+            instead of one ``udpin:`` port that every vehicle sends to.
     """
     cfg = load_scenario(scenario)
     pol = load_policy(policy or scenario)
@@ -72,25 +78,41 @@ async def fly_on_mock(
         vehicles=cfg.uav.count,
         flavour=flavour,
         base_port=0,
-        out=("127.0.0.1", port),
+        out=None if link_per_vehicle else ("127.0.0.1", port),
         speedup=speedup,
         cruise_alt_m=CRUISE_ALT_M,
         seed=seed,
     )
     mission = Mission.from_scenario(cfg, DEFAULT_HOME, CRUISE_ALT_M)
-    fly = FlyConfig(
-        connections=(f"udpin:127.0.0.1:{port}",),
-        mission=mission,
-        takeoff_m=CRUISE_ALT_M,
-        log_dir=log_dir,
-        speedup=speedup,
-        **(fly_options or {}),
-    )
+    if geofence is not None:
+        mission = dataclasses.replace(mission, geofence=geofence)
     spec = ControlSpec.from_policy_meta(pol.meta)
     fleet = SitlFleet(sitl, scenario=cfg, faults=faults)
-    runtime = SwarmRuntime(fly, pol, spec, on_status=on_status)
     # the fleet outlives the runtime: the runtime's hold commands on exit must reach it
-    async with fleet, runtime:
+    async with fleet:
+        connections: tuple[str, ...] = (f"udpin:127.0.0.1:{port}",)
+        if link_per_vehicle:
+            connections = tuple(f"udpout:{h}:{p}" for h, p in fleet.addresses)
+        fly = FlyConfig(
+            connections=connections,
+            mission=mission,
+            takeoff_m=CRUISE_ALT_M,
+            log_dir=log_dir,
+            speedup=speedup,
+            **(fly_options or {}),
+        )
+        runtime = SwarmRuntime(fly, pol, spec, on_status=on_status)
+        await _fly(fleet, runtime, during, speedup)
+    return MockFlight(runtime.summary(), fleet.summary())
+
+
+async def _fly(
+    fleet: SitlFleet,
+    runtime: SwarmRuntime,
+    during: Callable[[SitlFleet, SwarmRuntime], Coroutine[Any, Any, None]] | None,
+    speedup: float,
+) -> None:
+    async with runtime:
         if during is None:
             await runtime.run()
         else:
@@ -99,4 +121,3 @@ async def fly_on_mock(
                 await runtime.run()
                 side.cancel()
         await asyncio.sleep(1.0 / speedup)  # the last hold commands take effect
-    return MockFlight(runtime.summary(), fleet.summary())

@@ -437,6 +437,13 @@ class SwarmRuntime:
             if t.is_px4 and mid not in PX4_TELEMETRY:
                 continue
             await self.command(m, MavCmd.SET_MESSAGE_INTERVAL, int(mid), 1e6 / hz)
+        for mid in (MsgId.GLOBAL_POSITION_INT, MsgId.ATTITUDE):
+            name = _name(MsgId, mid)
+            await self.wait_until(
+                f"vehicle {m.system_id}: {name} after asking for it at {TELEMETRY[mid]:g} Hz",
+                lambda name=name: t.seen[name] > 0,  # type: ignore[misc]
+                cfg.ready_timeout_s,
+            )
         if cfg.dry_run:  # nothing is sent: fly the setpoints on paper from where it is
             await self.wait_until(
                 f"vehicle {m.system_id}: a position",

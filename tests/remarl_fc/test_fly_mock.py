@@ -138,3 +138,45 @@ async def test_dry_run_sends_no_command_and_no_setpoint(tmp_path):
     assert all(not v["armed"] and v["landed"] for v in truth)
     assert flight.runtime["decisions"] >= 3
     assert '"setpoint"' in (tmp_path / "decisions.jsonl").read_text()
+
+
+async def test_one_link_per_vehicle_ardupilot_sitl_style():
+    flight = await fly_on_mock("3u2o", speedup=SPEEDUP, link_per_vehicle=True)
+    assert_safe_and_arrived(flight.ground_truth)
+
+
+async def test_geofence_breach_ahead_holds_the_vehicle():
+    from remarl_fc.mission import Geofence
+
+    # the targets lie 270 m east of the origin: a 230 m fence stops everyone before them
+    flight = await fly_on_mock("3u2o", speedup=SPEEDUP, geofence=Geofence(radius_m=230.0))
+    for v in flight.runtime["vehicles"]:
+        assert v["status"] == "held"
+        assert any("geofence" in e for _, e in v["events"])
+    for v in flight.ground_truth["vehicles"]:
+        assert v["custom_mode"] == CopterMode.BRAKE
+        n, e = v["track_t_n_e_up_m"][-1][1:3]
+        assert (n * n + e * e) ** 0.5 < 235.0
+
+
+async def test_arming_refusal_carries_the_autopilots_reason():
+    from remarl_fc.errors import CommandRejected
+    from remarl_fc.mavlink.consts import MavCmd, MavResult
+
+    async def arm_too_early(fleet, runtime) -> None:
+        member = runtime.members[0]
+        await runtime.wait_until("heartbeat", lambda: member.track.autopilot is not None, 30)
+        with pytest.raises(CommandRejected) as info:
+            await runtime.command(member, MavCmd.COMPONENT_ARM_DISARM, 1)
+        assert info.value.result == MavResult.FAILED
+        assert "PreArm: Need Position Estimate" in info.value.reason
+        assert "PreArm" in str(info.value)
+        raise Checked  # done: end the flight here
+
+    with pytest.raises(ExceptionGroup) as info:
+        await fly_on_mock("3u2o", speedup=SPEEDUP, during=arm_too_early)
+    assert info.value.subgroup(Checked) is not None
+
+
+class Checked(Exception):
+    """Ends a flight once a test has seen what it wanted."""
