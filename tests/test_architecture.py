@@ -40,15 +40,18 @@ def test_cli_and_sim_import_without_torch():
 
 
 def test_sitl_runs_with_torch_unimportable(tmp_path):
-    """`remarl-fc sitl` and the MAVLink layer work on a machine without torch."""
+    """`remarl-fc sitl`, the flight runtime and the MAVLink layer work without torch."""
     code = (
         "import sys, importlib.abc\n"
         "class Block(importlib.abc.MetaPathFinder):\n"
         "    def find_spec(self, name, path, target=None):\n"
-        "        if name.split('.')[0] in ('torch', 'policies'):\n"
+        "        if name.split('.')[0] == 'torch':\n"
         "            raise ImportError('blocked: ' + name)\n"
         "sys.meta_path.insert(0, Block())\n"
         "import remarl_fc.sitl.fleet, remarl_fc.sitl.bench, remarl_fc.mavlink.udp\n"
+        "import remarl_fc.runtime, remarl_fc.demo, remarl_fc.flightlog, remarl_fc.benchfly\n"
+        "from remarl_fc.policy_io import load_policy; load_policy('3u2o')\n"
+        "assert 'policies' not in sys.modules\n"
         "from remarl_fc.cli import main\n"
         "raise SystemExit(main(['sitl', '--scenario', '3u1o', '--base-port', '0',\n"
         "                       '--speedup', '50', '--timeout', '1', '--json']))\n"
