@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from remarl_fc.control import ControlSpec
+from remarl_fc.mavlink.codec import SigningConfig
 from remarl_fc.mission import Geofence, Mission
 from remarl_fc.policy_io import load_policy
 from remarl_fc.runtime import FlyConfig, SwarmRuntime
@@ -59,6 +60,7 @@ async def fly_on_mock(
     fly_options: dict[str, Any] | None = None,
     geofence: Geofence | None = None,
     link_per_vehicle: bool = False,
+    signing_key: bytes | None = None,
 ) -> MockFlight:
     """Fly ``policy`` (default: the zoo policy of ``scenario``) on a mock of ``scenario``.
 
@@ -69,6 +71,7 @@ async def fly_on_mock(
         geofence: add this fence to the scenario's mission.
         link_per_vehicle: one ``udpout:`` connection per vehicle port (ArduPilot SITL style)
             instead of one ``udpin:`` port that every vehicle sends to.
+        signing_key: sign both sides with this key (the mock then rejects unsigned commands).
     """
     cfg = load_scenario(scenario)
     pol = load_policy(policy or scenario)
@@ -87,7 +90,8 @@ async def fly_on_mock(
     if geofence is not None:
         mission = dataclasses.replace(mission, geofence=geofence)
     spec = ControlSpec.from_policy_meta(pol.meta)
-    fleet = SitlFleet(sitl, scenario=cfg, faults=faults)
+    fleet = SitlFleet(sitl, scenario=cfg, faults=faults, signing_key=signing_key)
+    signing = SigningConfig(signing_key) if signing_key is not None else None
     # the fleet outlives the runtime: the runtime's hold commands on exit must reach it
     async with fleet:
         connections: tuple[str, ...] = (f"udpin:127.0.0.1:{port}",)
@@ -99,6 +103,7 @@ async def fly_on_mock(
             takeoff_m=CRUISE_ALT_M,
             log_dir=log_dir,
             speedup=speedup,
+            signing=signing,
             **(fly_options or {}),
         )
         runtime = SwarmRuntime(fly, pol, spec, on_status=on_status)

@@ -180,3 +180,11 @@ async def test_arming_refusal_carries_the_autopilots_reason():
 
 class Checked(Exception):
     """Ends a flight once a test has seen what it wanted."""
+
+
+async def test_signed_flight_on_px4():
+    import os
+
+    flight = await fly_on_mock("3u2o", flavour="px4", speedup=SPEEDUP, signing_key=os.urandom(32))
+    assert_safe_and_arrived(flight.ground_truth)
+    assert all(v["link"]["rejected_unsigned"] == 0 for v in flight.ground_truth["vehicles"])
