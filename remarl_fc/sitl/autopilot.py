@@ -171,7 +171,14 @@ class Autopilot:
         return LandedState.IN_AIR
 
     def base_mode(self) -> int:
-        """HEARTBEAT.base_mode."""
+        """HEARTBEAT.base_mode: the flavour's mode flags, + SAFETY_ARMED."""
+        mode = self.mode_flags()
+        if self.armed:
+            mode |= MavModeFlag.SAFETY_ARMED
+        return int(mode)
+
+    def mode_flags(self) -> MavModeFlag:
+        """base_mode bits of the current mode (without SAFETY_ARMED)."""
         raise NotImplementedError
 
     def system_status(self) -> int:
@@ -572,15 +579,13 @@ class ArduCopterLogic(Autopilot):
         """Nothing but HEARTBEAT until asked: ArduCopter's stream rates default to 0."""
         return {}
 
-    def base_mode(self) -> int:
-        """CUSTOM_MODE_ENABLED | STABILIZE | MANUAL_INPUT, + GUIDED in position modes, + ARMED."""
+    def mode_flags(self) -> MavModeFlag:
+        """CUSTOM_MODE_ENABLED | STABILIZE | MANUAL_INPUT, + GUIDED in position modes."""
         mode = MavModeFlag.CUSTOM_MODE_ENABLED | MavModeFlag.STABILIZE_ENABLED
         mode |= MavModeFlag.MANUAL_INPUT_ENABLED
         if self.custom_mode in self.POSITION_MODES:
             mode |= MavModeFlag.GUIDED_ENABLED
-        if self.armed:
-            mode |= MavModeFlag.SAFETY_ARMED
-        return int(mode)
+        return mode
 
     def resting_status(self) -> int:
         """STANDBY on the ground, ACTIVE in the air."""
@@ -839,8 +844,8 @@ class Px4Logic(Autopilot):
             MsgId.POSITION_TARGET_LOCAL_NED: 1 / 5,
         }
 
-    def base_mode(self) -> int:
-        """CUSTOM_MODE_ENABLED | MANUAL_INPUT, + STABILIZE, GUIDED, AUTO by mode, + ARMED."""
+    def mode_flags(self) -> MavModeFlag:
+        """CUSTOM_MODE_ENABLED | MANUAL_INPUT, + STABILIZE, GUIDED, AUTO by mode."""
         mode = MavModeFlag.CUSTOM_MODE_ENABLED | MavModeFlag.MANUAL_INPUT_ENABLED
         if self.main != 1:
             mode |= MavModeFlag.STABILIZE_ENABLED
@@ -848,9 +853,7 @@ class Px4Logic(Autopilot):
             mode |= MavModeFlag.GUIDED_ENABLED
         if self.main in (self.AUTO, self.OFFBOARD):
             mode |= MavModeFlag.AUTO_ENABLED
-        if self.armed:
-            mode |= MavModeFlag.SAFETY_ARMED
-        return int(mode)
+        return mode
 
     def resting_status(self) -> int:
         """STANDBY disarmed, ACTIVE armed."""
