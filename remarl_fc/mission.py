@@ -191,6 +191,15 @@ def _number(
     return float(value)
 
 
+def _only(table: dict[str, Any], known: set[str], src: str, prefix: str) -> None:
+    """Refuse keys a table does not take: a misspelt key must not be silently ignored."""
+    for key in table:
+        if key not in known:
+            raise MissionError(
+                f"unknown key; known: {', '.join(sorted(known))}", source=src, key=prefix + key
+            )
+
+
 def _table(data: dict[str, Any], key: str, src: str) -> dict[str, Any]:
     value = data.get(key)
     if not isinstance(value, dict):
@@ -207,6 +216,7 @@ def mission_from_dict(data: dict[str, Any], *, source: str) -> Mission:
                 f"unknown key; known: {', '.join(sorted(known))}", source=source, key=key
             )
     o = _table(data, "origin", source)
+    _only(o, {"lat_deg", "lon_deg", "alt_m"}, source, "origin.")
     try:
         origin = GeoPoint(
             _number(o, "lat_deg", source, "origin."),
@@ -234,6 +244,7 @@ def _vehicle(v: Any, k: int, origin: GeoPoint, src: str) -> VehiclePlan:
     prefix = f"vehicle[{k}]."
     if not isinstance(v, dict):
         raise MissionError("must be a table", source=src, key=f"vehicle[{k}]")
+    _only(v, {"system_id", "slot", "target", "alt_m"}, src, prefix)
     sysid = _number(v, "system_id", src, prefix)
     slot = _number(v, "slot", src, prefix)
     if sysid != int(sysid) or not 1 <= sysid <= 255:
@@ -249,6 +260,13 @@ def _vehicle(v: Any, k: int, origin: GeoPoint, src: str) -> VehiclePlan:
             source=src,
             key=prefix + "target",
         )
+    _only(target, {"north_m", "east_m", "lat_deg", "lon_deg"}, src, prefix + "target.")
+    if ("north_m" in target or "east_m" in target) and ("lat_deg" in target or "lon_deg" in target):
+        raise MissionError(
+            "give either north_m/east_m or lat_deg/lon_deg, not both",
+            source=src,
+            key=prefix + "target",
+        )
     if "north_m" in target or "east_m" in target:
         ne = (
             _number(target, "north_m", src, prefix + "target."),
@@ -257,6 +275,10 @@ def _vehicle(v: Any, k: int, origin: GeoPoint, src: str) -> VehiclePlan:
     else:
         lat = _number(target, "lat_deg", src, prefix + "target.")
         lon = _number(target, "lon_deg", src, prefix + "target.")
+        try:
+            GeoPoint(lat, lon, origin.alt_m)
+        except ValueError as exc:
+            raise MissionError(str(exc), source=src, key=prefix + "target") from exc
         n, e, _ = geodetic_to_ned(lat, lon, origin.alt_m, origin)
         ne = (float(n), float(e))
     alt = _number(v, "alt_m", src, prefix, positive=True) if "alt_m" in v else DEFAULT_ALT_M
@@ -266,6 +288,7 @@ def _vehicle(v: Any, k: int, origin: GeoPoint, src: str) -> VehiclePlan:
 def _geofence(g: Any, src: str) -> Geofence:
     if not isinstance(g, dict):
         raise MissionError("must be a table", source=src, key="geofence")
+    _only(g, {"radius_m", "polygon_ne_m", "max_alt_m"}, src, "geofence.")
     radius = _number(g, "radius_m", src, "geofence.", positive=True) if "radius_m" in g else None
     ceiling = _number(g, "max_alt_m", src, "geofence.", positive=True) if "max_alt_m" in g else None
     polygon = None
@@ -275,7 +298,12 @@ def _geofence(g: Any, src: str) -> Geofence:
             isinstance(pts, list)
             and len(pts) >= 3
             and all(
-                isinstance(p, list) and len(p) == 2 and all(isinstance(c, int | float) for c in p)
+                isinstance(p, list)
+                and len(p) == 2
+                and all(
+                    isinstance(c, int | float) and not isinstance(c, bool) and math.isfinite(c)
+                    for c in p
+                )
                 for p in pts
             )
         )

@@ -214,12 +214,20 @@ class TrafficPicture:
         )
         vel = np.array([speed * math.cos(course), speed * math.sin(course)])
         age = float(msg.tslc) if msg.tslc else 0.0
+        height = -float(d) if msg.flags & 2 else math.nan  # VALID_ALTITUDE, else unknown
         self.tracks[int(msg.ICAO_address)] = Intruder(
-            np.array([float(n), float(e)]), -float(d), vel, now - age
+            np.array([float(n), float(e)]), height, vel, now - age
         )
 
     def current(self, now: float, height_m: float, band_m: float) -> list[Intruder]:
-        """Tracks younger than `max_age_s` within ±``band_m`` of ``height_m``."""
+        """Tracks younger than `max_age_s` within ±``band_m`` of ``height_m``.
+
+        Tracks of unknown altitude (no VALID_ALTITUDE flag) are kept, to be safe.
+        """
         for icao in [k for k, v in self.tracks.items() if now - v.t > self.max_age_s]:
             del self.tracks[icao]
-        return [v for v in self.tracks.values() if abs(v.height_m - height_m) <= band_m]
+        return [  # an intruder of unknown altitude counts at every height
+            v
+            for v in self.tracks.values()
+            if math.isnan(v.height_m) or abs(v.height_m - height_m) <= band_m
+        ]

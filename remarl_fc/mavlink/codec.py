@@ -181,11 +181,15 @@ class Codec:
         self.stats.sent += 1
         return frame
 
-    def decode(self, data: bytes, address: Hashable = None) -> list[Message]:
+    def decode(
+        self, data: bytes, address: Hashable = None, *, datagram: bool = False
+    ) -> list[Message]:
         """Every whole, valid message in ``data`` from the peer at ``address``.
 
-        Bytes of an incomplete frame wait in that peer's parser for the next call. Invalid
-        frames are counted and skipped.
+        On a byte stream (TCP, serial) the bytes of an incomplete frame wait in that peer's
+        parser for the next call. A ``datagram`` (UDP) holds whole frames only: what is left
+        over is dropped, so a stray start byte cannot swallow the peer's next datagrams.
+        Invalid frames are counted and skipped.
         """
         parser = self._parsers.get(address)
         if parser is None:
@@ -204,6 +208,10 @@ class Codec:
                 self._count_bad(str(getattr(msg, "reason", "bad data")))
             else:
                 out.append(msg)
+        if datagram and parser.buf_len() > 0:
+            self._count_bad("incomplete frame at the end of a datagram")
+            parser.buf, parser.buf_index = bytearray(), 0
+            parser.expected_length = dialect.HEADER_LEN_V1 + 2
         self.stats.rejected_unsigned += parser.signing.reject_count - rejected_before
         self.stats.received += len(out)
         return out

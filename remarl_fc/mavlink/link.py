@@ -75,10 +75,11 @@ class LinkAddress:
             return cls(
                 "udpout" if head == "udpout" else "tcp" if head == "tcp" else "udpin", host, port
             )
-        if head == "serial" and sep:
+        if head == "serial" and sep and rest.partition(":")[0]:
             device, _, baud = rest.partition(":")
             return cls("serial", device=device, baud=_baud(baud or str(DEFAULT_BAUD), url))
-        if url.startswith("/dev/") or url.upper().startswith("COM"):
+        # COM1, COM3,57600 — but not a host whose name starts with "com" (companion:14550)
+        if url.startswith("/dev/") or (url.upper().startswith("COM") and url[3:4].isdigit()):
             device, _, baud = url.partition(",")
             return cls("serial", device=device, baud=_baud(baud or str(DEFAULT_BAUD), url))
         if sep and rest.isdigit():
@@ -163,6 +164,7 @@ class MavlinkLink:
         self._udp: UdpEndpoint | None = None
         self._transport: asyncio.Transport | None = None
         self._fd: int | None = None
+        self._pending = bytearray()  # serial bytes the port could not take yet
         self._loop: asyncio.AbstractEventLoop | None = None
 
     async def __aenter__(self) -> Self:
@@ -215,6 +217,7 @@ class MavlinkLink:
         if self._fd is not None:
             if self._loop is not None:
                 self._loop.remove_reader(self._fd)
+                self._loop.remove_writer(self._fd)
             os.close(self._fd)
             self._fd = None
         if self.tlog is not None:
@@ -236,44 +239,65 @@ class MavlinkLink:
         """
         if self.failure is not None:
             raise LinkLost(f"the connection failed: {self.failure}", link=self.url)
+        a = self.address
+        dests: set[Any] = set()
+        if a.kind == "udpin" and self._udp is not None:  # first: nowhere to go, nothing logged
+            heard = self.where.values() if system_id is None else [self.where.get(system_id)]
+            dests = {d for d in heard if d is not None}
+            if not dests:
+                return False
         frame = self.codec.encode(msg)
         if self.tlog is not None:
             self.tlog.write(frame)
-        a = self.address
         if self._udp is not None:
             if a.kind == "udpout":
                 self._udp.send(frame, (a.host, a.port))
                 return True
-            if system_id is not None:
-                dest = self.where.get(system_id)
-                if dest is None:
-                    return False
+            for dest in dests:
                 self._udp.send(frame, dest)
-                return True
-            for dest in set(self.where.values()):
-                self._udp.send(frame, dest)
-            return bool(self.where)
+            return True
         if self._transport is not None:
             self._transport.write(frame)
             return True
         if self._fd is not None:
+            if self._pending:  # earlier bytes wait: keep frames whole and in order
+                self._pending += frame
+                return True
             try:
-                os.write(self._fd, frame)
+                written = os.write(self._fd, frame)
             except BlockingIOError:
-                return False  # the UART buffer is full: drop, as a radio would
+                return False  # the UART buffer is full: drop whole frames, as a radio would
             except OSError as exc:
                 self._lost(exc)
                 raise LinkLost(f"serial write failed ({exc.strerror})", link=self.url) from exc
+            if written < len(frame):  # finish the frame when the port can take more
+                self._pending += frame[written:]
+                if self._loop is not None:
+                    self._loop.add_writer(self._fd, self._flush_serial)
             return True
         raise LinkLost("the connection is closed", link=self.url)
 
     def _received(self, data: bytes, addr: Any) -> None:
         now = time.monotonic()
-        for msg in self.codec.decode(data, addr):
+        datagram = self._udp is not None
+        for msg in self.codec.decode(data, addr, datagram=datagram):
             if self.tlog is not None:
                 self.tlog.write(msg.get_msgbuf())
             self.where[msg.get_srcSystem()] = addr
             self.on_message(msg, now)
+
+    def _flush_serial(self) -> None:
+        assert self._fd is not None
+        try:
+            written = os.write(self._fd, self._pending)
+        except BlockingIOError:
+            return
+        except OSError as exc:
+            self._lost(exc)
+            return
+        del self._pending[:written]
+        if not self._pending and self._loop is not None:
+            self._loop.remove_writer(self._fd)
 
     def _read_serial(self) -> None:
         assert self._fd is not None
@@ -284,13 +308,16 @@ class MavlinkLink:
         except OSError as exc:
             self._lost(exc)
             return
-        if data:
-            self._received(data, "serial")
+        if not data:  # readable but empty: the device went away (a USB adapter unplugged)
+            self._lost(ConnectionError("the serial device disconnected"))
+            return
+        self._received(data, "serial")
 
     def _lost(self, exc: BaseException) -> None:
         self.failure = exc
         if self._fd is not None and self._loop is not None:
             self._loop.remove_reader(self._fd)
+            self._loop.remove_writer(self._fd)
 
 
 def _open_serial(device: str, baud: int, url: str) -> int:
@@ -306,6 +333,9 @@ def _open_serial(device: str, baud: int, url: str) -> int:
         attrs[2] = termios.CS8 | termios.CREAD | termios.CLOCAL  # cflag
         attrs[3] = 0  # lflag
         attrs[4] = attrs[5] = speed
+        # VMIN 1, VTIME 0: with O_NONBLOCK an idle port reads EAGAIN, so an empty read means
+        # hang-up (a previous program, e.g. pyserial, may have left VMIN 0: empty reads when idle)
+        attrs[6][termios.VMIN], attrs[6][termios.VTIME] = 1, 0
         termios.tcsetattr(fd, termios.TCSANOW, attrs)
     except termios.error as exc:
         os.close(fd)

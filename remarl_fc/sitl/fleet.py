@@ -349,7 +349,7 @@ class SitlFleet:
         self.link_stats[i]["datagrams_in"] += 1
         ap = self.vehicles[i]
         try:
-            msgs = self.codecs[i].decode(data, addr)
+            msgs = self.codecs[i].decode(data, addr, datagram=True)
             if msgs:
                 self.peers[i] = addr
             now = self.now_s()

@@ -109,3 +109,10 @@ def test_named_numbers_match_the_dialect():
         name = "POSITION_TARGET_TYPEMASK_" + bit.name
         assert getattr(dialect, name) == bit.value
     assert consts.TYPE_MASK_VELOCITY_YAW == 2503
+
+
+def test_a_stray_start_byte_in_a_datagram_does_not_swallow_the_next_ones():
+    a, b = Codec(3, 1), Codec(255, 190)
+    assert b.decode(heartbeat(a) + b"\xfd", "u", datagram=True)  # the frame, then junk
+    assert [m.get_type() for m in b.decode(heartbeat(a), "u", datagram=True)] == ["HEARTBEAT"]
+    assert b.stats.bad_frames == 1

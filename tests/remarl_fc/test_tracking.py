@@ -1,0 +1,534 @@
+"""Vehicle tracks and the ADS-B traffic picture: telemetry in the mission frame, bad values out."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+import pytest
+from hypothesis import assume, given
+from hypothesis import strategies as st
+
+from remarl_fc.frames import GeoPoint, ned_to_geodetic, to_deg_e7, yaw_to_cdeg
+from remarl_fc.mavlink.codec import Codec
+from remarl_fc.mavlink.consts import (
+    EKF_GOOD,
+    AdsbFlag,
+    CopterMode,
+    EkfFlag,
+    LandedState,
+    MavAutopilot,
+    MavModeFlag,
+    MavState,
+    Px4AutoSubMode,
+    Px4MainMode,
+    px4_custom_mode,
+)
+from remarl_fc.tracking import (
+    MAX_SPEED_M_S,
+    STATUSTEXT_KEPT,
+    TrafficPicture,
+    VehicleTrack,
+)
+
+ORIGIN = GeoPoint(47.397742, 8.545594, 488.0)
+
+VEHICLE = Codec(1, 1)
+GCS = Codec(255, 190)
+F = VEHICLE.factory
+
+ADSB_ALL = (
+    AdsbFlag.VALID_COORDS
+    | AdsbFlag.VALID_ALTITUDE
+    | AdsbFlag.VALID_HEADING
+    | AdsbFlag.VALID_VELOCITY
+)
+
+# Positions from telemetry are quantised to degE7 (≈ 1.1 cm north, ≈ 0.8 cm east here) and mm.
+QUANTUM_M = 0.02
+
+
+def wire(msg: Any) -> Any:
+    """The message as the link delivers it: encoded by the vehicle, decoded by the GCS."""
+    (out,) = GCS.decode(VEHICLE.encode(msg), "vehicle")
+    return out
+
+
+def heartbeat(autopilot: int = MavAutopilot.ARDUPILOTMEGA, custom_mode: int = 0, base: int = 0):
+    return wire(F.heartbeat_encode(2, autopilot, base, custom_mode, MavState.ACTIVE))
+
+
+def position(
+    north: float,
+    east: float,
+    height: float,
+    vel_ned: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    *,
+    origin: GeoPoint = ORIGIN,
+    hdg: int = 65535,
+) -> Any:
+    lat, lon, alt = ned_to_geodetic(north, east, -height, origin)
+    vx, vy, vz = (round(v * 100) for v in vel_ned)
+    return wire(
+        F.global_position_int_encode(
+            1000,
+            int(to_deg_e7(lat)),
+            int(to_deg_e7(lon)),
+            round(float(alt) * 1000),
+            round(height * 1000),
+            vx,
+            vy,
+            vz,
+            hdg,
+        )
+    )
+
+
+def attitude(yaw: float) -> Any:
+    return wire(F.attitude_encode(1000, 0.0, 0.0, yaw, 0.0, 0.0, 0.0))
+
+
+def ekf(flags: int) -> Any:
+    return wire(F.ekf_status_report_encode(flags, 0.1, 0.1, 0.1, 0.1, 0.0))
+
+
+def statustext(text: str, severity: int = 4) -> Any:
+    return wire(F.statustext_encode(severity, text.encode()))
+
+
+def track() -> VehicleTrack:
+    return VehicleTrack(1, ORIGIN)
+
+
+# -- HEARTBEAT ------------------------------------------------------------------------------
+
+
+def test_a_new_track_knows_nothing():
+    t = track()
+    assert t.autopilot is None and not t.armed and not t.is_px4
+    assert np.isnan(t.ne_m).all() and math.isnan(t.height_m) and math.isnan(t.yaw_rad)
+    assert not t.position_ok()
+    assert t.position_age_s(5.0) == math.inf
+    assert t.last_text(-math.inf) == ""
+    assert not t.rejected and not t.seen
+
+
+def test_heartbeat_sets_identity_mode_and_arming():
+    t = track()
+    base = MavModeFlag.SAFETY_ARMED | MavModeFlag.CUSTOM_MODE_ENABLED
+    t.update(heartbeat(custom_mode=CopterMode.GUIDED, base=base), 3.0)
+    assert t.autopilot == MavAutopilot.ARDUPILOTMEGA and not t.is_px4
+    assert t.custom_mode == CopterMode.GUIDED and t.base_mode == base
+    assert t.system_status == MavState.ACTIVE and t.t_heartbeat == 3.0
+    assert t.armed
+    t.update(heartbeat(custom_mode=CopterMode.LOITER, base=MavModeFlag.CUSTOM_MODE_ENABLED), 4.0)
+    assert not t.armed and t.custom_mode == CopterMode.LOITER and t.t_heartbeat == 4.0
+    assert t.seen["HEARTBEAT"] == 2
+
+
+def test_heartbeat_of_a_gcs_or_companion_is_ignored():
+    t = track()
+    t.update(heartbeat(custom_mode=CopterMode.GUIDED, base=MavModeFlag.SAFETY_ARMED), 1.0)
+    t.update(heartbeat(autopilot=MavAutopilot.INVALID, custom_mode=0, base=0), 2.0)
+    assert t.autopilot == MavAutopilot.ARDUPILOTMEGA
+    assert t.custom_mode == CopterMode.GUIDED and t.armed and t.t_heartbeat == 1.0
+    assert t.seen["HEARTBEAT"] == 2  # counted, not used
+    fresh = track()
+    fresh.update(heartbeat(autopilot=MavAutopilot.INVALID), 1.0)
+    assert fresh.autopilot is None and fresh.t_heartbeat == -math.inf
+
+
+# -- external control mode ------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("autopilot", "custom_mode", "external"),
+    [
+        (MavAutopilot.ARDUPILOTMEGA, CopterMode.GUIDED, True),
+        (MavAutopilot.ARDUPILOTMEGA, CopterMode.LOITER, False),
+        (MavAutopilot.ARDUPILOTMEGA, CopterMode.GUIDED_NOGPS, False),
+        (MavAutopilot.ARDUPILOTMEGA, px4_custom_mode(Px4MainMode.OFFBOARD), False),
+        (MavAutopilot.PX4, px4_custom_mode(Px4MainMode.OFFBOARD), True),
+        (MavAutopilot.PX4, 6 << 16, True),
+        (MavAutopilot.PX4, CopterMode.GUIDED, False),  # 4 means nothing on PX4
+        (MavAutopilot.PX4, px4_custom_mode(Px4MainMode.POSCTL), False),
+        (MavAutopilot.PX4, px4_custom_mode(Px4MainMode.AUTO, Px4AutoSubMode.LOITER), False),
+    ],
+)
+def test_in_external_control_mode(autopilot, custom_mode, external):
+    t = track()
+    t.update(heartbeat(autopilot=autopilot, custom_mode=custom_mode), 1.0)
+    assert t.is_px4 == (autopilot == MavAutopilot.PX4)
+    assert t.in_external_control_mode() is external
+
+
+# -- GLOBAL_POSITION_INT --------------------------------------------------------------------
+
+
+def test_position_in_the_mission_frame():
+    t = track()
+    t.update(position(120.0, -35.5, 20.0, (3.0, -4.0, -0.5)), 7.0)
+    np.testing.assert_allclose(t.ne_m, [120.0, -35.5], atol=QUANTUM_M)
+    assert t.height_m == pytest.approx(20.0, abs=1e-3)
+    np.testing.assert_allclose(t.vel_ned_m_s, [3.0, -4.0, -0.5])
+    assert t.t_position == 7.0 and t.position_age_s(7.5) == pytest.approx(0.5)
+    assert t.seen["GLOBAL_POSITION_INT"] == 1 and not t.rejected
+
+
+def test_position_against_an_exact_geodetic_point():
+    """Lat/lon/alt on the wire built directly from `ned_to_geodetic` of a known offset."""
+    lat, lon, alt = ned_to_geodetic(-250.0, 410.0, -45.0, ORIGIN)
+    msg = wire(
+        F.global_position_int_encode(
+            0, int(to_deg_e7(lat)), int(to_deg_e7(lon)), round(float(alt) * 1000), 45000, 0, 0, 0, 0
+        )
+    )
+    t = track()
+    t.update(msg, 0.0)
+    np.testing.assert_allclose(t.ne_m, [-250.0, 410.0], atol=QUANTUM_M)
+    assert t.height_m == pytest.approx(45.0, abs=1e-3)
+    assert t.yaw_rad == 0.0  # hdg 0: north
+
+
+@given(
+    st.floats(-60.0, 60.0),
+    st.floats(-179.0, 179.0),
+    st.floats(-3000.0, 3000.0),
+    st.floats(-3000.0, 3000.0),
+    st.floats(-50.0, 400.0),
+)
+def test_position_round_trip(lat0, lon0, north, east, height):
+    origin = GeoPoint(lat0, lon0, 300.0)
+    lat, lon, _ = ned_to_geodetic(north, east, 0.0, origin)
+    # lat = lon = 0 on the wire is "no fix" by convention: a vehicle at null island is not flown
+    assume(int(to_deg_e7(lat)) != 0 or int(to_deg_e7(lon)) != 0)
+    t = VehicleTrack(1, origin)
+    t.update(position(north, east, height, origin=origin), 1.0)
+    assert not t.rejected
+    np.testing.assert_allclose(t.ne_m, [north, east], atol=QUANTUM_M)
+    assert t.height_m == pytest.approx(height, abs=1e-3)
+
+
+def test_heading_from_position_until_attitude_arrives():
+    t = track()
+    t.update(position(0.0, 0.0, 10.0, hdg=9000), 1.0)
+    assert t.yaw_rad == pytest.approx(math.pi / 2)
+    t.update(position(0.0, 1.0, 10.0, hdg=27000), 1.1)
+    assert t.yaw_rad == pytest.approx(-math.pi / 2)  # wrapped to [-π, π)
+    t.update(position(0.0, 2.0, 10.0, hdg=65535), 1.2)  # unknown: kept
+    assert t.yaw_rad == pytest.approx(-math.pi / 2)
+    t.update(attitude(0.25), 1.3)
+    assert t.yaw_rad == pytest.approx(0.25) and t.t_yaw == 1.3
+    t.update(position(0.0, 3.0, 10.0, hdg=int(yaw_to_cdeg(2.0))), 1.4)
+    assert t.yaw_rad == pytest.approx(0.25)  # ATTITUDE wins once heard
+
+
+def test_no_fix_is_rejected():
+    t = track()
+    msg = wire(F.global_position_int_encode(0, 0, 0, 488000, 0, 0, 0, 0, 65535))
+    t.update(msg, 1.0)
+    assert t.rejected == {"no fix (lat = lon = 0)": 1}
+    assert not math.isfinite(t.t_position) and np.isnan(t.ne_m).all()
+    assert not t.position_ok()
+
+
+@pytest.mark.parametrize(
+    "vel",
+    [
+        (MAX_SPEED_M_S + 1.0, 0.0, 0.0),
+        (0.0, -150.0, 0.0),
+        (0.0, 0.0, 120.0),
+        (80.0, 80.0, 0.0),  # 113 m/s in total
+    ],
+)
+def test_absurd_velocity_is_rejected(vel):
+    t = track()
+    t.update(position(10.0, 10.0, 20.0), 1.0)
+    t.update(position(11.0, 10.0, 20.0, vel), 1.1)
+    assert t.rejected == {"impossible position or velocity": 1}
+    np.testing.assert_allclose(t.ne_m, [10.0, 10.0], atol=QUANTUM_M)
+    assert t.t_position == 1.0
+    np.testing.assert_array_equal(t.vel_ned_m_s, [0.0, 0.0, 0.0])
+
+
+def test_fast_but_possible_velocity_is_kept():
+    t = track()
+    t.update(position(10.0, 10.0, 20.0, (70.0, -70.0, 0.0)), 1.0)  # 99 m/s
+    assert not t.rejected and t.t_position == 1.0
+
+
+def test_latitude_outside_the_globe_is_rejected():
+    t = track()
+    t.update(wire(F.global_position_int_encode(0, 950_000_000, 85_000_000, 0, 0, 0, 0, 0, 0)), 1.0)
+    assert t.rejected == {"impossible position or velocity": 1}
+    assert not math.isfinite(t.t_position)
+
+
+def test_position_jumps_are_rejected_then_caught_up_with():
+    t = track()
+    t.update(position(0.0, 0.0, 20.0), 10.0)
+    # 0.1 s later: at most 100 m/s · 0.1 s + 5 m = 15 m away
+    t.update(position(14.0, 0.0, 20.0), 10.1)
+    assert not t.rejected and t.t_position == 10.1
+    t.update(position(14.0, 40.0, 20.0), 10.2)
+    assert t.rejected == {"position jump": 1}
+    np.testing.assert_allclose(t.ne_m, [14.0, 0.0], atol=QUANTUM_M)
+    assert t.t_position == 10.1
+    t.update(position(14.0, 40.0, 20.0), 10.25)
+    assert t.rejected["position jump"] == 2
+    # the allowance grows with the time since the last accepted fix: 0.4 s → 45 m
+    t.update(position(14.0, 40.0, 20.0), 10.5)
+    assert t.rejected["position jump"] == 2
+    np.testing.assert_allclose(t.ne_m, [14.0, 40.0], atol=QUANTUM_M)
+    assert t.t_position == 10.5
+
+
+def test_nan_attitude_is_rejected():
+    t = track()
+    t.update(attitude(0.5), 1.0)
+    for bad in (math.nan, math.inf, -math.inf, 7.0):
+        t.update(attitude(bad), 2.0)
+    assert t.rejected == {"attitude not a number": 4}
+    assert t.yaw_rad == pytest.approx(0.5) and t.t_yaw == 1.0
+    assert t.seen["ATTITUDE"] == 5
+
+
+def test_rejections_are_counted_by_reason():
+    t = track()
+    t.update(wire(F.global_position_int_encode(0, 0, 0, 0, 0, 0, 0, 0, 0)), 1.0)
+    t.update(wire(F.global_position_int_encode(0, 0, 0, 0, 0, 0, 0, 0, 0)), 1.1)
+    t.update(position(0.0, 0.0, 20.0, (150.0, 0.0, 0.0)), 1.2)
+    t.update(attitude(math.nan), 1.3)
+    t.update(position(0.0, 0.0, 20.0), 1.4)
+    t.update(position(900.0, 0.0, 20.0), 1.5)
+    assert t.rejected == {
+        "no fix (lat = lon = 0)": 2,
+        "impossible position or velocity": 1,
+        "attitude not a number": 1,
+        "position jump": 1,
+    }
+
+
+# -- position_ok ----------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("flags", "ok"),
+    [
+        (None, False),  # ArduPilot without an EKF report: not yet
+        (EKF_GOOD, True),
+        (EkfFlag.VELOCITY_HORIZ | EkfFlag.POS_HORIZ_ABS, True),
+        (EKF_GOOD | EkfFlag.CONST_POS_MODE, False),
+        (EKF_GOOD & ~EkfFlag.POS_HORIZ_ABS, False),
+        (EKF_GOOD & ~EkfFlag.VELOCITY_HORIZ, False),
+        (EkfFlag.ATTITUDE | EkfFlag.POS_HORIZ_REL, False),
+        (0, False),
+    ],
+)
+def test_position_ok_on_ardupilot(flags, ok):
+    t = track()
+    t.update(heartbeat(autopilot=MavAutopilot.ARDUPILOTMEGA), 0.0)
+    t.update(position(1.0, 2.0, 3.0), 0.5)
+    if flags is not None:
+        t.update(ekf(int(flags)), 0.6)
+        assert t.ekf_flags == int(flags)
+    assert t.position_ok() is ok
+
+
+def test_position_ok_on_ardupilot_needs_a_position_too():
+    t = track()
+    t.update(heartbeat(autopilot=MavAutopilot.ARDUPILOTMEGA), 0.0)
+    t.update(ekf(int(EKF_GOOD)), 0.1)
+    assert not t.position_ok()
+    t.update(position(1.0, 2.0, 3.0), 0.5)
+    assert t.position_ok()
+    t.update(ekf(int(EKF_GOOD | EkfFlag.CONST_POS_MODE)), 0.6)  # lost GPS: dead reckoning
+    assert not t.position_ok()
+
+
+def test_position_ok_on_px4_needs_only_a_position():
+    t = track()
+    t.update(heartbeat(autopilot=MavAutopilot.PX4), 0.0)
+    assert not t.position_ok()
+    t.update(wire(F.global_position_int_encode(0, 0, 0, 0, 0, 0, 0, 0, 0)), 0.2)  # no fix
+    assert not t.position_ok()
+    t.update(position(1.0, 2.0, 3.0), 0.5)
+    assert t.position_ok()
+
+
+def test_other_telemetry_is_kept():
+    t = track()
+    t.update(wire(F.extended_sys_state_encode(0, LandedState.IN_AIR)), 1.0)
+    assert t.landed_state == LandedState.IN_AIR
+    t.update(wire(F.sys_status_encode(0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0)), 1.0)  # ignored
+    assert t.seen == {"EXTENDED_SYS_STATE": 1, "SYS_STATUS": 1}
+
+
+# -- STATUSTEXT -----------------------------------------------------------------------------
+
+
+def test_last_text():
+    t = track()
+    t.update(statustext("PreArm: Need Position Estimate", severity=2), 1.0)
+    t.update(statustext("Arming motors"), 2.0)
+    t.update(statustext("Mode change failed"), 3.0)
+    assert t.last_text(0.0) == "Mode change failed"
+    assert t.last_text(3.0) == "Mode change failed"  # at `since` counts
+    assert t.last_text(3.01) == ""
+    assert t.texts[0] == (1.0, 2, "PreArm: Need Position Estimate")
+    assert all(isinstance(text, str) for _, _, text in t.texts)
+
+
+def test_only_recent_texts_are_kept():
+    t = track()
+    for k in range(STATUSTEXT_KEPT + 5):
+        t.update(statustext(f"text {k}"), float(k))
+    assert len(t.texts) == STATUSTEXT_KEPT
+    assert t.texts[0][2] == "text 5"
+    assert t.last_text(0.0) == f"text {STATUSTEXT_KEPT + 4}"
+
+
+# -- prediction -----------------------------------------------------------------------------
+
+
+def test_predicted_position_at_constant_velocity():
+    t = track()
+    t.update(position(100.0, -50.0, 20.0, (2.0, -1.0, 0.5)), 10.0)
+    np.testing.assert_allclose(t.predicted_ne_m(10.0), [100.0, -50.0], atol=QUANTUM_M)
+    np.testing.assert_allclose(t.predicted_ne_m(12.5), [105.0, -52.5], atol=QUANTUM_M)
+    # never extrapolated backwards
+    np.testing.assert_allclose(t.predicted_ne_m(9.0), t.ne_m)
+    assert np.isnan(track().predicted_ne_m(1.0)).all()  # nothing known, nothing predicted
+
+
+# -- ADS-B ----------------------------------------------------------------------------------
+
+
+def adsb(
+    icao: int,
+    north: float,
+    east: float,
+    height: float,
+    *,
+    heading_cdeg: int = 0,
+    speed_cm_s: int = 0,
+    flags: int = ADSB_ALL,
+    tslc: int = 0,
+    origin: GeoPoint = ORIGIN,
+) -> Any:
+    lat, lon, alt = ned_to_geodetic(north, east, -height, origin)
+    return wire(
+        F.adsb_vehicle_encode(
+            icao,
+            int(to_deg_e7(lat)),
+            int(to_deg_e7(lon)),
+            1,  # ADSB_ALTITUDE_TYPE_GEOMETRIC
+            round(float(alt) * 1000),
+            heading_cdeg,
+            speed_cm_s,
+            0,
+            b"INTRUDER",
+            14,  # UAV
+            tslc,
+            flags,
+            0,
+        )
+    )
+
+
+def test_adsb_position_and_velocity():
+    pic = TrafficPicture(ORIGIN)
+    pic.update(adsb(0xABC123, 300.0, -200.0, 30.0, heading_cdeg=9000, speed_cm_s=1500), 4.0)
+    (intr,) = pic.current(4.0, 30.0, 10.0)
+    assert pic.tracks[0xABC123] is intr
+    np.testing.assert_allclose(intr.ne_m, [300.0, -200.0], atol=QUANTUM_M)
+    assert intr.height_m == pytest.approx(30.0, abs=1e-3)
+    np.testing.assert_allclose(intr.vel_ne_m_s, [0.0, 15.0], atol=1e-9)  # heading 90°: east
+    assert intr.t == 4.0
+    np.testing.assert_allclose(intr.predicted_ne_m(6.0), [300.0, -170.0], atol=QUANTUM_M)
+    np.testing.assert_allclose(intr.predicted_ne_m(3.0), intr.ne_m)
+
+
+@pytest.mark.parametrize(
+    ("heading_cdeg", "vel"),
+    [
+        (0, (2.5, 0.0)),  # north
+        (9000, (0.0, 2.5)),  # east: clockwise from north
+        (18000, (-2.5, 0.0)),  # south
+        (27000, (0.0, -2.5)),  # west
+        (4500, (2.5 / math.sqrt(2), 2.5 / math.sqrt(2))),  # north-east
+    ],
+)
+def test_adsb_heading_is_clockwise_from_north(heading_cdeg, vel):
+    pic = TrafficPicture(ORIGIN)
+    pic.update(adsb(1, 0.0, 0.0, 20.0, heading_cdeg=heading_cdeg, speed_cm_s=250), 0.0)
+    np.testing.assert_allclose(pic.tracks[1].vel_ne_m_s, vel, atol=1e-9)
+
+
+@given(st.integers(0, 35999), st.integers(1, 30000))
+def test_adsb_velocity_direction_and_magnitude(heading_cdeg, speed_cm_s):
+    pic = TrafficPicture(ORIGIN)
+    pic.update(adsb(7, 0.0, 0.0, 20.0, heading_cdeg=heading_cdeg, speed_cm_s=speed_cm_s), 0.0)
+    vn, ve = pic.tracks[7].vel_ne_m_s
+    assert math.hypot(vn, ve) == pytest.approx(speed_cm_s / 100.0)
+    course = math.degrees(math.atan2(ve, vn)) % 360.0
+    diff = (course - heading_cdeg / 100.0 + 180.0) % 360.0 - 180.0
+    assert abs(diff) < 1e-6
+
+
+def test_adsb_without_heading_or_velocity_flags():
+    pic = TrafficPicture(ORIGIN)
+    no_velocity = ADSB_ALL & ~AdsbFlag.VALID_VELOCITY
+    pic.update(adsb(1, 0.0, 0.0, 20.0, heading_cdeg=9000, speed_cm_s=900, flags=no_velocity), 0.0)
+    np.testing.assert_array_equal(pic.tracks[1].vel_ne_m_s, [0.0, 0.0])
+    no_heading = ADSB_ALL & ~AdsbFlag.VALID_HEADING
+    pic.update(adsb(2, 0.0, 0.0, 20.0, heading_cdeg=9000, speed_cm_s=900, flags=no_heading), 0.0)
+    np.testing.assert_allclose(pic.tracks[2].vel_ne_m_s, [9.0, 0.0])  # course taken as north
+
+
+def test_adsb_time_since_last_contact_ages_the_track():
+    pic = TrafficPicture(ORIGIN, max_age_s=5.0)
+    pic.update(adsb(1, 0.0, 0.0, 20.0, tslc=3), 10.0)
+    assert pic.tracks[1].t == 7.0
+    assert len(pic.current(12.0, 20.0, 5.0)) == 1
+    assert pic.current(12.5, 20.0, 5.0) == []
+
+
+def test_adsb_height_band():
+    pic = TrafficPicture(ORIGIN)
+    for icao, height in ((1, 20.0), (2, 29.0), (3, 31.0), (4, 5.0), (5, 400.0)):
+        pic.update(adsb(icao, 50.0 * icao, 0.0, height), 1.0)
+    close = pic.current(1.0, 20.0, 10.0)
+    assert sorted(round(i.height_m) for i in close) == [20, 29]
+    assert len(pic.current(1.0, 20.0, 1000.0)) == 5
+    assert len(pic.tracks) == 5  # filtered, not forgotten
+
+
+def test_adsb_expiry():
+    pic = TrafficPicture(ORIGIN, max_age_s=5.0)
+    pic.update(adsb(1, 0.0, 0.0, 20.0), 0.0)
+    pic.update(adsb(2, 100.0, 0.0, 20.0), 3.0)
+    assert len(pic.current(5.0, 20.0, 10.0)) == 2  # exactly max_age_s old: kept
+    (left,) = pic.current(5.1, 20.0, 10.0)
+    assert set(pic.tracks) == {2} and left is pic.tracks[2]
+    pic.update(adsb(2, 110.0, 0.0, 20.0), 7.0)  # a fresh report renews the track
+    (renewed,) = pic.current(11.0, 20.0, 10.0)
+    np.testing.assert_allclose(renewed.ne_m, [110.0, 0.0], atol=QUANTUM_M)
+    assert pic.current(12.5, 20.0, 10.0) == [] and not pic.tracks
+
+
+def test_adsb_without_valid_coordinates_is_rejected():
+    pic = TrafficPicture(ORIGIN)
+    pic.update(adsb(1, 10.0, 10.0, 20.0, flags=ADSB_ALL & ~AdsbFlag.VALID_COORDS), 0.0)
+    pic.update(adsb(2, 10.0, 10.0, 20.0, flags=0), 0.0)
+    assert not pic.tracks
+    assert pic.rejected == {"no valid coordinates": 2}
+
+
+def test_adsb_impossible_speed_is_rejected():
+    pic = TrafficPicture(ORIGIN)
+    pic.update(adsb(1, 0.0, 0.0, 20.0, heading_cdeg=0, speed_cm_s=60000), 0.0)  # 600 m/s
+    assert not pic.tracks and pic.rejected == {"impossible speed": 1}
+    pic.update(adsb(1, 0.0, 0.0, 20.0, heading_cdeg=0, speed_cm_s=25000), 0.0)  # an airliner
+    assert 1 in pic.tracks
