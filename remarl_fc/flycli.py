@@ -53,6 +53,30 @@ def add_parsers(sub: Any, bench: Any) -> None:
     p.add_argument(
         "--speedup", type=float, default=1.0, help=argparse.SUPPRESS
     )  # only to fly a mock running faster than real time
+    bus = p.add_argument_group("swarm bus (one process per vehicle)")
+    bus.add_argument(
+        "--vehicle",
+        type=int,
+        action="append",
+        default=None,
+        metavar="ID",
+        help="fly only this system id (repeatable); the others come from the bus",
+    )
+    bus.add_argument(
+        "--bus",
+        default="memory",
+        metavar="URL",
+        help="memory (default: one process flies all) or mqtt[s]://HOST[:PORT]",
+    )
+    bus.add_argument("--swarm", default="swarm", help="swarm name (MQTT topics)")
+    bus.add_argument("--bus-prefix", default="remarl", help="MQTT topic prefix")
+    bus.add_argument("--bus-user", default=None, help="MQTT user name")
+    bus.add_argument(
+        "--bus-password-file", default=None, help="MQTT password file (or $REMARL_BUS_PASSWORD)"
+    )
+    bus.add_argument("--bus-ca", default=None, help="CA certificate for TLS (implies TLS)")
+    bus.add_argument("--bus-cert", default=None, help="client certificate for TLS")
+    bus.add_argument("--bus-key", default=None, help="client key for TLS")
     p.add_argument("--quiet", action="store_true", help="no live status lines")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     p.set_defaults(handler=cmd_fly)
@@ -120,11 +144,18 @@ def cmd_fly(args: argparse.Namespace) -> int:
             system_id=args.system_id,
             speedup=args.speedup,
             max_flight_s=args.max_flight,
+            vehicles=frozenset(args.vehicle) if args.vehicle else None,
+            swarm=args.swarm,
+            bus_prefix=args.bus_prefix,
         )
     except ValueError as exc:
         raise ConfigError(f"fly: {exc}") from exc
     runtime = SwarmRuntime(
-        cfg, policy, spec, on_status=_status_printer(not (args.quiet or args.json))
+        cfg,
+        policy,
+        spec,
+        on_status=_status_printer(not (args.quiet or args.json)),
+        bus=_make_bus(args, cfg),
     )
 
     async def main() -> None:
@@ -137,8 +168,27 @@ def cmd_fly(args: argparse.Namespace) -> int:
         print("interrupted: every controlled vehicle was told to hold", file=sys.stderr)
     summary = runtime.summary()
     print(json.dumps(summary) if args.json else _fly_text(summary))
-    reached = all(v["status"] == "reached" for v in summary["vehicles"])
+    reached = all(v["status"] == "reached" for v in summary["vehicles"] if v["local"])
     return 0 if reached else EXIT_NOT_ALL_REACHED
+
+
+def _make_bus(args: argparse.Namespace, cfg: Any) -> Any:
+    """None for the in-process bus, else an MQTT endpoint for the vehicles this process flies."""
+    if args.bus == "memory":
+        return None
+    from remarl_fc.bus.mqtt import MqttBus, MqttSettings
+    from remarl_fc.runtime import bus_core
+
+    settings = MqttSettings.from_url(
+        args.bus,
+        username=args.bus_user,
+        password_file=args.bus_password_file,
+        ca_file=args.bus_ca,
+        cert_file=args.bus_cert,
+        key_file=args.bus_key,
+    )
+    ids = frozenset(p.system_id for p in cfg.mission.vehicles)
+    return MqttBus(settings, bus_core(cfg, cfg.vehicles or ids))
 
 
 def _fly_text(summary: dict[str, Any]) -> str:

@@ -36,8 +36,10 @@ from typing import IO, Any, Literal, Self
 
 import numpy as np
 
+from remarl_fc.bus.core import BusCore, SwarmBus
+from remarl_fc.bus.memory import MemoryBroker, MemoryBus
 from remarl_fc.control import ControlSpec, Decision, PolicyLike, SwarmController
-from remarl_fc.errors import CommandRejected, LinkTimeout, RemarlError
+from remarl_fc.errors import CommandRejected, ConfigError, LinkTimeout, RemarlError
 from remarl_fc.mavlink.codec import Codec, SigningConfig
 from remarl_fc.mavlink.consts import (
     TYPE_MASK_VELOCITY_YAW,
@@ -57,6 +59,7 @@ from remarl_fc.mavlink.consts import (
 )
 from remarl_fc.mavlink.link import LinkAddress, MavlinkLink, TlogWriter
 from remarl_fc.mission import Mission
+from remarl_fc.peers import Peers
 from remarl_fc.tracking import TrafficPicture, VehicleTrack
 
 HoldMode = Literal["brake", "loiter"]
@@ -163,6 +166,14 @@ class FlyConfig:
     """Scale every period and deadline (only to fly a mock running faster than real time)."""
     max_flight_s: float = 600.0
     """Hold everything after this long under control."""
+    vehicles: frozenset[int] | None = None
+    """System ids this process flies (one per process over MQTT); None: every vehicle."""
+    swarm: str = "swarm"
+    """The swarm's name on the bus (topics PREFIX/SWARM/uav/ID/...)."""
+    bus_prefix: str = "remarl"
+    """Topic prefix on the bus."""
+    peer_timeout_s: float = 1.5
+    """A peer silent on the bus this long is treated as lost (an obstacle at its last track)."""
 
     def __post_init__(self) -> None:
         if not self.connections:
@@ -188,6 +199,10 @@ class Member:
     prestream: bool = False  # PX4: stream zero-velocity setpoints before OFFBOARD
     sent: int = 0
     events: list[tuple[float, str]] = field(default_factory=list)
+    local: bool = True  # flown by this process (else a peer's, known from the swarm bus)
+    remote_status: str | None = None  # a peer's status as its process publishes it
+    ready_ne_m: np.ndarray | None = None  # where it was when it became ready to start
+    ready_t: float | None = None  # when (UNIX s): every process derives the same start
 
 
 class SwarmRuntime:
@@ -207,6 +222,7 @@ class SwarmRuntime:
         spec: ControlSpec,
         *,
         on_status: Callable[[str], None] | None = None,
+        bus: SwarmBus | None = None,
     ) -> None:
         self.cfg, self.policy, self.spec = cfg, policy, spec
         self.clock = Clock(cfg.speedup)
@@ -217,7 +233,21 @@ class SwarmRuntime:
             for p in mission.by_slot()
         ]
         self.by_sysid = {m.system_id: m for m in self.members}
+        local = cfg.vehicles if cfg.vehicles is not None else frozenset(self.by_sysid)
+        unknown = sorted(local - set(self.by_sysid))
+        if unknown:
+            raise ConfigError(
+                f"vehicle(s) {unknown} are not in the mission {mission.source} "
+                f"(its system ids: {sorted(self.by_sysid)})"
+            )
+        for m in self.members:
+            m.local = m.system_id in local
         self.traffic = TrafficPicture(mission.origin)
+        self.bus: SwarmBus = bus or MemoryBus(MemoryBroker(), bus_core(cfg, local))
+        self.peers = Peers(
+            self.bus, self.members, self.traffic, self.clock, cfg.peer_timeout_s,
+            lambda m: m.status.value,
+        )  # fmt: skip
         self.controller = SwarmController(policy, spec, mission.targets_ne_m())
         self.codec = Codec(cfg.system_id, cfg.component_id, signing=cfg.signing)
         self.links: list[MavlinkLink] = []
@@ -253,6 +283,7 @@ class SwarmRuntime:
                     tlog = TlogWriter(log_dir / name)
                 link = MavlinkLink(url, self.codec, self._receiver(k), tlog=tlog)
                 self.links.append(await stack.enter_async_context(link))
+            await stack.enter_async_context(self.bus)
         except BaseException:
             await stack.aclose()
             raise
@@ -286,7 +317,7 @@ class SwarmRuntime:
             self.traffic.update(msg, now)
             return
         member = self.by_sysid.get(msg.get_srcSystem())
-        if member is None or msg.get_srcComponent() != MavComponent.AUTOPILOT1:
+        if member is None or not member.local or msg.get_srcComponent() != MavComponent.AUTOPILOT1:
             return
         if member.link is None:
             member.link = self.links[k]
@@ -391,6 +422,8 @@ class SwarmRuntime:
                 tg.create_task(self._heartbeat_loop(), name="remarl.heartbeat")
                 tg.create_task(self._setpoint_loop(), name="remarl.setpoints")
                 tg.create_task(self._hold_loop(), name="remarl.holds")
+                tg.create_task(self.bus.run(), name="remarl.bus_rx")
+                tg.create_task(self.peers.tx_loop(self._done), name="remarl.bus_tx")
                 tg.create_task(self._mission(), name="remarl.mission")
         except* _FlightOver:  # the mission ended normally: the group cancelled the loops
             pass
@@ -415,19 +448,41 @@ class SwarmRuntime:
             self._done.set()
         raise _FlightOver
 
+    def local_members(self) -> list[Member]:
+        """The vehicles this process flies."""
+        return [m for m in self.members if m.local]
+
     async def _prepare(self) -> None:
         cfg = self.cfg
+        mine = self.local_members()
         await self.wait_until(
-            "a HEARTBEAT from every vehicle of the mission",
-            lambda: all(m.track.autopilot is not None for m in self.members),
+            "a HEARTBEAT from every vehicle this process flies",
+            lambda: all(m.track.autopilot is not None for m in mine),
             cfg.ready_timeout_s,
         )
         async with asyncio.TaskGroup() as tg:
-            for m in self.members:
+            for m in mine:
                 tg.create_task(self._prepare_one(m), name=f"remarl[{m.system_id}].prepare")
-        positions = np.array([m.track.ne_m for m in self.members])
-        self.controller.start(positions, self.clock.now())
-        for m in self.members:
+        for m in mine:
+            m.ready_ne_m, m.ready_t = m.track.ne_m.copy(), time.time()
+        plan: list[tuple[np.ndarray, float]] = []
+
+        def all_ready() -> bool:
+            self.peers.sync(self.clock.now())
+            got = self.peers.start_plan()
+            if got is not None:
+                plan.append(got)
+            return got is not None
+
+        await self.wait_until(
+            "every vehicle of the swarm ready (states on the swarm bus)",
+            all_ready,
+            cfg.ready_timeout_s + cfg.takeoff_timeout_s,
+        )
+        positions, start_unix = plan[0]
+        start = self.clock.now() - (time.time() - start_unix) * self.clock.speedup
+        self.controller.start(positions, start)
+        for m in mine:
             m.status = Status.CONTROLLED
             self._event(m, "under control")
 
@@ -503,7 +558,8 @@ class SwarmRuntime:
         dt = self.spec.dt_s
         t_next = self.clock.now()
         end = t_next + self.cfg.max_flight_s
-        while any(m.status in (Status.CONTROLLED, Status.LOST) for m in self.members):
+        mine = self.local_members()
+        while any(m.status in (Status.CONTROLLED, Status.LOST) for m in mine):
             now = self.clock.now()
             if now > end:
                 await self.hold_all(reason="max flight time")
@@ -528,6 +584,7 @@ class SwarmRuntime:
         return np.array(pos), np.array(vel)
 
     def _decide(self, now: float) -> None:
+        self._sync_peers(now)
         positions = np.array([m.track.predicted_ne_m(now) for m in self.members])
         heights = [m.track.height_m for m in self.members if math.isfinite(m.track.height_m)]
         obstacles, obstacle_vel = self._obstacles(now, float(np.mean(heights)) if heights else 0.0)
@@ -568,8 +625,10 @@ class SwarmRuntime:
                 self.setpoint_deadline_misses += 1
                 t_next = now
             t0 = time.perf_counter()
+            self._sync_peers(now)
             for m in self.members:
-                self._tick_member(m, now)
+                if m.local:
+                    self._tick_member(m, now)
             self.tick_s.append(time.perf_counter() - t0)
             t_next += period
             await self.clock.sleep(t_next - self.clock.now())
@@ -646,7 +705,7 @@ class SwarmRuntime:
         """Send the hold mode to every vehicle still flown by this runtime (never raises)."""
         flown = [
             m
-            for m in self.members
+            for m in self.local_members()
             if m.status in (Status.CONTROLLED, Status.TAKING_OFF, Status.READY)
         ]
         for m in flown:
@@ -660,6 +719,17 @@ class SwarmRuntime:
                 self._event(m, f"hold failed: {r!r}")
 
     # -- logs ---------------------------------------------------------------------------
+
+    def _sync_peers(self, now: float) -> None:
+        """Bring the remote vehicles' rows up to date from the swarm bus."""
+        self.peers.sync(now)
+        for m in self.members:
+            if m.local or m.remote_status is None:
+                continue
+            status = Status(m.remote_status)
+            if status != m.status:
+                self._event(m, f"peer: {status.value}")
+                m.status = status
 
     def _mission_header(self) -> dict[str, Any]:
         mission = self.cfg.mission
@@ -709,10 +779,12 @@ class SwarmRuntime:
         return {
             "decisions": self.decisions,
             "setpoint_deadline_misses": self.setpoint_deadline_misses,
+            "bus": self.bus.core.stats.as_dict(),
             "vehicles": [
                 {
                     "system_id": m.system_id,
                     "slot": m.slot,
+                    "local": m.local,
                     "status": m.status.value,
                     "setpoints_sent": m.sent,
                     "telemetry_rejected": dict(m.track.rejected),
@@ -730,6 +802,12 @@ class _FlightOver(Exception):
 def _first_leaf(group: BaseExceptionGroup[Any]) -> BaseException:
     first = group.exceptions[0]
     return _first_leaf(first) if isinstance(first, BaseExceptionGroup) else first
+
+
+def bus_core(cfg: FlyConfig, local: frozenset[int]) -> BusCore:
+    """The receive-side bookkeeping of this flight's swarm bus endpoint."""
+    ids = frozenset(p.system_id for p in cfg.mission.vehicles)
+    return BusCore(cfg.bus_prefix, cfg.swarm, local, ids)
 
 
 def _name(enum_cls: Any, value: int) -> str:

@@ -179,6 +179,7 @@ class Intruder:
     height_m: float
     vel_ne_m_s: FloatArray
     t: float
+    shared: bool = False  # learnt from another vehicle over the swarm bus
 
     def predicted_ne_m(self, now: float) -> FloatArray:
         """Position extrapolated at constant velocity to ``now``."""
