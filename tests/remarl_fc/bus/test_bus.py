@@ -166,8 +166,8 @@ async def running(bus) -> asyncio.Task:
     return task
 
 
-async def eventually(pred, timeout=10.0):
-    end = time.monotonic() + timeout
+async def eventually(pred, limit_s=10.0):
+    end = time.monotonic() + limit_s
     while not pred():
         if time.monotonic() > end:
             raise AssertionError("condition not met in time")
@@ -229,7 +229,8 @@ import asyncio, sys, os
 from remarl_fc.bus.core import BusCore
 from remarl_fc.bus.mqtt import MqttBus, MqttSettings
 async def main():
-    bus = MqttBus(MqttSettings.from_url(sys.argv[1]), BusCore("remarl", "s", frozenset({3}), frozenset({1, 2, 3})))
+    core = BusCore("remarl", "s", frozenset({3}), frozenset({1, 2, 3}))
+    bus = MqttBus(MqttSettings.from_url(sys.argv[1]), core)
     task = asyncio.create_task(bus.run())
     await bus.connected.wait()
     print("up", flush=True)
@@ -245,17 +246,19 @@ async def test_last_will_marks_a_dead_process_offline(mosquitto):
     b = MqttBus(MqttSettings.from_url(mosquitto.url), core(2))
     async with b:
         tb = await running(b)
-        proc = subprocess.Popen(
-            [sys.executable, "-c", WILL_SCRIPT, mosquitto.url], stdout=subprocess.PIPE
+        proc = await asyncio.create_subprocess_exec(
+            sys.executable, "-c", WILL_SCRIPT, mosquitto.url, stdout=subprocess.PIPE
         )
         try:
-            assert proc.stdout is not None and proc.stdout.readline().strip() == b"up"
+            assert proc.stdout is not None
+            assert (await asyncio.wait_for(proc.stdout.readline(), 20)).strip() == b"up"
             await eventually(lambda: b.core.online.get(3) is True)
             proc.kill()  # no clean goodbye: the broker publishes the will after the keepalive
-            await eventually(lambda: b.core.online.get(3) is False, timeout=20)
+            await eventually(lambda: b.core.online.get(3) is False, limit_s=20)
         finally:
-            proc.kill()
-            proc.communicate()
+            if proc.returncode is None:
+                proc.kill()
+            await proc.communicate()
         tb.cancel()
         await asyncio.gather(tb, return_exceptions=True)
 
