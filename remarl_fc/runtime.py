@@ -807,7 +807,7 @@ def _first_leaf(group: BaseExceptionGroup[Any]) -> BaseException:
 def bus_core(cfg: FlyConfig, local: frozenset[int]) -> BusCore:
     """The receive-side bookkeeping of this flight's swarm bus endpoint."""
     ids = frozenset(p.system_id for p in cfg.mission.vehicles)
-    return BusCore(cfg.bus_prefix, cfg.swarm, local, ids)
+    return BusCore(cfg.bus_prefix, cfg.swarm, local, ids, speedup=cfg.speedup)
 
 
 def _name(enum_cls: Any, value: int) -> str:

@@ -46,11 +46,12 @@ class Received:
 
 @dataclass
 class _Bucket:
+    rate_hz: float
     tokens: float = BUCKET_SIZE
     t: float = field(default_factory=time.monotonic)
 
     def take(self, now: float) -> bool:
-        self.tokens = min(BUCKET_SIZE, self.tokens + (now - self.t) * BUCKET_RATE_HZ)
+        self.tokens = min(BUCKET_SIZE, self.tokens + (now - self.t) * self.rate_hz)
         self.t = now
         if self.tokens < 1.0:
             return False
@@ -66,6 +67,8 @@ class BusCore:
         own_ids: the vehicles this process flies (their messages come back: ignored).
         mission_ids: every vehicle of the mission (anything else is ignored and counted).
         clock: monotonic seconds.
+        speedup: peers run this much faster than real time (a mock flown faster): the flood
+            limit scales with it.
     """
 
     def __init__(
@@ -75,7 +78,9 @@ class BusCore:
         own_ids: frozenset[int],
         mission_ids: frozenset[int],
         clock: Callable[[], float] = time.monotonic,
+        speedup: float = 1.0,
     ) -> None:
+        self.rate_hz = BUCKET_RATE_HZ * speedup
         self.prefix, self.swarm = prefix, swarm
         self.own_ids, self.mission_ids = own_ids, mission_ids
         self.clock = clock
@@ -97,7 +102,7 @@ class BusCore:
             return self._reject("sender not in the mission")
         if sender in self.own_ids:
             return False  # our own messages, echoed by the broker
-        bucket = self._buckets.setdefault((sender, kind), _Bucket(t=now))
+        bucket = self._buckets.setdefault((sender, kind), _Bucket(self.rate_hz, t=now))
         if not bucket.take(now):
             return self._reject("rate limited (flood)")
         if kind == "status":

@@ -1,0 +1,126 @@
+"""One `fly` process per vehicle over a real mosquitto, against the mock in its own process."""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from remarl_fc.demo import free_udp_port
+
+pytestmark = [pytest.mark.network, pytest.mark.timeout(300)]
+
+ROOT = Path(__file__).resolve().parents[2]
+MISSION = ROOT / "docs" / "examples" / "mission-3u2o.toml"
+CLI = [sys.executable, "-m", "remarl_fc"]
+
+
+def consecutive_udp_ports(n: int) -> int:
+    """A first port such that it and the next n − 1 are free now."""
+    for _ in range(50):
+        first = free_udp_port()
+        if all(_free(first + k) for k in range(n)):
+            return first
+    raise RuntimeError("no run of free UDP ports")
+
+
+def _free(port: int) -> bool:
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        try:
+            s.bind(("127.0.0.1", port))
+        except OSError:
+            return False
+    return True
+
+
+def fly_swarm(tmp_path: Path, broker, speedup: float, outage=None) -> tuple[list, dict]:
+    """Three fly processes, one mock; returns (their summaries, the mock's ground truth)."""
+    port = consecutive_udp_ports(3)
+    truth = tmp_path / "truth.json"
+    mock = subprocess.Popen(
+        [*CLI, "sitl", "--scenario", "3u2o", "--base-port", "0", "--out", f"127.0.0.1:{port}",
+         "--out-step", "1", "--speedup", str(speedup), "--timeout", "600", "--summary",
+         str(truth), "--json"],
+        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+    )  # fmt: skip
+    flyers = [
+        subprocess.Popen(
+            [
+                *CLI,
+                "fly",
+                "--connection",
+                f"udpin:127.0.0.1:{port + i}",
+                "--policy",
+                "3u2o",
+                "--mission",
+                str(MISSION),
+                "--takeoff",
+                "20",
+                "--vehicle",
+                str(i + 1),
+                "--bus",
+                broker.url,
+                "--swarm",
+                "ci",
+                "--speedup",
+                str(speedup),
+                "--json",
+                "--log",
+                str(tmp_path / f"log{i + 1}"),
+            ],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+        )  # fmt: skip
+        for i in range(3)
+    ]
+    try:
+        if outage is not None:
+            outage(broker)
+        outs = [p.communicate(timeout=240) for p in flyers]
+    finally:
+        for p in flyers:
+            if p.poll() is None:
+                p.kill()
+                p.communicate()
+        mock.send_signal(signal.SIGINT)
+        mock.communicate(timeout=30)
+    summaries = []
+    for p, (out, err) in zip(flyers, outs, strict=True):
+        assert p.returncode == 0, err.decode()[-3000:]
+        summaries.append(json.loads(out))
+    return summaries, json.loads(truth.read_text())
+
+
+def test_three_processes_fly_the_swarm_over_mqtt(tmp_path, mosquitto):
+    summaries, truth = fly_swarm(tmp_path, mosquitto, speedup=4.0)
+    for k, s in enumerate(summaries):
+        mine = [v for v in s["vehicles"] if v["local"]]
+        assert [v["system_id"] for v in mine] == [k + 1]
+        assert mine[0]["status"] == "reached"
+        assert s["bus"]["accepted"] > 50  # it heard its peers
+        assert not s["bus"]["rejected"]
+    assert truth["reached_targets"] == 3
+    assert truth["collisions_vehicle_intruder"] == 0 == truth["collisions_vehicle_vehicle"]
+    assert truth["min_vehicle_intruder_m"] >= truth["d_col_m"]
+
+
+def test_broker_outage_mid_flight(tmp_path, mosquitto):
+    speedup = 2.0
+
+    def outage(broker) -> None:
+        time.sleep(12.0 / speedup)  # boot, take-off, some seconds under control
+        broker.stop()
+        time.sleep(5.0 / speedup)  # 5 s of flight without a broker
+        broker.start()
+
+    summaries, truth = fly_swarm(tmp_path, mosquitto, speedup=speedup, outage=outage)
+    assert all(s["bus"]["reconnects"] >= 1 for s in summaries)
+    assert truth["collisions_vehicle_intruder"] == 0 == truth["collisions_vehicle_vehicle"]
+    assert truth["reached_targets"] == 3
