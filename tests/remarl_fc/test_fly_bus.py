@@ -77,7 +77,7 @@ def fly_swarm(tmp_path: Path, broker, speedup: float, outage=None) -> tuple[list
             ],
             stdout=subprocess.PIPE,
             stderr=subprocess.PIPE,
-        )  # fmt: skip
+        )
         for i in range(3)
     ]
     try:
