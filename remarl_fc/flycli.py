@@ -106,6 +106,13 @@ def add_parsers(sub: Any, bench: Any) -> None:
     b.add_argument("--json", action="store_true", help="print one JSON object")
     b.set_defaults(handler=cmd_bench_fly)
 
+    b = bench.add_parser("bus", help="swarm bus: state latency through an MQTT broker")
+    b.add_argument("--vehicles", type=int, default=50)
+    b.add_argument("--seconds", type=float, default=5.0)
+    b.add_argument("--bus", default=None, help="mqtt://HOST:PORT (default: start mosquitto)")
+    b.add_argument("--json", action="store_true", help="print one JSON object")
+    b.set_defaults(handler=cmd_bench_bus)
+
 
 def _status_printer(enabled: bool) -> Any:
     if not enabled:
@@ -263,5 +270,26 @@ def cmd_bench_fly(args: argparse.Namespace) -> int:
             f"{result['decide_ms_p50']:.3f} ms, p99 {result['decide_ms_p99']:.3f} ms; "
             f"missed setpoint deadlines {result['setpoint_deadline_misses']}; "
             f"setpoint rate per vehicle {result['setpoints_per_vehicle_hz']:.2f} Hz"
+        )
+    return 0
+
+
+def cmd_bench_bus(args: argparse.Namespace) -> int:
+    """State latency through the broker."""
+    from remarl_fc.bus.bench import bench_bus
+    from remarl_fc.bus.mqtt import MqttSettings
+
+    host, port = "127.0.0.1", None
+    if args.bus:
+        settings = MqttSettings.from_url(args.bus)
+        host, port = settings.host, settings.port
+    result = asyncio.run(bench_bus(args.vehicles, args.seconds, port, host))
+    if args.json:
+        print(json.dumps(result))
+    else:
+        print(
+            f"{result['vehicles']} vehicles at {result['rate_hz']:g} Hz, {result['observers']} "
+            f"observers: state latency p50 {result['latency_ms_p50']} ms, p99 "
+            f"{result['latency_ms_p99']} ms; delivered {result['delivered_fraction']:.1%}"
         )
     return 0

@@ -293,3 +293,19 @@ async def test_acls_let_a_vehicle_publish_only_as_itself(secured_mosquitto):
             t.cancel()
         await asyncio.gather(ta, tb, tw, return_exceptions=True)
     assert url.startswith("mqtt://")
+
+
+@pytest.mark.network
+@pytest.mark.timeout(60)
+def test_bench_bus_command(mosquitto, capsys):
+    from remarl_fc.cli import main
+
+    assert (
+        main(
+            ["bench", "bus", "--vehicles", "5", "--seconds", "1", "--bus", mosquitto.url, "--json"]
+        )
+        == 0
+    )
+    result = json.loads(capsys.readouterr().out)
+    assert result["published"] >= 40 and result["delivered_fraction"] > 0.9
+    assert result["latency_ms_p50"] < 100
