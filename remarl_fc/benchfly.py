@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import asyncio
 import dataclasses
+import time
 from typing import Any
 
 import numpy as np
@@ -81,7 +82,15 @@ async def bench_fly(vehicles: int = 10, seconds: float = 10.0) -> dict[str, Any]
             runtime.setpoint_deadline_misses = 0
             for m in runtime.members:
                 m.sent = 0
+            window.append(time.monotonic())
+            await runtime.wait_until(
+                "the end of the measured flight",
+                lambda: not any(m.status == Status.CONTROLLED for m in runtime.members),
+                seconds + 30.0,
+            )
+            window.append(time.monotonic())
 
+        window: list[float] = []
         async with asyncio.TaskGroup() as tg:
             tg.create_task(watch(), name="bench.watch")
             tg.create_task(runtime.run(), name="bench.runtime")
@@ -98,6 +107,6 @@ async def bench_fly(vehicles: int = 10, seconds: float = 10.0) -> dict[str, Any]
         "decide_ms_p50": float(np.percentile(decide, 50)) if decide.size else None,
         "decide_ms_p99": float(np.percentile(decide, 99)) if decide.size else None,
         "setpoint_deadline_misses": runtime.setpoint_deadline_misses,
-        "setpoints_per_vehicle_hz": float(np.mean(sent)) / seconds,
+        "setpoints_per_vehicle_hz": float(np.mean(sent)) / (window[-1] - window[0]),
         "setpoints_applied_by_mock_min": int(min(applied)),
     }

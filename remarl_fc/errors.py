@@ -96,8 +96,8 @@ class LinkTimeout(LinkError):
 
     def __init__(self, *, link: str, waited_for: str, timeout_s: float) -> None:
         super().__init__(
-            f"no {waited_for} within {timeout_s:g} s; check that the vehicle is powered, the "
-            "address and port are right and nothing else holds the port",
+            f"timed out after {timeout_s:g} s waiting for: {waited_for}; check that the vehicle "
+            "is powered, the address and port are right and nothing else holds the port",
             link=link,
         )
         self.waited_for, self.timeout_s = waited_for, timeout_s

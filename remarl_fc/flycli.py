@@ -8,6 +8,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import json
+import math
 import sys
 import tempfile
 from pathlib import Path
@@ -37,7 +38,15 @@ def add_parsers(sub: Any, bench: Any) -> None:
     )
     p.add_argument("--policy", required=True, help="zoo name (e.g. 3u2o) or .safetensors file")
     p.add_argument("--mission", required=True, help="mission TOML (docs/examples/)")
-    p.add_argument("--takeoff", type=float, default=None, metavar="ALT_M", help="take off first")
+    p.add_argument(
+        "--takeoff",
+        type=float,
+        nargs="?",
+        const=math.nan,  # given without a value: the mission's heights
+        default=None,
+        metavar="ALT_M",
+        help="take off first: to ALT_M, or without a value to each vehicle's mission alt_m",
+    )
     p.add_argument("--dry-run", action="store_true", help="compute and log, send nothing")
     p.add_argument("--log", default=None, metavar="DIR", help="write flight.tlog + decisions")
     p.add_argument("--signing-key", default=None, help="MAVLink 2 signing key file")
@@ -138,11 +147,13 @@ def cmd_fly(args: argparse.Namespace) -> int:
     spec = ControlSpec.from_policy_meta(policy.meta)
     mission.check_policy(policy.agents, spec.speed_m_s, spec.dt_s)
     signing = SigningConfig(load_signing_key(args.signing_key)) if args.signing_key else None
+    by_mission = args.takeoff is not None and math.isnan(args.takeoff)
     try:
         cfg = FlyConfig(
             connections=tuple(args.connection),
             mission=mission,
-            takeoff_m=args.takeoff,
+            takeoff_m=None if by_mission else args.takeoff,
+            takeoff_to_mission_alt=by_mission,
             dry_run=args.dry_run,
             log_dir=Path(args.log) if args.log else None,
             signing=signing,

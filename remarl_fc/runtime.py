@@ -78,6 +78,12 @@ PX4_TELEMETRY = frozenset({MsgId.GLOBAL_POSITION_INT, MsgId.ATTITUDE, MsgId.EXTE
 READ_ONLY_COMMANDS = frozenset({MavCmd.SET_MESSAGE_INTERVAL, MavCmd.REQUEST_MESSAGE})
 """Commands that change nothing on the vehicle: sent even in a dry run (telemetry is needed)."""
 
+HOLD_CONFIRM_S = 6.0
+"""At the end, wait at most this long for the last hold commands to be confirmed."""
+
+ADSB_HZ = 2.0
+"""ADSB_VEHICLE rate asked for (best effort: not every autopilot takes it)."""
+
 ACK_TIMEOUT_S = 1.0
 """Wait for one COMMAND_ACK before retrying, s."""
 
@@ -141,6 +147,9 @@ class FlyConfig:
     connections: tuple[str, ...]
     mission: Mission
     takeoff_m: float | None = None
+    """Take off to this height above the origin first (overrides the mission's alt_m)."""
+    takeoff_to_mission_alt: bool = False
+    """Take off first, each vehicle to its mission ``alt_m`` (when `takeoff_m` is None)."""
     """Take off to this height above the origin first (None: vehicles are already flying)."""
     dry_run: bool = False
     """Compute and log setpoints, send no command and no setpoint."""
@@ -233,6 +242,7 @@ class SwarmRuntime:
             for p in mission.by_slot()
         ]
         self.by_sysid = {m.system_id: m for m in self.members}
+        self.plans = {p.system_id: p for p in mission.vehicles}
         local = cfg.vehicles if cfg.vehicles is not None else frozenset(self.by_sysid)
         unknown = sorted(local - set(self.by_sysid))
         if unknown:
@@ -335,8 +345,18 @@ class SwarmRuntime:
         links = [member.link] if member.link is not None else self.links
         return any(link.send(msg, member.system_id) for link in links)
 
-    async def command(self, member: Member, cmd: int, *params: float) -> None:
+    async def command(
+        self,
+        member: Member,
+        cmd: int,
+        *params: float,
+        done: Callable[[], bool] | None = None,
+    ) -> None:
         """COMMAND_LONG with retries; returns on ACCEPTED.
+
+        ``done`` tells whether the command's effect is already visible: a retry refused
+        because the first attempt worked (its ACK was lost) — e.g. NAV_TAKEOFF while already
+        climbing — then counts as accepted.
 
         Raises:
             CommandRejected: any other result (with the vehicle's STATUSTEXT reason).
@@ -362,7 +382,7 @@ class SwarmRuntime:
                 continue
             finally:
                 self._acks.pop(key, None)
-            if ack.result == MavResult.ACCEPTED:
+            if ack.result == MavResult.ACCEPTED or (attempt > 0 and done is not None and done()):
                 return
             await self.clock.sleep(0.2)  # the reason's STATUSTEXT may follow the ACK
             raise CommandRejected(
@@ -396,7 +416,7 @@ class SwarmRuntime:
         if mode == "hold" and not t.is_px4:
             mode = self.cfg.hold
         params, check = _mode_command(t.is_px4, mode)
-        await self.command(member, MavCmd.DO_SET_MODE, *params)
+        await self.command(member, MavCmd.DO_SET_MODE, *params, done=lambda: check(t.custom_mode))
         if not self.cfg.dry_run:
             await self.wait_until(
                 f"vehicle {member.system_id} HEARTBEAT in {mode}",
@@ -442,8 +462,9 @@ class SwarmRuntime:
         try:
             await self._prepare()
             await self._fly()
-            while not self._to_hold.empty():  # let the last holds go out
-                await self.clock.sleep(0.1)
+            with contextlib.suppress(TimeoutError):  # let the last holds be confirmed
+                async with self.clock.timeout(HOLD_CONFIRM_S):
+                    await self._to_hold.join()
         finally:
             self._done.set()
         raise _FlightOver
@@ -483,6 +504,7 @@ class SwarmRuntime:
         start = self.clock.now() - (time.time() - start_unix) * self.clock.speedup
         self.controller.start(positions, start)
         for m in mine:
+            m.prestream = False
             m.status = Status.CONTROLLED
             self._event(m, "under control")
 
@@ -492,6 +514,12 @@ class SwarmRuntime:
             if t.is_px4 and mid not in PX4_TELEMETRY:
                 continue
             await self.command(m, MavCmd.SET_MESSAGE_INTERVAL, int(mid), 1e6 / hz)
+        try:  # ArduPilot relays its ADS-B receiver's traffic only when asked (ADSB_TYPE=1)
+            await self.command(
+                m, MavCmd.SET_MESSAGE_INTERVAL, int(MsgId.ADSB_VEHICLE), 1e6 / ADSB_HZ
+            )
+        except CommandRejected as exc:
+            self._event(m, f"ADSB_VEHICLE rate not set ({exc.result_name}): relying on its default")
         for mid in (MsgId.GLOBAL_POSITION_INT, MsgId.ATTITUDE):
             name = _name(MsgId, mid)
             await self.wait_until(
@@ -512,9 +540,9 @@ class SwarmRuntime:
             lambda: t.system_status != MavState.BOOT and t.position_ok(),
             cfg.ready_timeout_s,
         )
-        if cfg.takeoff_m is not None:
+        if cfg.takeoff_m is not None or cfg.takeoff_to_mission_alt:
             m.status = Status.TAKING_OFF
-            self._event(m, f"taking off to {cfg.takeoff_m:g} m")
+            self._event(m, f"taking off to {self._takeoff_alt(m):g} m")
             await (self._takeoff_px4(m) if t.is_px4 else self._takeoff_ardupilot(m))
         else:
             if t.height_m < 1.0 or t.landed_state == 1:
@@ -525,23 +553,32 @@ class SwarmRuntime:
                 m.prestream = True
                 await self.clock.sleep(0.5)
             await self.set_mode(m, "external")
-        m.prestream = False
+        m.prestream = t.is_px4  # PX4 leaves OFFBOARD after 1 s without setpoints: keep them
         m.status = Status.READY
 
+    def _takeoff_alt(self, m: Member) -> float:
+        """Take-off height of ``m``: ``--takeoff ALT_M``, else its mission ``alt_m``."""
+        if self.cfg.takeoff_m is not None:
+            return float(self.cfg.takeoff_m)
+        return self.plans[m.system_id].alt_m
+
     async def _takeoff_ardupilot(self, m: Member) -> None:
-        alt = float(self.cfg.takeoff_m or 0.0)
+        alt = self._takeoff_alt(m)
         await self.set_mode(m, "external")
-        await self.command(m, MavCmd.COMPONENT_ARM_DISARM, 1)
+        await self.command(m, MavCmd.COMPONENT_ARM_DISARM, 1, done=lambda: m.track.armed)
         await self.wait_until(f"vehicle {m.system_id} armed", lambda: m.track.armed, 3.0)
-        await self.command(m, MavCmd.NAV_TAKEOFF, 0, 0, 0, math.nan, 0, 0, alt)
+        await self.command(
+            m, MavCmd.NAV_TAKEOFF, 0, 0, 0, math.nan, 0, 0, alt,
+            done=lambda: m.track.height_m > 0.5 or m.track.landed_state in (2, 3),
+        )  # fmt: skip
         await self._wait_height(m, alt)
 
     async def _takeoff_px4(self, m: Member) -> None:
-        alt = float(self.cfg.takeoff_m or 0.0)
+        alt = self._takeoff_alt(m)
         m.prestream = True  # zero-velocity setpoints: OFFBOARD needs a stream first
         await self.clock.sleep(0.5)
         await self.set_mode(m, "external")
-        await self.command(m, MavCmd.COMPONENT_ARM_DISARM, 1)
+        await self.command(m, MavCmd.COMPONENT_ARM_DISARM, 1, done=lambda: m.track.armed)
         await self.wait_until(f"vehicle {m.system_id} armed", lambda: m.track.armed, 3.0)
         m.climb_target_m = alt
         await self._wait_height(m, alt)
@@ -692,7 +729,10 @@ class SwarmRuntime:
     async def _hold_loop(self) -> None:
         while True:
             m = await self._to_hold.get()
-            await self._hold(m)
+            try:
+                await self._hold(m)
+            finally:
+                self._to_hold.task_done()
 
     async def _hold(self, m: Member) -> None:
         try:

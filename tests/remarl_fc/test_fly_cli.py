@@ -32,7 +32,7 @@ def test_fly_the_example_mission_on_a_mock_in_another_process(tmp_path, capsys):
     try:
         status = main(
             ["fly", "--connection", f"udpin:127.0.0.1:{port}", "--policy", "3u2o",
-             "--mission", str(MISSION), "--takeoff", "20", "--log", str(tmp_path / "log"),
+             "--mission", str(MISSION), "--takeoff", "--log", str(tmp_path / "log"),
              "--speedup", "4", "--json"]
         )  # fmt: skip
     finally:
