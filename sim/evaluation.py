@@ -2,6 +2,8 @@
 
 A policy here is any function from flat observations (B, N, D) to normalised actions (B, N):
 the DDPG actors, the numpy inference of an exported policy file, a baseline or a heuristic.
+A planner that needs the whole simulator state (the E2Coop meta-heuristic) sets the attribute
+``uses_state = True`` and is called as ``act(obs, state)``.
 """
 
 from __future__ import annotations
@@ -36,8 +38,10 @@ def run_episodes(
     started = env.num_envs
     counted = np.ones(env.num_envs, dtype=bool)  # whether each env's current episode counts
     rows: list[dict[str, Any]] = []
+    uses_state = bool(getattr(act, "uses_state", False))
     while len(rows) < episodes:
-        obs, _, _, _, info = env.step(act(obs))
+        actions = act(obs, env.state) if uses_state else act(obs)  # type: ignore[call-arg]
+        obs, _, _, _, info = env.step(actions)
         if "episode" not in info:
             continue
         ep = info["episode"]

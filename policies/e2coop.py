@@ -1,0 +1,253 @@
+"""E2Coop, the contour meta-heuristic of the paper's Table 2, ported to the 2-D simulator.
+
+The original (a MATLAB planner) gives every avoiding UAV its own PSO ("species PSO") over the
+curvature and heading of its next arc, scored by E = ½·E_int − ½·E_ext: E_int the bending
+(Σ‖second difference‖ over 10 samples of the previous arc and 10 of the candidate), E_ext the
+edge map of the UAV's own contour level summed over the same samples — so the UAV follows its
+contour round the obstacles. UAVs whose predicted end points come within d_col of each other are
+then separated (the original picks altitude offsets with a second PSO).
+
+This port keeps that algorithm and changes what the 2-D simulator forces:
+
+* the arc starts at the UAV's current heading (the simulator's kinematics), so the decision
+  variable is the turn of the arc, a ∈ [−max_turn, max_turn] — the curvature a/L; a free start
+  heading would be a jump the simulator cannot fly;
+* the edge map is the analytic level edge of `sim.contour` (a Gaussian in the signed distance to
+  the UAV's level φ_i), the smooth counterpart of the original's binarised-and-differentiated
+  field; φ_i is the field at the UAV when its avoidance begins;
+* the altitude deconfliction becomes a lateral one: UAVs are planned one after another, each
+  cost adding a penalty for ending within d_col of the end points already chosen;
+* the PSO is the constriction PSO (χ = 0.7298, c1 = c2 = 2.05, as the original's coefficients)
+  without the original's adaptive inertia and gbest perturbation.
+
+Avoidance begins for a UAV when an obstacle is within sensing range and ends when every such
+obstacle is behind it (the original's dot-product test); otherwise the UAV turns toward its
+target. `E2Coop` is a policy over the simulator state (``uses_state``), so `sim.evaluation`
+measures it — success, distances, energy Σ|a| — with the same code as every other method.
+numpy only.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+from numpy.typing import NDArray
+
+from sim.config import ScenarioConfig
+from sim.contour import external_density_xy
+from sim.field import FieldSources, potential_and_gradient_xy
+from sim.kinematics import arc_points_xy, wrap_angle
+from sim.swarm import SwarmState
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class E2CoopConfig:
+    """The planner's settings (defaults: the original's PSO budget)."""
+
+    particles: int = 200
+    """Particles per UAV (the original's 200)."""
+    iterations: int = 100
+    """PSO iterations (the original's 100)."""
+    samples: int = 10
+    """Samples per arc in the energies (the original's every-10th of 100)."""
+    chi: float = 0.7298
+    """Clerc constriction factor."""
+    c: float = 2.05
+    """Cognitive and social coefficients (before constriction)."""
+    separation_weight: float = 1.0
+    """Penalty per m² of end-point intrusion within d_col (the lateral deconfliction)."""
+    capture_m: float = 40.0
+    """Width of the edge map's basin, m: the original extends its edge map's reach with a
+    gradient-vector-flow snake (600 diffusion iterations); a level edge as narrow as the
+    reward's (10 m) loses the contour once an approaching obstacle pushes it away."""
+
+
+class E2Coop:
+    """The planner as a policy: ``act(obs, state) -> (B, N)`` normalised turns.
+
+    Args:
+        cfg: the scenario (field, sensing, speed, d_col).
+        planner: PSO settings.
+        seed: seed of the PSO's random generator.
+    """
+
+    uses_state = True
+
+    def __init__(
+        self, cfg: ScenarioConfig, planner: E2CoopConfig | None = None, seed: int = 0
+    ) -> None:
+        self.cfg = cfg
+        self.planner = planner or E2CoopConfig()
+        self.rng = np.random.default_rng(seed)
+        self.reward_cfg = replace(
+            cfg.reward, external="level-edge", edge_width_m=self.planner.capture_m
+        )
+        self.length_m = cfg.uav.speed_m_s * cfg.dt_s
+        self.max_turn = cfg.uav.max_turn_rad
+        self.levels: FloatArray | None = None  # (B, N) NaN: not avoiding
+        self.prev_turn: FloatArray | None = None  # (B, N)
+
+    def __call__(self, obs: NDArray[np.float32], state: SwarmState) -> NDArray[np.float32]:
+        """Plan every UAV's next arc."""
+        b, n = state.heading_rad.shape
+        if self.levels is None or self.levels.shape != (b, n):
+            self.levels = np.full((b, n), np.nan)
+            self.prev_turn = np.zeros((b, n))
+        assert self.prev_turn is not None
+        fresh = state.steps == 0  # a new episode in that environment
+        self.levels[fresh] = np.nan
+        self.prev_turn[fresh] = 0.0
+        # the field half a step ahead: the obstacles move while the arc is flown
+        src = state.sources(self.cfg.uav.speed_m_s, self.cfg.dt_s / 2)
+        avoiding = self._avoiding(state)
+        phi, _, _ = potential_and_gradient_xy(
+            state.pos_m[..., 0], state.pos_m[..., 1], src, self.cfg.field
+        )
+        # z0, the level whose edge map the PSO follows: the field at the UAV now (the original
+        # binarises the field at the UAV's current level every planning step)
+        self.levels = np.where(avoiding, phi, np.nan)
+
+        to_target = state.target_m - state.pos_m
+        bearing = np.arctan2(to_target[..., 1], to_target[..., 0])
+        turn = np.clip(wrap_angle(bearing - state.heading_rad), -self.max_turn, self.max_turn)
+        if avoiding.any():
+            turn = self._plan(state, src, avoiding, turn)
+        self.prev_turn = np.where(state.active, turn, 0.0)
+        out: NDArray[np.float32] = (turn / self.max_turn).astype(np.float32)
+        return out
+
+    def _avoiding(self, state: SwarmState) -> NDArray[np.bool_]:
+        """(B, N): an obstacle within sensing range that is not yet behind the UAV."""
+        rel = state.obstacle_pos_m[:, None, :, :] - state.pos_m[:, :, None, :]  # (B, N, M, 2)
+        dist = np.linalg.norm(rel, axis=-1)
+        to_target = (state.target_m - state.pos_m)[:, :, None, :]
+        ahead = np.einsum("bnmk,bnmk->bnm", rel, np.broadcast_to(to_target, rel.shape)) > 0
+        near = dist <= self.cfg.sensing.range_m
+        found: NDArray[np.bool_] = (near & ahead).any(axis=-1) & state.active
+        return found
+
+    def _arcs(
+        self, state: SwarmState, b: int, i: int, turns: FloatArray
+    ) -> tuple[FloatArray, FloatArray]:
+        """Sample points (P, Q) of candidate arcs of UAV (b, i) for turns (P,)."""
+        q = np.linspace(0.0, 1.0, self.planner.samples + 1)[1:]
+        start = np.broadcast_to(state.pos_m[b, i], (len(turns), 2))
+        heading = np.full(len(turns), state.heading_rad[b, i])
+        x, y = arc_points_xy(start, heading, turns, self.length_m, q)
+        return x, y
+
+    def _previous(self, state: SwarmState, b: int, i: int) -> tuple[FloatArray, FloatArray]:
+        """Sample points (Q,) of the previous arc, ending at the UAV (walked backwards)."""
+        assert self.prev_turn is not None
+        q = np.linspace(0.0, 1.0, self.planner.samples + 1)[1:]
+        back_heading = np.array([state.heading_rad[b, i] + math.pi])
+        x, y = arc_points_xy(
+            state.pos_m[b, i][None], back_heading, -self.prev_turn[b, i : i + 1], self.length_m, q
+        )
+        return x[0, ::-1], y[0, ::-1]
+
+    def _cost(
+        self,
+        state: SwarmState,
+        src: FieldSources,
+        b: int,
+        i: int,
+        turns: FloatArray,
+        others_end: FloatArray,
+    ) -> FloatArray:
+        """½·E_int − ½·E_ext (+ the separation penalty) of candidate turns (P,)."""
+        assert self.levels is not None
+        x, y = self._arcs(state, b, i, turns)  # (P, Q)
+        px, py = self._previous(state, b, i)
+        p0 = state.pos_m[b, i]
+        allx = np.concatenate(
+            [np.broadcast_to(px, (len(turns), len(px))), np.full((len(turns), 1), p0[0]), x], axis=1
+        )
+        ally = np.concatenate(
+            [np.broadcast_to(py, (len(turns), len(py))), np.full((len(turns), 1), p0[1]), y], axis=1
+        )
+        ddx = allx[:, 2:] - 2 * allx[:, 1:-1] + allx[:, :-2]
+        ddy = ally[:, 2:] - 2 * ally[:, 1:-1] + ally[:, :-2]
+        # in radians: a second difference over sample spacing h is h·(angle turned), so
+        # dividing by h makes E_int ≈ |a| + |a − a_prev| whatever the step length
+        e_int = np.hypot(ddx, ddy).sum(axis=1) / (self.length_m / self.planner.samples)
+        one = _single_env_sources(src, b)
+        dens = external_density_xy(
+            x[None],
+            y[None],
+            np.full((1, 1, 1), self.levels[b, i]),
+            one,
+            self.cfg.field,
+            self.reward_cfg,
+        )[0]
+        e_ext = dens.sum(axis=1)
+        cost = 0.5 * e_int - 0.5 * e_ext
+        if len(others_end):
+            end = np.stack([x[:, -1], y[:, -1]], axis=-1)  # (P, 2)
+            gap = np.linalg.norm(end[:, None, :] - others_end[None], axis=-1)  # (P, K)
+            intrusion = np.maximum(0.0, self.cfg.d_col_m - gap)
+            cost = cost + self.planner.separation_weight * (intrusion**2).sum(axis=1)
+        out: FloatArray = cost
+        return out
+
+    def _plan(
+        self,
+        state: SwarmState,
+        src: FieldSources,
+        avoiding: NDArray[np.bool_],
+        turn: FloatArray,
+    ) -> FloatArray:
+        """PSO for every avoiding UAV, one after another (lateral deconfliction)."""
+        turn = turn.copy()
+        b_count, n = turn.shape
+        for b in range(b_count):
+            if not avoiding[b].any():
+                continue
+            ends: list[FloatArray] = []
+            for i in range(n):
+                if not state.active[b, i]:
+                    continue
+                if avoiding[b, i]:
+                    turn[b, i] = self._pso(state, src, b, i, np.array(ends).reshape(-1, 2))
+                x, y = self._arcs(state, b, i, turn[b, i : i + 1])
+                ends.append(np.array([x[0, -1], y[0, -1]]))
+        return turn
+
+    def _pso(
+        self, state: SwarmState, src: FieldSources, b: int, i: int, others_end: FloatArray
+    ) -> float:
+        """Constriction PSO over the turn of UAV (b, i)."""
+        p, lim = self.planner, self.max_turn
+        pos = self.rng.uniform(-lim, lim, p.particles)
+        vel = self.rng.uniform(-lim, lim, p.particles) * 0.1
+        cost = self._cost(state, src, b, i, pos, others_end)
+        best_pos, best_cost = pos.copy(), cost.copy()
+        g = int(np.argmin(cost))
+        g_pos, g_cost = float(pos[g]), float(cost[g])
+        for _ in range(p.iterations):
+            r1, r2 = self.rng.random(p.particles), self.rng.random(p.particles)
+            vel = p.chi * (vel + p.c * r1 * (best_pos - pos) + p.c * r2 * (g_pos - pos))
+            pos = np.clip(pos + vel, -lim, lim)
+            cost = self._cost(state, src, b, i, pos, others_end)
+            better = cost < best_cost
+            best_pos[better], best_cost[better] = pos[better], cost[better]
+            k = int(np.argmin(best_cost))
+            if best_cost[k] < g_cost:
+                g_pos, g_cost = float(best_pos[k]), float(best_cost[k])
+        return g_pos
+
+
+def _single_env_sources(src: FieldSources, b: int) -> FieldSources:
+    """The field sources of environment ``b`` alone (batch of one)."""
+    mask = src.obstacle_mask
+    return FieldSources(
+        obstacle_pos_m=src.obstacle_pos_m[b : b + 1],
+        obstacle_speed_m_s=src.obstacle_speed_m_s[b : b + 1],
+        centre_m=src.centre_m[b : b + 1],
+        swarm_speed_m_s=src.swarm_speed_m_s,
+        obstacle_mask=None if mask is None else mask[b : b + 1],
+    )
