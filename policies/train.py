@@ -143,6 +143,7 @@ def train(
         step, best, elapsed_before = meta["step"], meta["best_success"], meta["elapsed_s"]
         rng = np.random.default_rng([cfg.seed, step])
     writer = _summary_writer(out_dir)
+    curve = CurveWriter(out_dir / "curve.csv", resume=resume)
 
     def checkpoint(path: Path) -> None:
         save_checkpoint(
@@ -198,6 +199,11 @@ def train(
                             "swarming_return": float(ep["swarming_return"][k]),
                             "total_return": float(ep["total_return"][k]),
                         }
+                    )
+                    curve.add(
+                        (step + 1) * cfg.num_envs,
+                        float(ep["swarming_return"][k]),
+                        bool(ep["success"][k]),
                     )
             terminal = info["agent_done"]
             terminal_value = np.where(info["arrived"], goal_value, 0.0).astype(np.float32)
@@ -260,12 +266,14 @@ def train(
                 summary = {"last_eval": record, "best_success": best}
     except KeyboardInterrupt:
         checkpoint(last_path)
+        curve.close()
         raise
     checkpoint(last_path)
     if not best_path.exists():
         checkpoint(best_path)
     if writer is not None:
         writer.close()
+    curve.close()
     summary.update(
         {
             "steps": step,
@@ -275,6 +283,34 @@ def train(
         }
     )
     return summary
+
+
+class CurveWriter:
+    """Appends one CSV row per finished training episode: the learning curve of a run.
+
+    Columns ``env_steps, episode, swarming_return, success``: the same for every method
+    (`remarl-fc compare` reads them), from the simulator's own episode metrics.
+    """
+
+    HEADER = "env_steps,episode,swarming_return,success\n"
+
+    def __init__(self, path: Path, *, resume: bool = False) -> None:
+        self.episode = 0
+        if resume and path.exists():
+            with path.open() as fh:
+                self.episode = max(0, sum(1 for _ in fh) - 1)
+        else:
+            path.write_text(self.HEADER)
+        self._fh = path.open("a")
+
+    def add(self, env_steps: int, swarming_return: float, success: bool) -> None:
+        """One finished episode."""
+        self.episode += 1
+        self._fh.write(f"{env_steps},{self.episode},{swarming_return:.5f},{int(success)}\n")
+
+    def close(self) -> None:
+        """Flush and close."""
+        self._fh.close()
 
 
 def _summary_writer(out_dir: Path) -> Any:
