@@ -220,6 +220,31 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_compare(args: argparse.Namespace) -> int:
+    from policies.compare import METHODS, CompareConfig, run_grid, write_reports
+
+    scenarios = tuple(s for s in args.scenarios.split(",") if s)
+    methods = tuple(m for m in (args.methods or ",".join(METHODS)).split(",") if m)
+    out = Path(args.out)
+    if args.quick:
+        cfg = CompareConfig.quick_preset(scenarios, methods, out)
+    else:
+        cfg = CompareConfig(
+            scenarios,
+            methods,
+            seeds=args.seeds,
+            budget_steps=args.budget,
+            out=out,
+            n_actions=args.n_actions,
+            workers=args.workers,
+        )
+    results = run_grid(cfg, ray_address=args.ray_address)
+    paths = write_reports(cfg, results)
+    payload = {"cells": len(results), "out": str(out), **paths}
+    _emit(args, payload, "\n".join(f"wrote {p}" for p in paths.values()))
+    return 0
+
+
 def _positive_int(text: str) -> int:
     value = int(text)
     if value < 1:
@@ -322,6 +347,23 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--json", action="store_true", help="print one JSON object")
     b.set_defaults(handler=_cmd_bench_sim)
     add_bench_parser(bench)
+
+    p = sub.add_parser(
+        "compare", help="the paper's comparisons: baselines, E2Coop, Table 2, learning curves"
+    )
+    p.add_argument("--scenarios", default="3u2o", help="comma-separated (default 3u2o)")
+    p.add_argument(
+        "--methods", default=None, help="comma-separated: remarl,coma,mappo,iql,vdn,qmix,e2coop"
+    )
+    p.add_argument("--seeds", type=_positive_int, default=3)
+    p.add_argument("--budget", type=_positive_int, default=200_000, help="env steps per run")
+    p.add_argument("--out", default="results", help="results folder (finished cells are kept)")
+    p.add_argument("--n-actions", type=_positive_int, default=11, help="baselines' heading set")
+    p.add_argument("--workers", type=_positive_int, default=2, help="cells run in parallel")
+    p.add_argument("--quick", action="store_true", help="small budgets: minutes on 2 cores")
+    p.add_argument("--ray-address", default=None, help="run the cells on this Ray cluster")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(handler=_cmd_compare)
     add_sitl_parser(sub)
     add_fly_parsers(sub, bench)
     return parser

@@ -1,0 +1,43 @@
+"""`remarl-fc compare --quick`: the grid runs, resumes, and writes well-formed outputs."""
+
+from __future__ import annotations
+
+import csv
+import json
+
+import pytest
+
+from remarl_fc.cli import main
+
+pytestmark = pytest.mark.timeout(180)
+
+
+def test_quick_compare_two_methods_writes_every_output(tmp_path, capsys):
+    out = tmp_path / "results"
+    args = ["compare", "--quick", "--scenarios", "2u1o,3u2o", "--methods", "remarl,e2coop"]
+    assert main([*args, "--out", str(out), "--json"]) == 0
+    paths = json.loads(capsys.readouterr().out)
+    assert paths["cells"] == 4
+    for name in ("learning_curves.png", "summary.md", "table2.md", "table2.csv", "config.json"):
+        assert (out / name).stat().st_size > 0, name
+    with (out / "table2.csv").open() as fh:
+        rows = list(csv.DictReader(fh))
+    assert [r["method"] for r in rows] == ["e2coop", "remarl"]
+    assert float(rows[0]["paper_reaction_ms"]) == 480.0
+    summary = (out / "summary.md").read_text()
+    assert "| 2u1o |" in summary and "| 3u2o |" in summary
+    with (out / "runs" / "2u1o" / "remarl" / "seed0" / "curve.csv").open() as fh:
+        curve = list(csv.DictReader(fh))
+    assert curve and set(curve[0]) == {"env_steps", "episode", "swarming_return", "success"}
+    result = json.loads((out / "runs" / "3u2o" / "e2coop" / "seed0" / "result.json").read_text())
+    assert {"success_rate", "energy_rad", "reaction_ms_median"} <= set(result)
+
+    # a rerun resumes: every cell is already finished, nothing is trained again
+    stamp = (out / "runs" / "2u1o" / "remarl" / "seed0" / "result.json").stat().st_mtime
+    assert main([*args, "--out", str(out), "--json"]) == 0
+    assert (out / "runs" / "2u1o" / "remarl" / "seed0" / "result.json").stat().st_mtime == stamp
+
+
+def test_unknown_method_is_a_clear_error(tmp_path, capsys):
+    assert main(["compare", "--methods", "dqn", "--out", str(tmp_path)]) == 2
+    assert "unknown method" in capsys.readouterr().err
