@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import concurrent.futures
 import csv
+import importlib
 import json
 import multiprocessing
 import time
@@ -224,13 +225,13 @@ def _run_coma(job: Job) -> dict[str, Any]:
 
 
 def _run_benchmarl(job: Job) -> dict[str, Any]:
-    try:
-        from policies.benchmarl_task import train_benchmarl
+    try:  # the adapter needs the optional BenchMARL stack
+        task = importlib.import_module("policies.benchmarl_task")
     except ImportError as exc:
         raise ConfigError(
             f"{job.method} needs BenchMARL: pip install 'remarl-fc[baselines]' ({exc})"
         ) from exc
-    summary: dict[str, Any] = train_benchmarl(
+    summary: dict[str, Any] = task.train_benchmarl(
         job.method, job.scenario, job.cfg.budget_steps, job.seed, job.folder, job.cfg.n_actions
     )
     return summary
