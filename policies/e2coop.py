@@ -60,6 +60,9 @@ class E2CoopConfig:
     """Cognitive and social coefficients (before constriction)."""
     separation_weight: float = 1.0
     """Penalty per m² of end-point intrusion within d_col (the lateral deconfliction)."""
+    level_source: str = "assigned"
+    """"assigned": follow the contour level the simulator's PSO gave the UAV (reMARL's
+    separated levels, E2Coop's descendant); "current": the level at the UAV each step."""
     capture_m: float = 40.0
     """Width of the edge map's basin, m: the original extends its edge map's reach with a
     gradient-vector-flow snake (600 diffusion iterations); a level edge as narrow as the
@@ -89,6 +92,7 @@ class E2Coop:
         self.length_m = cfg.uav.speed_m_s * cfg.dt_s
         self.max_turn = cfg.uav.max_turn_rad
         self.levels: FloatArray | None = None  # (B, N) NaN: not avoiding
+        self.level_source = self.planner.level_source
         self.prev_turn: FloatArray | None = None  # (B, N)
 
     def __call__(self, obs: NDArray[np.float32], state: SwarmState) -> NDArray[np.float32]:
@@ -107,9 +111,11 @@ class E2Coop:
         phi, _, _ = potential_and_gradient_xy(
             state.pos_m[..., 0], state.pos_m[..., 1], src, self.cfg.field
         )
-        # z0, the level whose edge map the PSO follows: the field at the UAV now (the original
-        # binarises the field at the UAV's current level every planning step)
-        self.levels = np.where(avoiding, phi, np.nan)
+        # z0, the level whose edge map the PSO follows
+        if self.level_source == "assigned":  # the contour levels the simulator's PSO assigned
+            self.levels = np.where(avoiding, state.levels, np.nan)
+        else:  # the field at the UAV now (the original re-binarises at its current level)
+            self.levels = np.where(avoiding, phi, np.nan)
 
         to_target = state.target_m - state.pos_m
         bearing = np.arctan2(to_target[..., 1], to_target[..., 0])
