@@ -24,6 +24,7 @@ import importlib
 import json
 import multiprocessing
 import time
+import warnings
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -217,7 +218,7 @@ def _run_coma(job: Job) -> dict[str, Any]:
         raise ConfigError(f"COMA is not available: {exc}") from exc
     cfg = coma.ComaConfig(budget_steps=job.cfg.budget_steps, n_actions=job.cfg.n_actions)
     coma.train_coma(cfg, job.scenario, job.folder, job.seed)
-    act = coma.coma_policy(coma.load_coma(job.folder / "actor.safetensors"))
+    act = coma.coma_policy(coma.load_coma(job.folder / "model.safetensors"))
     return {
         **_evaluate(act, job.scenario, job.cfg.eval_episodes, job.seed, 50),
         **_reaction_ms(act, job.scenario),
@@ -290,7 +291,8 @@ def _binned(
             if sel.size:
                 means[k, b] = sel.mean()
     centre = (edges[:-1] + edges[1:]) / 2
-    with np.errstate(all="ignore"):
+    with warnings.catch_warnings():  # bins no episode ended in stay NaN: not drawn
+        warnings.simplefilter("ignore", RuntimeWarning)
         return centre, np.nanmean(means, axis=0), np.nanstd(means, axis=0)
 
 

@@ -14,10 +14,10 @@ pytestmark = pytest.mark.timeout(180)
 
 def test_quick_compare_two_methods_writes_every_output(tmp_path, capsys):
     out = tmp_path / "results"
-    args = ["compare", "--quick", "--scenarios", "2u1o,3u2o", "--methods", "remarl,e2coop"]
+    args = ["compare", "--quick", "--scenarios", "2u1o,3u2o", "--methods", "remarl,coma,e2coop"]
     assert main([*args, "--out", str(out), "--json"]) == 0
     paths = json.loads(capsys.readouterr().out)
-    assert paths["cells"] == 4
+    assert paths["cells"] == 6
     for name in ("learning_curves.png", "summary.md", "table2.md", "table2.csv", "config.json"):
         assert (out / name).stat().st_size > 0, name
     with (out / "table2.csv").open() as fh:
