@@ -15,8 +15,12 @@ This port keeps that algorithm and changes what the 2-D simulator forces:
 * the edge map is the analytic level edge of `sim.contour` (a Gaussian in the signed distance to
   the UAV's level φ_i), the smooth counterpart of the original's binarised-and-differentiated
   field; φ_i is the field at the UAV when its avoidance begins;
-* the altitude deconfliction becomes a lateral one: UAVs are planned one after another, each
-  cost adding a penalty for ending within d_col of the end points already chosen;
+* the GVF snake that predicts the whole avoidance path becomes a receding horizon: the PSO
+  plans the next `E2CoopConfig.horizon` arcs against the field predicted while each is flown
+  (obstacles and p* move on) and the first arc is flown;
+* the altitude deconfliction becomes a lateral one: each cost adds a penalty for coming within
+  1.5·d_col of the other UAVs' planned arcs at the same instants, in two sweeps over the UAVs;
+  a UAV heading home makes way to the arcs already planned;
 * the PSO is the constriction PSO (χ = 0.7298, c1 = c2 = 2.05, as the original's coefficients)
   without the original's adaptive inertia and gbest perturbation.
 
@@ -44,6 +48,13 @@ from sim.swarm import SwarmState
 FloatArray = NDArray[np.float64]
 
 
+PASSES = 2
+"""Planning sweeps over the UAVs of a swarm (the second re-plans against everyone's arcs)."""
+
+SEPARATION_MARGIN = 1.5
+"""Planned arcs of two UAVs are kept this many d_col apart (the spawn spacing factor)."""
+
+
 @dataclass(frozen=True)
 class E2CoopConfig:
     """The planner's settings (defaults: the original's PSO budget)."""
@@ -54,6 +65,9 @@ class E2CoopConfig:
     """PSO iterations (the original's 100)."""
     samples: int = 10
     """Samples per arc in the energies (the original's every-10th of 100)."""
+    horizon: int = 3
+    """Arcs planned ahead (the first is flown): the original predicts the whole avoidance
+    path with a GVF snake before its PSO; a one-arc PSO sees the contour move too late."""
     chi: float = 0.7298
     """Clerc constriction factor."""
     c: float = 2.05
@@ -121,7 +135,7 @@ class E2Coop:
         bearing = np.arctan2(to_target[..., 1], to_target[..., 0])
         turn = np.clip(wrap_angle(bearing - state.heading_rad), -self.max_turn, self.max_turn)
         if avoiding.any():
-            turn = self._plan(state, src, avoiding, turn)
+            turn = self._plan(state, avoiding, turn)
         self.prev_turn = np.where(state.active, turn, 0.0)
         out: NDArray[np.float32] = (turn / self.max_turn).astype(np.float32)
         return out
@@ -139,12 +153,18 @@ class E2Coop:
     def _arcs(
         self, state: SwarmState, b: int, i: int, turns: FloatArray
     ) -> tuple[FloatArray, FloatArray]:
-        """Sample points (P, Q) of candidate arcs of UAV (b, i) for turns (P,)."""
+        """Sample points (P, H, Q) of the H chained arcs of UAV (b, i) for turns (P, H)."""
         q = np.linspace(0.0, 1.0, self.planner.samples + 1)[1:]
-        start = np.broadcast_to(state.pos_m[b, i], (len(turns), 2))
-        heading = np.full(len(turns), state.heading_rad[b, i])
-        x, y = arc_points_xy(start, heading, turns, self.length_m, q)
-        return x, y
+        p, h = turns.shape
+        xs, ys = np.empty((p, h, len(q))), np.empty((p, h, len(q)))
+        start = np.broadcast_to(state.pos_m[b, i], (p, 2)).copy()
+        heading = np.full(p, state.heading_rad[b, i])
+        for k in range(h):
+            x, y = arc_points_xy(start, heading, turns[:, k], self.length_m, q)
+            xs[:, k], ys[:, k] = x, y
+            start = np.stack([x[:, -1], y[:, -1]], axis=-1)
+            heading = heading + turns[:, k]
+        return xs, ys
 
     def _previous(self, state: SwarmState, b: int, i: int) -> tuple[FloatArray, FloatArray]:
         """Sample points (Q,) of the previous arc, ending at the UAV (walked backwards)."""
@@ -159,43 +179,46 @@ class E2Coop:
     def _cost(
         self,
         state: SwarmState,
-        src: FieldSources,
         b: int,
         i: int,
         turns: FloatArray,
         others_end: FloatArray,
     ) -> FloatArray:
-        """½·E_int − ½·E_ext (+ the separation penalty) of candidate turns (P,)."""
+        """Σ over the horizon of ½·E_int − ½·E_ext (+ separation) for turns (P, H)."""
         assert self.levels is not None
-        x, y = self._arcs(state, b, i, turns)  # (P, Q)
+        x, y = self._arcs(state, b, i, turns)  # (P, H, Q)
+        p, h, q = x.shape
         px, py = self._previous(state, b, i)
         p0 = state.pos_m[b, i]
         allx = np.concatenate(
-            [np.broadcast_to(px, (len(turns), len(px))), np.full((len(turns), 1), p0[0]), x], axis=1
+            [np.broadcast_to(px, (p, q)), np.full((p, 1), p0[0]), x.reshape(p, h * q)], axis=1
         )
         ally = np.concatenate(
-            [np.broadcast_to(py, (len(turns), len(py))), np.full((len(turns), 1), p0[1]), y], axis=1
+            [np.broadcast_to(py, (p, q)), np.full((p, 1), p0[1]), y.reshape(p, h * q)], axis=1
         )
         ddx = allx[:, 2:] - 2 * allx[:, 1:-1] + allx[:, :-2]
         ddy = ally[:, 2:] - 2 * ally[:, 1:-1] + ally[:, :-2]
         # in radians: a second difference over sample spacing h is h·(angle turned), so
-        # dividing by h makes E_int ≈ |a| + |a − a_prev| whatever the step length
+        # dividing by h makes E_int ≈ Σ|a_k| + Σ|a_k − a_{k−1}| whatever the step length
         e_int = np.hypot(ddx, ddy).sum(axis=1) / (self.length_m / self.planner.samples)
-        one = _single_env_sources(src, b)
-        dens = external_density_xy(
-            x[None],
-            y[None],
-            np.full((1, 1, 1), self.levels[b, i]),
-            one,
-            self.cfg.field,
-            self.reward_cfg,
-        )[0]
-        e_ext = dens.sum(axis=1)
+        e_ext = np.zeros(p)
+        for k in range(h):  # the field while arc k is flown: obstacles and p* move on
+            src = state.sources(self.cfg.uav.speed_m_s, (k + 0.5) * self.cfg.dt_s)
+            one = _single_env_sources(src, b)
+            dens = external_density_xy(
+                x[None, :, k],
+                y[None, :, k],
+                np.full((1, 1, 1), self.levels[b, i]),
+                one,
+                self.cfg.field,
+                self.reward_cfg,
+            )[0]
+            e_ext += dens.sum(axis=1)
         cost = 0.5 * e_int - 0.5 * e_ext
-        if len(others_end):
-            end = np.stack([x[:, -1], y[:, -1]], axis=-1)  # (P, 2)
-            gap = np.linalg.norm(end[:, None, :] - others_end[None], axis=-1)  # (P, K)
-            intrusion = np.maximum(0.0, self.cfg.d_col_m - gap)
+        if len(others_end):  # others' first arcs (K, Q, 2), sampled at the same instants
+            mine = np.stack([x[:, 0], y[:, 0]], axis=-1)  # (P, Q, 2)
+            gap = np.linalg.norm(mine[:, None] - others_end[None], axis=-1).min(axis=-1)  # (P, K)
+            intrusion = np.maximum(0.0, SEPARATION_MARGIN * self.cfg.d_col_m - gap)
             cost = cost + self.planner.separation_weight * (intrusion**2).sum(axis=1)
         out: FloatArray = cost
         return out
@@ -203,48 +226,76 @@ class E2Coop:
     def _plan(
         self,
         state: SwarmState,
-        src: FieldSources,
         avoiding: NDArray[np.bool_],
         turn: FloatArray,
     ) -> FloatArray:
-        """PSO for every avoiding UAV, one after another (lateral deconfliction)."""
+        """PSO for every avoiding UAV with lateral deconfliction, in `PASSES` sweeps.
+
+        The first sweep plans the UAVs one after another, each keeping clear of the arcs
+        chosen before it; the next sweeps re-plan each against everyone's latest arcs, so the
+        first UAV planned does not get right of way.
+        """
         turn = turn.copy()
         b_count, n = turn.shape
+        q = self.planner.samples
         for b in range(b_count):
             if not avoiding[b].any():
                 continue
-            ends: list[FloatArray] = []
-            for i in range(n):
-                if not state.active[b, i]:
-                    continue
-                if avoiding[b, i]:
-                    turn[b, i] = self._pso(state, src, b, i, np.array(ends).reshape(-1, 2))
-                x, y = self._arcs(state, b, i, turn[b, i : i + 1])
-                ends.append(np.array([x[0, -1], y[0, -1]]))
+            paths: dict[int, FloatArray] = {}
+            for sweep in range(PASSES):
+                for i in range(n):
+                    if not state.active[b, i]:
+                        continue
+                    others = np.array([p for j, p in paths.items() if j != i]).reshape(-1, q, 2)
+                    if avoiding[b, i]:
+                        turn[b, i] = self._pso(state, b, i, others)
+                    elif len(others) and sweep == PASSES - 1:  # heading home: make way
+                        turn[b, i] = self._make_way(state, b, i, turn[b, i], others)
+                    x, y = self._arcs(state, b, i, turn[b, i : i + 1, None])
+                    paths[i] = np.stack([x[0, 0], y[0, 0]], axis=-1)
         return turn
 
-    def _pso(
-        self, state: SwarmState, src: FieldSources, b: int, i: int, others_end: FloatArray
+    def _intrusion(
+        self, state: SwarmState, b: int, i: int, turns: FloatArray, others: FloatArray
+    ) -> FloatArray:
+        """Σ squared intrusion (m²) of candidate first arcs (P,) into the others' arcs."""
+        x, y = self._arcs(state, b, i, turns[:, None])
+        mine = np.stack([x[:, 0], y[:, 0]], axis=-1)
+        gap = np.linalg.norm(mine[:, None] - others[None], axis=-1).min(axis=-1)
+        out: FloatArray = (np.maximum(0.0, SEPARATION_MARGIN * self.cfg.d_col_m - gap) ** 2).sum(1)
+        return out
+
+    def _make_way(
+        self, state: SwarmState, b: int, i: int, goal: float, others: FloatArray
     ) -> float:
-        """Constriction PSO over the turn of UAV (b, i)."""
+        """The turn closest to ``goal`` whose arc keeps clear of the others' (a grid search)."""
+        grid = np.linspace(-self.max_turn, self.max_turn, 31)
+        cost = self._intrusion(state, b, i, grid, others) + 100.0 * (grid - goal) ** 2
+        if self._intrusion(state, b, i, np.array([goal]), others)[0] == 0.0:
+            return goal
+        return float(grid[int(np.argmin(cost))])
+
+    def _pso(self, state: SwarmState, b: int, i: int, others_end: FloatArray) -> float:
+        """Constriction PSO over the next H turns of UAV (b, i); returns the first."""
         p, lim = self.planner, self.max_turn
-        pos = self.rng.uniform(-lim, lim, p.particles)
-        vel = self.rng.uniform(-lim, lim, p.particles) * 0.1
-        cost = self._cost(state, src, b, i, pos, others_end)
+        shape = (p.particles, p.horizon)
+        pos = self.rng.uniform(-lim, lim, shape)
+        vel = self.rng.uniform(-lim, lim, shape) * 0.1
+        cost = self._cost(state, b, i, pos, others_end)
         best_pos, best_cost = pos.copy(), cost.copy()
         g = int(np.argmin(cost))
-        g_pos, g_cost = float(pos[g]), float(cost[g])
+        g_pos, g_cost = pos[g].copy(), float(cost[g])
         for _ in range(p.iterations):
-            r1, r2 = self.rng.random(p.particles), self.rng.random(p.particles)
+            r1, r2 = self.rng.random(shape), self.rng.random(shape)
             vel = p.chi * (vel + p.c * r1 * (best_pos - pos) + p.c * r2 * (g_pos - pos))
             pos = np.clip(pos + vel, -lim, lim)
-            cost = self._cost(state, src, b, i, pos, others_end)
+            cost = self._cost(state, b, i, pos, others_end)
             better = cost < best_cost
             best_pos[better], best_cost[better] = pos[better], cost[better]
             k = int(np.argmin(best_cost))
             if best_cost[k] < g_cost:
-                g_pos, g_cost = float(best_pos[k]), float(best_cost[k])
-        return g_pos
+                g_pos, g_cost = best_pos[k].copy(), float(best_cost[k])
+        return float(g_pos[0])
 
 
 def _single_env_sources(src: FieldSources, b: int) -> FieldSources:
