@@ -389,6 +389,32 @@ class Autopilot:
 
     def cmd_arm_disarm(self, cmd: Command, now_s: float) -> tuple[int, str]:
         """MAV_CMD_COMPONENT_ARM_DISARM: p1 1 arm / 0 disarm, p2 21196 force."""
+        arm, force = cmd.params[0] >= 0.5, forced(cmd.params[1])
+        if arm:
+            if self.armed:
+                return MavResult.ACCEPTED, ""
+            refusal = None if force else self.arm_refusal(now_s)
+            if refusal is not None:
+                return refusal
+            self.do_arm(now_s)
+            self.after_arm()
+            return MavResult.ACCEPTED, ""
+        if not self.armed:
+            return MavResult.ACCEPTED, ""
+        if not self.landed and not force:
+            return self.disarm_refusal()
+        self.do_disarm()
+        return MavResult.ACCEPTED, ""
+
+    def arm_refusal(self, now_s: float) -> tuple[int, str] | None:
+        """(result, STATUSTEXT) when the flavour refuses to arm now, else None."""
+        raise NotImplementedError
+
+    def after_arm(self) -> None:
+        """What arming starts besides spinning the motors (nothing by default)."""
+
+    def disarm_refusal(self) -> tuple[int, str]:
+        """(result, STATUSTEXT) for a disarm in flight without force."""
         raise NotImplementedError
 
     def cmd_takeoff(self, cmd: Command, now_s: float) -> tuple[int, str]:
@@ -652,25 +678,17 @@ class ArduCopterLogic(Autopilot):
             return MavResult.ACCEPTED, ""
         return self._enter(mode, now_s)
 
-    def cmd_arm_disarm(self, cmd: Command, now_s: float) -> tuple[int, str]:
+    def arm_refusal(self, now_s: float) -> tuple[int, str] | None:
         """Arm in STABILIZE/ALT_HOLD/LOITER/POSHOLD/GUIDED once the EKF has a position."""
-        arm, force = cmd.params[0] >= 0.5, forced(cmd.params[1])
-        if arm:
-            if self.armed:
-                return MavResult.ACCEPTED, ""
-            if not force:
-                if self.booting(now_s) or not self.position_ok(now_s):
-                    return MavResult.FAILED, "PreArm: Need Position Estimate"
-                if self.custom_mode not in self.ARMABLE:
-                    return MavResult.FAILED, "Arm: Mode not armable"
-            self.do_arm(now_s)
-            return MavResult.ACCEPTED, ""
-        if not self.armed:
-            return MavResult.ACCEPTED, ""
-        if not self.landed and not force:
-            return MavResult.FAILED, "Disarm: vehicle is flying (force to override)"
-        self.do_disarm()
-        return MavResult.ACCEPTED, ""
+        if self.booting(now_s) or not self.position_ok(now_s):
+            return MavResult.FAILED, "PreArm: Need Position Estimate"
+        if self.custom_mode not in self.ARMABLE:
+            return MavResult.FAILED, "Arm: Mode not armable"
+        return None
+
+    def disarm_refusal(self) -> tuple[int, str]:
+        """Disarming in flight needs force."""
+        return MavResult.FAILED, "Disarm: vehicle is flying (force to override)"
 
     def cmd_takeoff(self, cmd: Command, now_s: float) -> tuple[int, str]:
         """p7 = height above home, m; armed, landed, take-off mode; COMMAND_INT frame 3."""
@@ -917,29 +935,24 @@ class Px4Logic(Autopilot):
         main, sub = int(cmd.params[1]) & 0xFF, int(cmd.params[2]) & 0xFF
         return self._enter(main, sub, now_s)
 
-    def cmd_arm_disarm(self, cmd: Command, now_s: float) -> tuple[int, str]:
-        """Arming needs a position (in position modes) and, in OFFBOARD, a setpoint stream."""
-        arm, force = cmd.params[0] >= 0.5, forced(cmd.params[1])
-        if arm:
-            if self.armed:
-                return MavResult.ACCEPTED, ""
-            if not force:
-                if self.booting(now_s) or not self.position_ok(now_s):
-                    return MavResult.TEMPORARILY_REJECTED, "Arming denied: no global position"
-                if self.main == self.OFFBOARD and not self.stream_alive(now_s):
-                    return MavResult.TEMPORARILY_REJECTED, "Arming denied: offboard signal lost"
-            self.do_arm(now_s)
-            if self.main == self.AUTO and self.sub == self.TAKEOFF:
-                self._set(self.AUTO, self.TAKEOFF)
-            elif self.main == self.OFFBOARD and self.setpoint is not None:
-                self._fly_offboard(self.setpoint)
-            return MavResult.ACCEPTED, ""
-        if not self.armed:
-            return MavResult.ACCEPTED, ""
-        if not self.landed and not force:
-            return MavResult.TEMPORARILY_REJECTED, "Disarming denied: not landed"
-        self.do_disarm()
-        return MavResult.ACCEPTED, ""
+    def arm_refusal(self, now_s: float) -> tuple[int, str] | None:
+        """Arming needs a position and, in OFFBOARD, a setpoint stream."""
+        if self.booting(now_s) or not self.position_ok(now_s):
+            return MavResult.TEMPORARILY_REJECTED, "Arming denied: no global position"
+        if self.main == self.OFFBOARD and not self.stream_alive(now_s):
+            return MavResult.TEMPORARILY_REJECTED, "Arming denied: offboard signal lost"
+        return None
+
+    def after_arm(self) -> None:
+        """Armed in AUTO.TAKEOFF: climb; in OFFBOARD: fly the latest setpoint."""
+        if self.main == self.AUTO and self.sub == self.TAKEOFF:
+            self._set(self.AUTO, self.TAKEOFF)
+        elif self.main == self.OFFBOARD and self.setpoint is not None:
+            self._fly_offboard(self.setpoint)
+
+    def disarm_refusal(self) -> tuple[int, str]:
+        """Disarming in flight needs force."""
+        return MavResult.TEMPORARILY_REJECTED, "Disarming denied: not landed"
 
     def cmd_takeoff(self, cmd: Command, now_s: float) -> tuple[int, str]:
         """Switch to AUTO.TAKEOFF; p7 AMSL altitude if finite, else MIS_TAKEOFF_ALT."""
