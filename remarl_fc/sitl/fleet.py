@@ -31,10 +31,12 @@ from remarl_fc.frames import GeoPoint, heading_to_yaw, ned_to_geodetic, sim_to_n
 from remarl_fc.mavlink.codec import Codec, SigningConfig
 from remarl_fc.mavlink.consts import MavComponent, MsgId
 from remarl_fc.mavlink.udp import Address, UdpEndpoint
-from remarl_fc.sitl.autopilot import TICK_HZ, Autopilot, make_autopilot
+from remarl_fc.sitl.ardupilot import ArduCopterLogic
+from remarl_fc.sitl.autopilot import TICK_HZ, Autopilot, Emit
 from remarl_fc.sitl.config import SitlConfig
 from remarl_fc.sitl.faults import Faults
 from remarl_fc.sitl.groundtruth import GroundTruth
+from remarl_fc.sitl.px4 import Px4Logic
 from remarl_fc.sitl.telemetry import TelemetryBuilder, heartbeat
 from remarl_fc.sitl.traffic import Traffic
 from remarl_fc.sitl.vehicle import Airframes, step
@@ -54,6 +56,14 @@ UNSIGNED_ALLOWED = {
 
 MAX_LAG_S = 0.5
 """Wall seconds the physics loop may fall behind before it stops trying to catch up."""
+
+
+def make_autopilot(
+    index: int, cfg: SitlConfig, frames: Airframes, origin: GeoPoint, factory: Any, emit: Emit
+) -> Autopilot:
+    """The flavour's logic for vehicle ``index``."""
+    cls: type[Autopilot] = ArduCopterLogic if cfg.flavour == "ardupilot" else Px4Logic
+    return cls(index, cfg, frames, origin, factory, emit)
 
 
 def grid_layout(n: int, spacing_m: float) -> FloatArray:
