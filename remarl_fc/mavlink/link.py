@@ -29,7 +29,7 @@ from types import TracebackType
 from typing import IO, Any, Self
 
 from remarl_fc.errors import LinkLost
-from remarl_fc.mavlink.codec import Codec, Message, SigningConfig
+from remarl_fc.mavlink.codec import Codec, Message
 from remarl_fc.mavlink.udp import Address, UdpEndpoint, parse_host_port
 
 MessageHandler = Callable[[Message, float], None]
@@ -341,8 +341,3 @@ def _open_serial(device: str, baud: int, url: str) -> int:
         os.close(fd)
         raise LinkLost(f"{device} is not a serial port ({exc})", link=url) from exc
     return fd
-
-
-def gcs_codec(system_id: int, component_id: int, signing: SigningConfig | None) -> Codec:
-    """The controller's MAVLink identity."""
-    return Codec(system_id, component_id, signing=signing)

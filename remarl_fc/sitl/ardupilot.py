@@ -164,7 +164,7 @@ class ArduCopterLogic(Autopilot):
 
     def cmd_takeoff(self, cmd: Command, now_s: float) -> tuple[int, str]:
         """p7 = height above home, m; armed, landed, take-off mode; COMMAND_INT frame 3."""
-        if not self.stream_frame_ok(cmd.frame, (MavFrame.GLOBAL_RELATIVE_ALT,)):
+        if not self.command_frame_ok(cmd.frame, (MavFrame.GLOBAL_RELATIVE_ALT,)):
             return MavResult.DENIED, ""
         height = cmd.params[6]
         if not self.armed or not self.landed or self.custom_mode not in self.TAKEOFF_MODES:

@@ -34,6 +34,7 @@ from remarl_fc.mavlink.consts import (
 )
 from remarl_fc.sitl.config import SitlConfig
 from remarl_fc.sitl.setpoints import Setpoint, parse_setpoint
+from remarl_fc.sitl.telemetry import statustext
 from remarl_fc.sitl.vehicle import Airframes, Guidance, YawMode
 
 Emit = Callable[[Any], None]
@@ -279,7 +280,7 @@ class Autopilot:
 
     def say(self, severity: int, text: str) -> None:
         """Send a STATUSTEXT."""
-        self.emit(self.factory.statustext_encode(severity, text[:50].encode("ascii", "replace")))
+        self.emit(statustext(self.factory, severity, text))
 
     def command_handlers(
         self,
@@ -530,7 +531,7 @@ class Autopilot:
             f.yaw_mode[i] = YawMode.HOLD
             f.yaw_target_rad[i] = f.yaw_rad[i]
 
-    def stream_frame_ok(self, frame: int | None, allowed: tuple[int, ...]) -> bool:
+    def command_frame_ok(self, frame: int | None, allowed: tuple[int, ...]) -> bool:
         """COMMAND_INT frame check (COMMAND_LONG has none)."""
         return frame is None or frame in allowed
 

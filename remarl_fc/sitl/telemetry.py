@@ -8,7 +8,6 @@ noise; the ground truth never does.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
@@ -314,8 +313,3 @@ def heartbeat(factory: Any, ap: Autopilot) -> Any:
 def statustext(factory: Any, severity: int, text: str) -> Any:
     """STATUSTEXT (253): at most 50 characters, as the autopilots send single chunks."""
     return factory.statustext_encode(severity, text[:50].encode("ascii", "replace"))
-
-
-def speed_of(vel_ned: np.ndarray) -> float:
-    """Horizontal speed of a NED velocity, m/s."""
-    return math.hypot(float(vel_ned[0]), float(vel_ned[1]))

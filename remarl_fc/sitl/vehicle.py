@@ -18,6 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from remarl_fc.sitl.config import VehicleModelConfig
+from sim.kinematics import wrap_angle
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -158,15 +159,6 @@ def _clip_norm(v: FloatArray, limit: FloatArray | float) -> FloatArray:
     return out
 
 
-def wrap_pi(angle: FloatArray) -> FloatArray:
-    """Wrap radians to [-π, π).
-
-    >>> round(float(wrap_pi(np.array(3 * math.pi / 2))), 4)
-    -1.5708
-    """
-    return (np.asarray(angle) + math.pi) % (2 * math.pi) - math.pi
-
-
 def commanded_velocity(a: Airframes, cfg: VehicleModelConfig) -> FloatArray:
     """(N, 3) velocity command of every vehicle from its guidance."""
     g = a.guidance
@@ -248,15 +240,15 @@ def step(a: Airframes, cfg: VehicleModelConfig, dt_s: float, rng: np.random.Gene
     angle = a.yaw_mode == YawMode.ANGLE
     hold = a.yaw_mode == YawMode.HOLD
     track = angle | hold
-    rate[track] = wrap_pi(a.yaw_target_rad[track] - a.yaw_rad[track]) / cfg.yaw_tau_s
+    rate[track] = wrap_angle(a.yaw_target_rad[track] - a.yaw_rad[track]) / cfg.yaw_tau_s
     ratem = a.yaw_mode == YawMode.RATE
     rate[ratem] = a.yaw_rate_target_rad_s[ratem]
     travel = a.yaw_mode == YawMode.TRAVEL
     speed = np.hypot(a.vel_ned_m_s[:, 0], a.vel_ned_m_s[:, 1])
     moving = travel & (speed > 0.5)
     course = np.arctan2(a.vel_ned_m_s[:, 1], a.vel_ned_m_s[:, 0])
-    rate[moving] = wrap_pi(course[moving] - a.yaw_rad[moving]) / cfg.yaw_tau_s
+    rate[moving] = wrap_angle(course[moving] - a.yaw_rad[moving]) / cfg.yaw_tau_s
     rate = np.clip(rate, -cfg.max_yaw_rate_rad_s, cfg.max_yaw_rate_rad_s)
     rate[a.landed & (a.guidance == Guidance.IDLE)] = 0.0
     a.yaw_rate_rad_s = rate
-    a.yaw_rad = wrap_pi(a.yaw_rad + rate * dt_s)
+    a.yaw_rad = wrap_angle(a.yaw_rad + rate * dt_s)

@@ -21,7 +21,6 @@ from remarl_fc.mavlink.link import (
     LinkAddress,
     MavlinkLink,
     TlogWriter,
-    gcs_codec,
 )
 
 WAIT_S = 5.0
@@ -138,11 +137,6 @@ def test_parse_refuses_bad_forms_clearly(url, words):
 def test_a_bad_url_fails_at_construction():
     with pytest.raises(ValueError, match="is not one of"):
         MavlinkLink("nowhere", Codec(255, 190), Inbox())
-
-
-def test_gcs_codec_is_this_sides_identity():
-    codec = gcs_codec(250, 191, None)
-    assert (codec.system_id, codec.component_id, codec.signing) == (250, 191, None)
 
 
 # -- UDP ------------------------------------------------------------------------------------
