@@ -233,7 +233,13 @@ def _run_benchmarl(job: Job) -> dict[str, Any]:
             f"{job.method} needs BenchMARL: pip install 'remarl-fc[baselines]' ({exc})"
         ) from exc
     summary: dict[str, Any] = task.train_benchmarl(
-        job.method, job.scenario, job.cfg.budget_steps, job.seed, job.folder, job.cfg.n_actions
+        job.method,
+        job.scenario,
+        job.cfg.budget_steps,
+        job.seed,
+        job.folder,
+        job.cfg.n_actions,
+        eval_episodes=job.cfg.eval_episodes,
     )
     return summary
 

@@ -24,9 +24,10 @@ import numpy as np
 
 from remarl_fc.control import ControlSpec
 from remarl_fc.demo import free_udp_port
+from remarl_fc.flyconfig import FlyConfig, Status
 from remarl_fc.mission import Mission, VehiclePlan
 from remarl_fc.policy_io import Policy, load_policy
-from remarl_fc.runtime import FlyConfig, Status, SwarmRuntime
+from remarl_fc.runtime import SwarmRuntime
 from remarl_fc.sitl.config import DEFAULT_HOME, SitlConfig
 from remarl_fc.sitl.fleet import DEFAULT_D_COL_M, SitlFleet, grid_layout
 from sim.spawn import SPAWN_SPACING_FACTOR
@@ -72,7 +73,7 @@ async def bench_fly(vehicles: int = 10, seconds: float = 10.0) -> dict[str, Any]
     async with runtime, SitlFleet(sitl) as fleet:
 
         async def watch() -> None:
-            await runtime.wait_until(
+            await runtime.commands.wait_until(
                 "every vehicle under control",
                 lambda: all(m.status == Status.CONTROLLED for m in runtime.members),
                 cfg.ready_timeout_s + cfg.takeoff_timeout_s,
@@ -83,7 +84,7 @@ async def bench_fly(vehicles: int = 10, seconds: float = 10.0) -> dict[str, Any]
             for m in runtime.members:
                 m.sent = 0
             window.append(time.monotonic())
-            await runtime.wait_until(
+            await runtime.commands.wait_until(
                 "the end of the measured flight",
                 lambda: not any(m.status == Status.CONTROLLED for m in runtime.members),
                 seconds + 30.0,

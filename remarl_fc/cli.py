@@ -229,6 +229,14 @@ def _cmd_compare(args: argparse.Namespace) -> int:
     if args.quick:
         cfg = CompareConfig.quick_preset(scenarios, methods, out)
     else:
+        episodes = {
+            name: value
+            for name, value in (
+                ("eval_episodes", args.eval_episodes),
+                ("e2coop_episodes", args.e2coop_episodes),
+            )
+            if value is not None  # unset: CompareConfig's defaults
+        }
         cfg = CompareConfig(
             scenarios,
             methods,
@@ -237,6 +245,7 @@ def _cmd_compare(args: argparse.Namespace) -> int:
             out=out,
             n_actions=args.n_actions,
             workers=args.workers,
+            **episodes,
         )
     results = run_grid(cfg, ray_address=args.ray_address)
     paths = write_reports(cfg, results)
@@ -360,6 +369,18 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default="results", help="results folder (finished cells are kept)")
     p.add_argument("--n-actions", type=_positive_int, default=11, help="baselines' heading set")
     p.add_argument("--workers", type=_positive_int, default=2, help="cells run in parallel")
+    p.add_argument(
+        "--eval-episodes",
+        type=_positive_int,
+        default=None,
+        help="evaluation episodes per trained run",
+    )
+    p.add_argument(
+        "--e2coop-episodes",
+        type=_positive_int,
+        default=None,
+        help="evaluation episodes per E2Coop seed",
+    )
     p.add_argument("--quick", action="store_true", help="small budgets: minutes on 2 cores")
     p.add_argument("--ray-address", default=None, help="run the cells on this Ray cluster")
     p.add_argument("--json", action="store_true", help="print one JSON object")

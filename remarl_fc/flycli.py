@@ -137,10 +137,11 @@ def cmd_fly(args: argparse.Namespace) -> int:
     """Fly; exit 0 when every vehicle reached its target, 4 otherwise."""
     from remarl_fc.control import ControlSpec
     from remarl_fc.errors import ConfigError
+    from remarl_fc.flyconfig import FlyConfig
     from remarl_fc.mavlink.codec import SigningConfig, load_signing_key
     from remarl_fc.mission import load_mission
     from remarl_fc.policy_io import load_policy
-    from remarl_fc.runtime import FlyConfig, SwarmRuntime
+    from remarl_fc.runtime import SwarmRuntime
 
     policy = load_policy(args.policy)
     mission = load_mission(args.mission)
@@ -195,7 +196,7 @@ def _make_bus(args: argparse.Namespace, cfg: Any) -> Any:
     if args.bus == "memory":
         return None
     from remarl_fc.bus.mqtt import MqttBus, MqttSettings
-    from remarl_fc.runtime import bus_core
+    from remarl_fc.flyconfig import bus_core
 
     settings = MqttSettings.from_url(
         args.bus,

@@ -25,7 +25,7 @@ from remarl_fc.bus.schema import STATUSES, Detection, Detections, VehicleState
 from remarl_fc.tracking import Intruder, TrafficPicture
 
 if TYPE_CHECKING:
-    from remarl_fc.runtime import Member
+    from remarl_fc.flyconfig import Member
 
 STATE_HZ = 10.0
 """State publication rate per local vehicle."""
@@ -35,7 +35,7 @@ DETECTIONS_EVERY = 5
 
 
 class ClockLike(Protocol):
-    """The runtime's clock (`remarl_fc.runtime.Clock`)."""
+    """The runtime's clock (`remarl_fc.flyconfig.Clock`)."""
 
     speedup: float
 

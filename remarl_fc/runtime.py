@@ -24,59 +24,43 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import dataclasses
-import enum
 import json
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
-from pathlib import Path
 from types import TracebackType
-from typing import IO, Any, Literal, Self
+from typing import IO, Any, Self
 
 import numpy as np
 
-from remarl_fc.bus.core import BusCore, SwarmBus
+from remarl_fc.bus.core import SwarmBus
 from remarl_fc.bus.memory import MemoryBroker, MemoryBus
+from remarl_fc.commands import Commander, enum_name
 from remarl_fc.control import ControlSpec, Decision, PolicyLike, SwarmController
-from remarl_fc.errors import CommandRejected, ConfigError, LinkTimeout, RemarlError
-from remarl_fc.mavlink.codec import Codec, SigningConfig
+from remarl_fc.errors import CommandRejected, ConfigError, RemarlError
+from remarl_fc.flyconfig import (
+    PX4_TELEMETRY,
+    TELEMETRY,
+    Clock,
+    FlyConfig,
+    Member,
+    Status,
+    bus_core,
+)
+from remarl_fc.mavlink.codec import Codec
 from remarl_fc.mavlink.consts import (
     TYPE_MASK_VELOCITY_YAW,
-    CopterMode,
     MavAutopilot,
     MavCmd,
     MavComponent,
     MavFrame,
-    MavModeFlag,
-    MavResult,
     MavState,
     MavType,
     MsgId,
-    Px4AutoSubMode,
-    Px4MainMode,
-    px4_mode_parts,
 )
-from remarl_fc.mavlink.link import LinkAddress, MavlinkLink, TlogWriter
-from remarl_fc.mission import Mission
+from remarl_fc.mavlink.link import MavlinkLink, TlogWriter
 from remarl_fc.peers import Peers
 from remarl_fc.tracking import TrafficPicture, VehicleTrack
-
-HoldMode = Literal["brake", "loiter"]
-
-TELEMETRY: dict[int, float] = {
-    MsgId.GLOBAL_POSITION_INT: 10.0,
-    MsgId.ATTITUDE: 10.0,
-    MsgId.EKF_STATUS_REPORT: 2.0,
-    MsgId.EXTENDED_SYS_STATE: 1.0,
-}
-"""Messages the runtime asks every vehicle for, Hz (SET_MESSAGE_INTERVAL)."""
-
-PX4_TELEMETRY = frozenset({MsgId.GLOBAL_POSITION_INT, MsgId.ATTITUDE, MsgId.EXTENDED_SYS_STATE})
-"""The subset PX4 has (no EKF_STATUS_REPORT)."""
-
-READ_ONLY_COMMANDS = frozenset({MavCmd.SET_MESSAGE_INTERVAL, MavCmd.REQUEST_MESSAGE})
-"""Commands that change nothing on the vehicle: sent even in a dry run (telemetry is needed)."""
 
 HOLD_CONFIRM_S = 6.0
 """At the end, wait at most this long for the last hold commands to be confirmed."""
@@ -84,135 +68,11 @@ HOLD_CONFIRM_S = 6.0
 ADSB_HZ = 2.0
 """ADSB_VEHICLE rate asked for (best effort: not every autopilot takes it)."""
 
-ACK_TIMEOUT_S = 1.0
-"""Wait for one COMMAND_ACK before retrying, s."""
-
-ACK_RETRIES = 5
-"""Attempts per command (COMMAND_LONG.confirmation counts them): at 10 % loss each way an
-attempt fails 19 % of the time, five in a row 0.02 %."""
-
 CLIMB_RATE_M_S = 1.5
 """PX4 take-off climb in OFFBOARD (MPC_TKO_SPEED's default)."""
 
 TAKEOFF_DONE_FRACTION = 0.95
 """A take-off is done at this fraction of its height."""
-
-
-class Clock:
-    """The runtime's time: monotonic, optionally scaled to follow a faster-than-real mock.
-
-    Args:
-        speedup: simulated seconds per wall second (1 for real vehicles).
-    """
-
-    def __init__(self, speedup: float = 1.0) -> None:
-        if not speedup > 0:
-            raise ValueError(f"speedup must be > 0, not {speedup}")
-        self.speedup = speedup
-        self._t0 = time.monotonic()
-
-    def now(self) -> float:
-        """Seconds since the clock started (scaled)."""
-        return (time.monotonic() - self._t0) * self.speedup
-
-    def at(self, t_mono: float) -> float:
-        """A monotonic stamp on this clock."""
-        return (t_mono - self._t0) * self.speedup
-
-    async def sleep(self, seconds: float) -> None:
-        """Sleep ``seconds`` of this clock."""
-        await asyncio.sleep(max(0.0, seconds) / self.speedup)
-
-    def timeout(self, seconds: float) -> asyncio.Timeout:
-        """`asyncio.timeout` for ``seconds`` of this clock."""
-        return asyncio.timeout(seconds / self.speedup)
-
-
-class Status(enum.StrEnum):
-    """Where a vehicle is in the flight."""
-
-    WAITING = "waiting"
-    TAKING_OFF = "taking-off"
-    READY = "ready"
-    CONTROLLED = "controlled"
-    LOST = "lost"  # telemetry stale: not commanded, an obstacle at its last track
-    HELD = "held"  # told to hold after a loss, a breach or the end
-    REACHED = "reached"  # at its target: held and released
-    PILOT = "pilot"  # the pilot took it: released, never fought
-
-
-@dataclass(frozen=True)
-class FlyConfig:
-    """Settings of one flight (the CLI fills them; defaults are the safe ones)."""
-
-    connections: tuple[str, ...]
-    mission: Mission
-    takeoff_m: float | None = None
-    """Take off to this height above the origin first (overrides the mission's alt_m)."""
-    takeoff_to_mission_alt: bool = False
-    """Take off first, each vehicle to its mission ``alt_m`` (when `takeoff_m` is None)."""
-    """Take off to this height above the origin first (None: vehicles are already flying)."""
-    dry_run: bool = False
-    """Compute and log setpoints, send no command and no setpoint."""
-    log_dir: Path | None = None
-    """Write flight.tlog and decisions.jsonl here."""
-    signing: SigningConfig | None = None
-    setpoint_hz: float = 10.0
-    """Setpoint stream rate (≥ 10 Hz: ArduPilot stops after GUID_TIMEOUT, PX4 after 1 s)."""
-    stale_s: float = 1.0
-    """Telemetry older than this marks a vehicle lost."""
-    hold: HoldMode = "brake"
-    """ArduPilot hold mode: BRAKE holds position and height without RC; LOITER needs the
-    pilot's sticks (without RC ArduCopter descends in LOITER). PX4 always uses Hold."""
-    ready_timeout_s: float = 90.0
-    """Wait this long for heartbeats, telemetry and a position."""
-    takeoff_timeout_s: float = 60.0
-    adsb_band_m: float = 50.0
-    """Intruders within ±this height of a vehicle are obstacles."""
-    system_id: int = 255
-    """The controller's MAVLink system id (ArduPilot's MAV_GCS_SYSID default)."""
-    component_id: int = MavComponent.ONBOARD_COMPUTER
-    speedup: float = 1.0
-    """Scale every period and deadline (only to fly a mock running faster than real time)."""
-    max_flight_s: float = 600.0
-    """Hold everything after this long under control."""
-    vehicles: frozenset[int] | None = None
-    """System ids this process flies (one per process over MQTT); None: every vehicle."""
-    swarm: str = "swarm"
-    """The swarm's name on the bus (topics PREFIX/SWARM/uav/ID/...)."""
-    bus_prefix: str = "remarl"
-    """Topic prefix on the bus."""
-    peer_timeout_s: float = 1.5
-    """A peer silent on the bus this long is treated as lost (an obstacle at its last track)."""
-
-    def __post_init__(self) -> None:
-        if not self.connections:
-            raise ValueError("give at least one --connection")
-        for url in self.connections:
-            LinkAddress.parse(url)  # a bad URL fails here, before anything is opened
-        if self.setpoint_hz < 10.0:
-            raise ValueError(f"setpoint_hz must be ≥ 10 Hz, not {self.setpoint_hz}")
-        if self.takeoff_m is not None and not self.takeoff_m > 0:
-            raise ValueError(f"takeoff height must be > 0 m, not {self.takeoff_m}")
-
-
-@dataclass
-class Member:
-    """One vehicle of the flight, as the runtime sees it."""
-
-    slot: int
-    system_id: int
-    track: VehicleTrack
-    status: Status = Status.WAITING
-    link: MavlinkLink | None = None
-    climb_target_m: float | None = None  # PX4 offboard take-off
-    prestream: bool = False  # PX4: stream zero-velocity setpoints before OFFBOARD
-    sent: int = 0
-    events: list[tuple[float, str]] = field(default_factory=list)
-    local: bool = True  # flown by this process (else a peer's, known from the swarm bus)
-    remote_status: str | None = None  # a peer's status as its process publishes it
-    ready_ne_m: np.ndarray | None = None  # where it was when it became ready to start
-    ready_t: float | None = None  # when (UNIX s): every process derives the same start
 
 
 class SwarmRuntime:
@@ -262,7 +122,7 @@ class SwarmRuntime:
         self.controller = SwarmController(policy, spec, mission.targets_ne_m())
         self.codec = Codec(cfg.system_id, cfg.component_id, signing=cfg.signing)
         self.links: list[MavlinkLink] = []
-        self._acks: dict[tuple[int, int], asyncio.Future[Any]] = {}
+        self.commands = Commander(cfg, self.codec, self.clock, self.links)
         self._stack: contextlib.AsyncExitStack | None = None
         self._log: IO[str] | None = None
         self._done = asyncio.Event()
@@ -334,100 +194,7 @@ class SwarmRuntime:
             member.link = self.links[k]
         member.track.update(msg, now)
         if mid == MsgId.COMMAND_ACK:
-            fut = self._acks.get((member.system_id, int(msg.command)))
-            if fut is not None and not fut.done():
-                fut.set_result(msg)
-
-    # -- sending ------------------------------------------------------------------------
-
-    def _send(self, member: Member, msg: Any, *, harmless: bool = False) -> bool:
-        if self.cfg.dry_run and not harmless:
-            return False
-        links = [member.link] if member.link is not None else self.links
-        return any(link.send(msg, member.system_id) for link in links)
-
-    async def command(
-        self,
-        member: Member,
-        cmd: int,
-        *params: float,
-        done: Callable[[], bool] | None = None,
-    ) -> None:
-        """COMMAND_LONG with retries; returns on ACCEPTED.
-
-        ``done`` tells whether the command's effect is already visible: a retry refused
-        because the first attempt worked (its ACK was lost) — e.g. NAV_TAKEOFF while already
-        climbing — then counts as accepted.
-
-        Raises:
-            CommandRejected: any other result (with the vehicle's STATUSTEXT reason).
-            LinkTimeout: no ACK after `ACK_RETRIES` attempts.
-        """
-        harmless = cmd in READ_ONLY_COMMANDS
-        if self.cfg.dry_run and not harmless:
-            return
-        p = [*params, *([0.0] * (7 - len(params)))]
-        key = (member.system_id, cmd)
-        sent_at = self.clock.now()
-        for attempt in range(ACK_RETRIES):
-            fut: asyncio.Future[Any] = asyncio.get_running_loop().create_future()
-            self._acks[key] = fut
-            msg = self.codec.factory.command_long_encode(
-                member.system_id, MavComponent.AUTOPILOT1, cmd, attempt, *p
-            )
-            self._send(member, msg, harmless=harmless)
-            try:
-                async with self.clock.timeout(ACK_TIMEOUT_S):
-                    ack = await fut
-            except TimeoutError:
-                continue
-            finally:
-                self._acks.pop(key, None)
-            if ack.result == MavResult.ACCEPTED or (attempt > 0 and done is not None and done()):
-                return
-            await self.clock.sleep(0.2)  # the reason's STATUSTEXT may follow the ACK
-            raise CommandRejected(
-                command=cmd,
-                command_name=_name(MavCmd, cmd),
-                result=int(ack.result),
-                result_name=_name(MavResult, int(ack.result)),
-                system_id=member.system_id,
-                reason=member.track.last_text(sent_at),
-            )
-        if done is not None:  # every ACK lost: the effect may still be there
-            with contextlib.suppress(LinkTimeout):
-                await self.wait_until("the command's effect", done, 1.5)
-                return
-        raise LinkTimeout(
-            link=self.cfg.connections[0],
-            waited_for=f"COMMAND_ACK of {_name(MavCmd, cmd)} from vehicle {member.system_id}",
-            timeout_s=ACK_TIMEOUT_S * ACK_RETRIES,
-        )
-
-    async def wait_until(self, what: str, pred: Callable[[], bool], timeout_s: float) -> None:
-        """Poll ``pred`` until true; raise `LinkTimeout` naming ``what`` after ``timeout_s``."""
-        try:
-            async with self.clock.timeout(timeout_s):
-                while not pred():
-                    await self.clock.sleep(0.05)
-        except TimeoutError as exc:
-            raise LinkTimeout(
-                link=", ".join(self.cfg.connections), waited_for=what, timeout_s=timeout_s
-            ) from exc
-
-    async def set_mode(self, member: Member, mode: str) -> None:
-        """DO_SET_MODE in the vehicle's encoding, confirmed by the next HEARTBEAT."""
-        t = member.track
-        if mode == "hold" and not t.is_px4:
-            mode = self.cfg.hold
-        params, check = _mode_command(t.is_px4, mode)
-        await self.command(member, MavCmd.DO_SET_MODE, *params, done=lambda: check(t.custom_mode))
-        if not self.cfg.dry_run:
-            await self.wait_until(
-                f"vehicle {member.system_id} HEARTBEAT in {mode}",
-                lambda: check(t.custom_mode),
-                3.0,
-            )
+            self.commands.on_ack(member.system_id, msg)
 
     # -- the flight ---------------------------------------------------------------------
 
@@ -481,7 +248,7 @@ class SwarmRuntime:
     async def _prepare(self) -> None:
         cfg = self.cfg
         mine = self.local_members()
-        await self.wait_until(
+        await self.commands.wait_until(
             "a HEARTBEAT from every vehicle this process flies",
             lambda: all(m.track.autopilot is not None for m in mine),
             cfg.ready_timeout_s,
@@ -500,7 +267,7 @@ class SwarmRuntime:
                 plan.append(got)
             return got is not None
 
-        await self.wait_until(
+        await self.commands.wait_until(
             "every vehicle of the swarm ready (states on the swarm bus)",
             all_ready,
             cfg.ready_timeout_s + cfg.takeoff_timeout_s,
@@ -518,29 +285,29 @@ class SwarmRuntime:
         for mid, hz in TELEMETRY.items():
             if t.is_px4 and mid not in PX4_TELEMETRY:
                 continue
-            await self.command(m, MavCmd.SET_MESSAGE_INTERVAL, int(mid), 1e6 / hz)
+            await self.commands.command(m, MavCmd.SET_MESSAGE_INTERVAL, int(mid), 1e6 / hz)
         try:  # ArduPilot relays its ADS-B receiver's traffic only when asked (ADSB_TYPE=1)
-            await self.command(
+            await self.commands.command(
                 m, MavCmd.SET_MESSAGE_INTERVAL, int(MsgId.ADSB_VEHICLE), 1e6 / ADSB_HZ
             )
         except CommandRejected as exc:
             self._event(m, f"ADSB_VEHICLE rate not set ({exc.result_name}): relying on its default")
         for mid in (MsgId.GLOBAL_POSITION_INT, MsgId.ATTITUDE):
-            name = _name(MsgId, mid)
-            await self.wait_until(
+            name = enum_name(MsgId, mid)
+            await self.commands.wait_until(
                 f"vehicle {m.system_id}: {name} after asking for it at {TELEMETRY[mid]:g} Hz",
                 lambda name=name: t.seen[name] > 0,  # type: ignore[misc]
                 cfg.ready_timeout_s,
             )
         if cfg.dry_run:  # nothing is sent: fly the setpoints on paper from where it is
-            await self.wait_until(
+            await self.commands.wait_until(
                 f"vehicle {m.system_id}: a position",
                 lambda: math.isfinite(t.t_position),
                 cfg.ready_timeout_s,
             )
             m.status = Status.READY
             return
-        await self.wait_until(
+        await self.commands.wait_until(
             f"vehicle {m.system_id}: out of boot with a position (EKF flags on ArduPilot)",
             lambda: t.system_status != MavState.BOOT and t.position_ok(),
             cfg.ready_timeout_s,
@@ -557,7 +324,7 @@ class SwarmRuntime:
             if t.is_px4:
                 m.prestream = True
                 await self.clock.sleep(0.5)
-            await self.set_mode(m, "external")
+            await self.commands.set_mode(m, "external")
         m.prestream = t.is_px4  # PX4 leaves OFFBOARD after 1 s without setpoints: keep them
         m.status = Status.READY
 
@@ -569,10 +336,10 @@ class SwarmRuntime:
 
     async def _takeoff_ardupilot(self, m: Member) -> None:
         alt = self._takeoff_alt(m)
-        await self.set_mode(m, "external")
-        await self.command(m, MavCmd.COMPONENT_ARM_DISARM, 1, done=lambda: m.track.armed)
-        await self.wait_until(f"vehicle {m.system_id} armed", lambda: m.track.armed, 3.0)
-        await self.command(
+        await self.commands.set_mode(m, "external")
+        await self.commands.command(m, MavCmd.COMPONENT_ARM_DISARM, 1, done=lambda: m.track.armed)
+        await self.commands.wait_until(f"vehicle {m.system_id} armed", lambda: m.track.armed, 3.0)
+        await self.commands.command(
             m, MavCmd.NAV_TAKEOFF, 0, 0, 0, math.nan, 0, 0, alt,
             done=lambda: m.track.height_m > 0.5 or m.track.landed_state in (2, 3),
         )  # fmt: skip
@@ -582,15 +349,15 @@ class SwarmRuntime:
         alt = self._takeoff_alt(m)
         m.prestream = True  # zero-velocity setpoints: OFFBOARD needs a stream first
         await self.clock.sleep(0.5)
-        await self.set_mode(m, "external")
-        await self.command(m, MavCmd.COMPONENT_ARM_DISARM, 1, done=lambda: m.track.armed)
-        await self.wait_until(f"vehicle {m.system_id} armed", lambda: m.track.armed, 3.0)
+        await self.commands.set_mode(m, "external")
+        await self.commands.command(m, MavCmd.COMPONENT_ARM_DISARM, 1, done=lambda: m.track.armed)
+        await self.commands.wait_until(f"vehicle {m.system_id} armed", lambda: m.track.armed, 3.0)
         m.climb_target_m = alt
         await self._wait_height(m, alt)
         m.climb_target_m = None
 
     async def _wait_height(self, m: Member, alt: float) -> None:
-        await self.wait_until(
+        await self.commands.wait_until(
             f"vehicle {m.system_id} at {TAKEOFF_DONE_FRACTION:.0%} of {alt:g} m",
             lambda: m.track.height_m >= TAKEOFF_DONE_FRACTION * alt,
             self.cfg.takeoff_timeout_s,
@@ -725,7 +492,7 @@ class SwarmRuntime:
             MavFrame.LOCAL_NED, TYPE_MASK_VELOCITY_YAW, 0.0, 0.0, 0.0, vn, ve, vd,
             0.0, 0.0, 0.0, yaw, 0.0,
         )  # fmt: skip
-        if self._send(m, msg):
+        if self.commands.send(m, msg):
             m.sent += 1
 
     def _spawn_hold(self, m: Member) -> None:
@@ -741,7 +508,7 @@ class SwarmRuntime:
 
     async def _hold(self, m: Member) -> None:
         try:
-            await self.set_mode(m, "hold")
+            await self.commands.set_mode(m, "hold")
             self._event(m, "holding")
         except RemarlError as exc:
             self._event(m, f"hold command failed: {exc}")
@@ -847,34 +614,3 @@ class _FlightOver(Exception):
 def _first_leaf(group: BaseExceptionGroup[Any]) -> BaseException:
     first = group.exceptions[0]
     return _first_leaf(first) if isinstance(first, BaseExceptionGroup) else first
-
-
-def bus_core(cfg: FlyConfig, local: frozenset[int]) -> BusCore:
-    """The receive-side bookkeeping of this flight's swarm bus endpoint."""
-    ids = frozenset(p.system_id for p in cfg.mission.vehicles)
-    return BusCore(cfg.bus_prefix, cfg.swarm, local, ids, speedup=cfg.speedup)
-
-
-def _name(enum_cls: Any, value: int) -> str:
-    try:
-        return str(enum_cls(value).name)
-    except ValueError:
-        return str(value)
-
-
-def _mode_command(px4: bool, mode: str) -> tuple[tuple[float, ...], Callable[[int], bool]]:
-    """(DO_SET_MODE params, HEARTBEAT.custom_mode check) for "external" or "hold"."""
-    if px4:
-        main, sub = {
-            "external": (Px4MainMode.OFFBOARD, 0),
-            "hold": (Px4MainMode.AUTO, Px4AutoSubMode.LOITER),
-        }[mode]
-        return (float(MavModeFlag.CUSTOM_MODE_ENABLED), float(main), float(sub)), (
-            lambda cm: px4_mode_parts(cm) == (main, sub)
-        )
-    number = {
-        "external": CopterMode.GUIDED,
-        "brake": CopterMode.BRAKE,
-        "loiter": CopterMode.LOITER,
-    }[mode]
-    return (float(MavModeFlag.CUSTOM_MODE_ENABLED), float(number)), (lambda cm: cm == number)

@@ -11,8 +11,8 @@ import asyncio
 import pytest
 
 from remarl_fc.demo import fly_on_mock
+from remarl_fc.flyconfig import Status
 from remarl_fc.mavlink.consts import CopterMode
-from remarl_fc.runtime import Status
 from remarl_fc.sitl.faults import Faults
 
 pytestmark = [pytest.mark.asyncio, pytest.mark.network, pytest.mark.timeout(180)]
@@ -30,7 +30,7 @@ def assert_safe_and_arrived(truth: dict, reached: int | None = None) -> None:
 
 
 async def until_controlled(runtime) -> float:
-    await runtime.wait_until(
+    await runtime.commands.wait_until(
         "control", lambda: all(m.status == Status.CONTROLLED for m in runtime.members), 120
     )
     return runtime.clock.now()
@@ -165,9 +165,11 @@ async def test_arming_refusal_carries_the_autopilots_reason():
 
     async def arm_too_early(fleet, runtime) -> None:
         member = runtime.members[0]
-        await runtime.wait_until("heartbeat", lambda: member.track.autopilot is not None, 30)
+        await runtime.commands.wait_until(
+            "heartbeat", lambda: member.track.autopilot is not None, 30
+        )
         with pytest.raises(CommandRejected) as info:
-            await runtime.command(member, MavCmd.COMPONENT_ARM_DISARM, 1)
+            await runtime.commands.command(member, MavCmd.COMPONENT_ARM_DISARM, 1)
         assert info.value.result == MavResult.FAILED
         assert "PreArm: Need Position Estimate" in info.value.reason
         assert "PreArm" in str(info.value)

@@ -1,0 +1,162 @@
+"""One flight's settings and bookkeeping: `FlyConfig`, `Clock`, `Member` and `Status`.
+
+Also the messages asked of every vehicle (`TELEMETRY`) and the bus endpoint's core (`bus_core`).
+
+Kept apart from `remarl_fc.runtime` so that the command layer (`remarl_fc.commands`), the swarm
+bus glue (`remarl_fc.peers`) and the tools (`remarl_fc.benchfly`, `remarl_fc.demo`) share them
+without importing the flight itself.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import enum
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+
+from remarl_fc.bus.core import BusCore
+from remarl_fc.mavlink.codec import SigningConfig
+from remarl_fc.mavlink.consts import MavComponent, MsgId
+from remarl_fc.mavlink.link import LinkAddress, MavlinkLink
+from remarl_fc.mission import Mission
+from remarl_fc.tracking import VehicleTrack
+
+HoldMode = Literal["brake", "loiter"]
+
+TELEMETRY: dict[int, float] = {
+    MsgId.GLOBAL_POSITION_INT: 10.0,
+    MsgId.ATTITUDE: 10.0,
+    MsgId.EKF_STATUS_REPORT: 2.0,
+    MsgId.EXTENDED_SYS_STATE: 1.0,
+}
+"""Messages the runtime asks every vehicle for, Hz (SET_MESSAGE_INTERVAL)."""
+
+PX4_TELEMETRY = frozenset({MsgId.GLOBAL_POSITION_INT, MsgId.ATTITUDE, MsgId.EXTENDED_SYS_STATE})
+"""The subset PX4 has (no EKF_STATUS_REPORT)."""
+
+
+class Clock:
+    """The runtime's time: monotonic, optionally scaled to follow a faster-than-real mock.
+
+    Args:
+        speedup: simulated seconds per wall second (1 for real vehicles).
+    """
+
+    def __init__(self, speedup: float = 1.0) -> None:
+        if not speedup > 0:
+            raise ValueError(f"speedup must be > 0, not {speedup}")
+        self.speedup = speedup
+        self._t0 = time.monotonic()
+
+    def now(self) -> float:
+        """Seconds since the clock started (scaled)."""
+        return (time.monotonic() - self._t0) * self.speedup
+
+    def at(self, t_mono: float) -> float:
+        """A monotonic stamp on this clock."""
+        return (t_mono - self._t0) * self.speedup
+
+    async def sleep(self, seconds: float) -> None:
+        """Sleep ``seconds`` of this clock."""
+        await asyncio.sleep(max(0.0, seconds) / self.speedup)
+
+    def timeout(self, seconds: float) -> asyncio.Timeout:
+        """`asyncio.timeout` for ``seconds`` of this clock."""
+        return asyncio.timeout(seconds / self.speedup)
+
+
+class Status(enum.StrEnum):
+    """Where a vehicle is in the flight."""
+
+    WAITING = "waiting"
+    TAKING_OFF = "taking-off"
+    READY = "ready"
+    CONTROLLED = "controlled"
+    LOST = "lost"  # telemetry stale: not commanded, an obstacle at its last track
+    HELD = "held"  # told to hold after a loss, a breach or the end
+    REACHED = "reached"  # at its target: held and released
+    PILOT = "pilot"  # the pilot took it: released, never fought
+
+
+@dataclass(frozen=True)
+class FlyConfig:
+    """Settings of one flight (the CLI fills them; defaults are the safe ones)."""
+
+    connections: tuple[str, ...]
+    mission: Mission
+    takeoff_m: float | None = None
+    """Take off to this height above the origin first (overrides the mission's alt_m)."""
+    takeoff_to_mission_alt: bool = False
+    """Take off first, each vehicle to its mission ``alt_m`` (when `takeoff_m` is None; with
+    neither, the vehicles must already be flying)."""
+    dry_run: bool = False
+    """Compute and log setpoints, send no command and no setpoint."""
+    log_dir: Path | None = None
+    """Write flight.tlog and decisions.jsonl here."""
+    signing: SigningConfig | None = None
+    setpoint_hz: float = 10.0
+    """Setpoint stream rate (≥ 10 Hz: ArduPilot stops after GUID_TIMEOUT, PX4 after 1 s)."""
+    stale_s: float = 1.0
+    """Telemetry older than this marks a vehicle lost."""
+    hold: HoldMode = "brake"
+    """ArduPilot hold mode: BRAKE holds position and height without RC; LOITER needs the
+    pilot's sticks (without RC ArduCopter descends in LOITER). PX4 always uses Hold."""
+    ready_timeout_s: float = 90.0
+    """Wait this long for heartbeats, telemetry and a position."""
+    takeoff_timeout_s: float = 60.0
+    adsb_band_m: float = 50.0
+    """Intruders within ±this height of a vehicle are obstacles."""
+    system_id: int = 255
+    """The controller's MAVLink system id (ArduPilot's MAV_GCS_SYSID default)."""
+    component_id: int = MavComponent.ONBOARD_COMPUTER
+    speedup: float = 1.0
+    """Scale every period and deadline (only to fly a mock running faster than real time)."""
+    max_flight_s: float = 600.0
+    """Hold everything after this long under control."""
+    vehicles: frozenset[int] | None = None
+    """System ids this process flies (one per process over MQTT); None: every vehicle."""
+    swarm: str = "swarm"
+    """The swarm's name on the bus (topics PREFIX/SWARM/uav/ID/...)."""
+    bus_prefix: str = "remarl"
+    """Topic prefix on the bus."""
+    peer_timeout_s: float = 1.5
+    """A peer silent on the bus this long is treated as lost (an obstacle at its last track)."""
+
+    def __post_init__(self) -> None:
+        if not self.connections:
+            raise ValueError("give at least one --connection")
+        for url in self.connections:
+            LinkAddress.parse(url)  # a bad URL fails here, before anything is opened
+        if self.setpoint_hz < 10.0:
+            raise ValueError(f"setpoint_hz must be ≥ 10 Hz, not {self.setpoint_hz}")
+        if self.takeoff_m is not None and not self.takeoff_m > 0:
+            raise ValueError(f"takeoff height must be > 0 m, not {self.takeoff_m}")
+
+
+@dataclass
+class Member:
+    """One vehicle of the flight, as the runtime sees it."""
+
+    slot: int
+    system_id: int
+    track: VehicleTrack
+    status: Status = Status.WAITING
+    link: MavlinkLink | None = None
+    climb_target_m: float | None = None  # PX4 offboard take-off
+    prestream: bool = False  # PX4: stream zero-velocity setpoints before OFFBOARD
+    sent: int = 0
+    events: list[tuple[float, str]] = field(default_factory=list)
+    local: bool = True  # flown by this process (else a peer's, known from the swarm bus)
+    remote_status: str | None = None  # a peer's status as its process publishes it
+    ready_ne_m: np.ndarray | None = None  # where it was when it became ready to start
+    ready_t: float | None = None  # when (UNIX s): every process derives the same start
+
+
+def bus_core(cfg: FlyConfig, local: frozenset[int]) -> BusCore:
+    """The receive-side bookkeeping of this flight's swarm bus endpoint."""
+    ids = frozenset(p.system_id for p in cfg.mission.vehicles)
+    return BusCore(cfg.bus_prefix, cfg.swarm, local, ids, speedup=cfg.speedup)
