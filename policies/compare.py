@@ -359,6 +359,10 @@ def _summary(cfg: CompareConfig, results: list[dict[str, Any]]) -> Path:
         "",
         "Final evaluation (mean ± std over seeds): success rate and Swarming return per episode.",
         "",
+        "Episodes evaluated per run (greedy, seeds never used in training): "
+        + _episode_counts(cfg, results)
+        + ".",
+        "",
         "| scenario | " + " | ".join(cfg.methods) + " |",
         "|---|" + "---|" * len(cfg.methods),
     ]
@@ -376,6 +380,17 @@ def _summary(cfg: CompareConfig, results: list[dict[str, Any]]) -> Path:
     path = cfg.out / "summary.md"
     path.write_text("\n".join(lines) + "\n")
     return path
+
+
+def _episode_counts(cfg: CompareConfig, results: list[dict[str, Any]]) -> str:
+    """'method N' per method, from the results themselves (a range where runs differ)."""
+    parts = []
+    for m in cfg.methods:
+        counts = sorted({int(r["episodes"]) for r in results if r["method"] == m})
+        if counts:
+            span = str(counts[0]) if len(counts) == 1 else f"{counts[0]}–{counts[-1]}"
+            parts.append(f"{m} {span}")
+    return ", ".join(parts) or "none"
 
 
 def _table2(cfg: CompareConfig, results: list[dict[str, Any]]) -> dict[str, str]:

@@ -26,6 +26,7 @@ def test_quick_compare_two_methods_writes_every_output(tmp_path, capsys):
     assert float(rows[0]["paper_reaction_ms"]) == 480.0
     summary = (out / "summary.md").read_text()
     assert "| 2u1o |" in summary and "| 3u2o |" in summary
+    assert "remarl 20, coma 20, e2coop 5" in summary  # the quick preset's evaluation episodes
     with (out / "runs" / "2u1o" / "remarl" / "seed0" / "curve.csv").open() as fh:
         curve = list(csv.DictReader(fh))
     assert curve and set(curve[0]) == {"env_steps", "episode", "swarming_return", "success"}
@@ -41,3 +42,17 @@ def test_quick_compare_two_methods_writes_every_output(tmp_path, capsys):
 def test_unknown_method_is_a_clear_error(tmp_path, capsys):
     assert main(["compare", "--methods", "dqn", "--out", str(tmp_path)]) == 2
     assert "unknown method" in capsys.readouterr().err
+
+
+def test_episode_counts_come_from_the_results():
+    from pathlib import Path
+
+    from policies.compare import CompareConfig, _episode_counts
+
+    cfg = CompareConfig(("3u2o",), ("remarl", "mappo", "e2coop"), out=Path("unused"))
+    results = [
+        {"method": "remarl", "episodes": 200.0},
+        {"method": "mappo", "episodes": 100.0},
+        {"method": "mappo", "episodes": 200.0},
+    ]
+    assert _episode_counts(cfg, results) == "remarl 200, mappo 100–200"
