@@ -14,9 +14,11 @@ One `asyncio.TaskGroup` owns every task, each named ``remarl.<what>``:
   obstacle at its last track, and is told to hold when it comes back; a mode the pilot chose →
   released, never fought; a geofence breach ahead → hold; target reached → hold and release.
 
-Receiving is callback-driven (`remarl_fc.mavlink.link`). Every wait has a deadline on the
-monotonic clock and raises (`LinkTimeout`, `CommandRejected`); on any exit — the end of the
-mission, an error, Ctrl-C — every vehicle still under control is sent the hold mode.
+Receiving is callback-driven (`remarl_fc.mavlink.link`); commands, mode changes and waits go
+through `remarl_fc.commands.Commander`; the settings and per-vehicle rows are in
+`remarl_fc.flyconfig`. Every wait has a deadline on the monotonic clock and raises
+(`LinkTimeout`, `CommandRejected`); on any exit — the end of the mission, an error, Ctrl-C —
+every vehicle still under control is sent the hold mode.
 """
 
 from __future__ import annotations
