@@ -335,7 +335,8 @@ def _plot_curves(cfg: CompareConfig) -> Path:
     for ax in list(axes.flat)[n:]:
         ax.axis("off")
     fig.suptitle(
-        f"learning curves (mean ± std over {cfg.seeds} seeds; baselines: {cfg.n_actions} headings)",
+        f"learning curves (mean ± std over {cfg.seeds} seed{'s' if cfg.seeds > 1 else ''}; "
+        f"baselines: {cfg.n_actions} headings)",
         fontsize=12 if cols > 2 else 8,  # one or two panels: keep the title inside the figure
     )
     fig.tight_layout()
