@@ -10,12 +10,13 @@ over time to the nearest intruder and the nearest other vehicle against d_col.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import struct
 from collections import defaultdict
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import IO, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -24,6 +25,7 @@ from remarl_fc.errors import ConfigError
 from remarl_fc.frames import GeoPoint, from_deg_e7, geodetic_to_ned
 from remarl_fc.mavlink.codec import Codec
 from remarl_fc.mavlink.consts import MsgId
+from remarl_fc.mission import Mission
 
 FloatArray = NDArray[np.float64]
 
@@ -58,6 +60,40 @@ def read_tlog(path: str | Path) -> list[tuple[float, Any]]:
         out += [(stamp / 1e6, m) for m in codec.decode(data[start : start + size], "tlog")]
         i = start + size
     return out
+
+
+class DecisionLog:
+    """The writer of ``decisions.jsonl``: the mission header line, then rows and events.
+
+    `read_flight` reads it back; `mission_header` makes the header it needs.
+    """
+
+    def __init__(self, fh: IO[str], header: dict[str, Any]) -> None:
+        self._fh = fh
+        self.write({"mission": header})
+
+    def event(self, t: float, system_id: int, text: str) -> None:
+        """One event of one vehicle at flight time ``t`` (s)."""
+        self.write({"t": round(t, 3), "system_id": system_id, "event": text})
+
+    def write(self, row: dict[str, Any]) -> None:
+        """One JSON line."""
+        self._fh.write(json.dumps(row) + "\n")
+
+
+def mission_header(
+    mission: Mission, *, d_col_m: float, speed_m_s: float, dt_s: float, speedup: float
+) -> dict[str, Any]:
+    """The first line of ``decisions.jsonl``: what `read_flight` needs to place the tracks."""
+    return {
+        "origin": dataclasses.asdict(mission.origin),
+        "targets_ne_m": {str(p.system_id): list(p.target_ne_m) for p in mission.vehicles},
+        "d_col_m": d_col_m,
+        "speed_m_s": speed_m_s,
+        "dt_s": dt_s,
+        "source": mission.source,
+        "speedup": speedup,
+    }
 
 
 @dataclass

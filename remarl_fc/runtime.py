@@ -25,13 +25,11 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import dataclasses
-import json
 import math
 import time
 from collections.abc import Callable
 from types import TracebackType
-from typing import IO, Any, Self
+from typing import Any, Self
 
 import numpy as np
 
@@ -40,6 +38,7 @@ from remarl_fc.bus.memory import MemoryBroker, MemoryBus
 from remarl_fc.commands import Commander, enum_name
 from remarl_fc.control import ControlSpec, Decision, PolicyLike, SwarmController
 from remarl_fc.errors import CommandRejected, ConfigError, RemarlError
+from remarl_fc.flightlog import DecisionLog, mission_header
 from remarl_fc.flyconfig import (
     PX4_TELEMETRY,
     TELEMETRY,
@@ -126,7 +125,7 @@ class SwarmRuntime:
         self.links: list[MavlinkLink] = []
         self.commands = Commander(cfg, self.codec, self.clock, self.links)
         self._stack: contextlib.AsyncExitStack | None = None
-        self._log: IO[str] | None = None
+        self._log: DecisionLog | None = None
         self._done = asyncio.Event()
         self.decisions = 0
         self.setpoint_deadline_misses = 0
@@ -147,8 +146,15 @@ class SwarmRuntime:
             log_dir = self.cfg.log_dir
             if log_dir is not None:
                 log_dir.mkdir(parents=True, exist_ok=True)
-                self._log = stack.enter_context((log_dir / "decisions.jsonl").open("w"))
-                self._log.write(json.dumps({"mission": self._mission_header()}) + "\n")
+                header = mission_header(
+                    self.cfg.mission,
+                    d_col_m=self.spec.arrival_m,
+                    speed_m_s=self.spec.speed_m_s,
+                    dt_s=self.spec.dt_s,
+                    speedup=self.cfg.speedup,
+                )
+                fh = stack.enter_context((log_dir / "decisions.jsonl").open("w"))
+                self._log = DecisionLog(fh, header)
             for k, url in enumerate(self.cfg.connections):
                 tlog = None
                 if log_dir is not None:
@@ -545,25 +551,11 @@ class SwarmRuntime:
                 self._event(m, f"peer: {status.value}")
                 m.status = status
 
-    def _mission_header(self) -> dict[str, Any]:
-        mission = self.cfg.mission
-        return {
-            "origin": dataclasses.asdict(mission.origin),
-            "targets_ne_m": {str(p.system_id): list(p.target_ne_m) for p in mission.vehicles},
-            "d_col_m": self.spec.arrival_m,
-            "speed_m_s": self.spec.speed_m_s,
-            "dt_s": self.spec.dt_s,
-            "source": mission.source,
-            "speedup": self.cfg.speedup,
-        }
-
     def _event(self, m: Member, text: str) -> None:
         now = self.clock.now()
         m.events.append((now, text))
         if self._log is not None:
-            self._log.write(
-                json.dumps({"t": round(now, 3), "system_id": m.system_id, "event": text}) + "\n"
-            )
+            self._log.event(now, m.system_id, text)
 
     def _log_decision(self, d: Decision) -> None:
         if self._log is None:
@@ -586,7 +578,7 @@ class SwarmRuntime:
                 "obstacles_ne_m": [[round(float(v), 2) for v in p] for p in d.obstacles_ne_m],
                 "decide_ms": round(self.decide_s[-1] * 1000, 3) if self.decide_s else None,
             }
-            self._log.write(json.dumps(row) + "\n")
+            self._log.write(row)
 
     def summary(self) -> dict[str, Any]:
         """What happened to each vehicle."""
