@@ -7,6 +7,7 @@ Errors of the project (`remarl_fc.errors.RemarlError`) print one line on stderr 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 from collections.abc import Callable, Sequence
@@ -229,14 +230,6 @@ def _cmd_compare(args: argparse.Namespace) -> int:
     if args.quick:
         cfg = CompareConfig.quick_preset(scenarios, methods, out)
     else:
-        episodes = {
-            name: value
-            for name, value in (
-                ("eval_episodes", args.eval_episodes),
-                ("e2coop_episodes", args.e2coop_episodes),
-            )
-            if value is not None  # unset: CompareConfig's defaults
-        }
         cfg = CompareConfig(
             scenarios,
             methods,
@@ -245,8 +238,16 @@ def _cmd_compare(args: argparse.Namespace) -> int:
             out=out,
             n_actions=args.n_actions,
             workers=args.workers,
-            **episodes,
         )
+    episodes = {
+        name: value
+        for name, value in (
+            ("eval_episodes", args.eval_episodes),
+            ("e2coop_episodes", args.e2coop_episodes),
+        )
+        if value is not None  # unset: the preset's own
+    }
+    cfg = dataclasses.replace(cfg, **episodes)
     results = run_grid(cfg, ray_address=args.ray_address)
     paths = write_reports(cfg, results)
     payload = {"cells": len(results), "out": str(out), **paths}

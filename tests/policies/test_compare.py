@@ -39,6 +39,16 @@ def test_quick_compare_two_methods_writes_every_output(tmp_path, capsys):
     assert (out / "runs" / "2u1o" / "remarl" / "seed0" / "result.json").stat().st_mtime == stamp
 
 
+def test_episode_flags_override_the_preset(tmp_path, capsys):
+    out = tmp_path / "results"
+    args = ["compare", "--quick", "--scenarios", "2u1o", "--methods", "remarl,e2coop"]
+    assert main([*args, "--eval-episodes", "7", "--e2coop-episodes", "2", "--out", str(out)]) == 0
+    runs = out / "runs" / "2u1o"
+    assert json.loads((runs / "remarl" / "seed0" / "result.json").read_text())["episodes"] == 7
+    assert json.loads((runs / "e2coop" / "seed0" / "result.json").read_text())["episodes"] == 2
+    assert "remarl 7, e2coop 2" in (out / "summary.md").read_text()
+
+
 def test_unknown_method_is_a_clear_error(tmp_path, capsys):
     assert main(["compare", "--methods", "dqn", "--out", str(tmp_path)]) == 2
     assert "unknown method" in capsys.readouterr().err
