@@ -103,8 +103,27 @@ def heading_error_deg(fleet: SitlFleet, i: int, yaw_deg: float) -> float:
 async def fly(fleet: SitlFleet, system: System, flavour: Flavour) -> None:
     """Health → arm → take off → offboard velocity + yaw → stop, checked on the ground truth."""
     i = await system.get_system_id() - 1
-    ap, f = fleet.vehicles[i], fleet.frames
     telemetry, action, offboard = TelemetryAsync(system), ActionAsync(system), OffboardAsync(system)
+    try:
+        await fly_with(fleet, i, telemetry, action, offboard, flavour)
+    finally:
+        # Release the plugins here, on the event loop's thread. Left to the garbage collector,
+        # the last reference can die on an executor thread (MAVSDK's awaitables close over the
+        # plugin) while Mavsdk.__aexit__ destroys the core on this one: a native abort.
+        for plugin in (telemetry, action, offboard):
+            plugin.destroy()
+
+
+async def fly_with(
+    fleet: SitlFleet,
+    i: int,
+    telemetry: TelemetryAsync,
+    action: ActionAsync,
+    offboard: OffboardAsync,
+    flavour: Flavour,
+) -> None:
+    """The flight of vehicle ``i`` (0-based) through its three MAVSDK plugins."""
+    ap, f = fleet.vehicles[i], fleet.frames
     if flavour == "ardupilot":  # ArduCopter streams nothing until asked (stream rates 0)
         await telemetry.set_rate_position(10.0)
         await telemetry.set_rate_home(1.0)
