@@ -21,6 +21,8 @@ from remarl_fc.sitl.autopilot import (
     Autopilot,
     Command,
 )
+from remarl_fc.sitl.config import ArduPilotParams
+from remarl_fc.sitl.params import ARDUPILOT_PARAMS
 from remarl_fc.sitl.setpoints import Setpoint
 from remarl_fc.sitl.vehicle import Guidance, YawMode
 
@@ -50,6 +52,7 @@ class ArduCopterLogic(Autopilot):
 
     autopilot_id = MavAutopilot.ARDUPILOTMEGA
     flavour = "ardupilot"
+    param_table = ARDUPILOT_PARAMS
     PILOT_MODES: ClassVar[frozenset[int]] = frozenset({0, 2, 5, 16})
     POSITION_MODES: ClassVar[frozenset[int]] = frozenset({4, 5, 6, 16, 17})
     ARMABLE: ClassVar[frozenset[int]] = frozenset({0, 2, 4, 5, 16})
@@ -64,6 +67,14 @@ class ArduCopterLogic(Autopilot):
         self.custom_mode = self.INITIAL_MODE
         self.pilot_holding = False
         self.takeoff_active = False
+
+    def params(self) -> ArduPilotParams:
+        """The live ArduCopter parameters."""
+        return self.p
+
+    def set_params(self, values: ArduPilotParams) -> None:
+        """Replace the live ArduCopter parameters."""
+        self.p = values
 
     def boot_s(self) -> float:
         """ArduCopter boot time (`ArduPilotParams.boot_s`)."""
@@ -247,7 +258,7 @@ class ArduCopterLogic(Autopilot):
                 f.set_idle(i)
             landed_at = self._landed_since_s if self._landed_since_s is not None else now_s
             since = max(self._armed_at_s, landed_at)
-            if self.armed and now_s - since >= p.disarm_delay_s:
+            if self.armed and 0 < p.disarm_delay_s <= now_s - since:
                 self.do_disarm()
                 self.say(Severity.INFO, "Disarming motors")
 

@@ -33,6 +33,7 @@ from remarl_fc.mavlink.consts import (
     Severity,
 )
 from remarl_fc.sitl.config import SitlConfig
+from remarl_fc.sitl.params import ParamRejected, ParamTable, param_name
 from remarl_fc.sitl.setpoints import Setpoint, parse_setpoint
 from remarl_fc.sitl.telemetry import statustext
 from remarl_fc.sitl.vehicle import Airframes, Guidance, YawMode
@@ -61,6 +62,9 @@ class Counters:
     commands: Counter[str] = field(default_factory=Counter)
     results: Counter[str] = field(default_factory=Counter)
     ignored_reasons: Counter[str] = field(default_factory=Counter)
+    params_set: Counter[str] = field(default_factory=Counter)
+    params_refused: Counter[str] = field(default_factory=Counter)
+    params_unknown: Counter[str] = field(default_factory=Counter)
 
     def as_dict(self) -> dict[str, Any]:
         """JSON-ready form."""
@@ -71,6 +75,9 @@ class Counters:
             "setpoints_ignored_by_reason": dict(self.ignored_reasons),
             "commands": dict(self.commands),
             "command_results": dict(self.results),
+            "params_set": dict(self.params_set),
+            "params_refused": dict(self.params_refused),
+            "params_unknown": dict(self.params_unknown),
         }
 
 
@@ -89,6 +96,8 @@ class Autopilot:
 
     autopilot_id: ClassVar[int] = MavAutopilot.GENERIC
     flavour: ClassVar[str] = ""
+    param_table: ClassVar[ParamTable] = ParamTable((), bytewise=False)
+    """The parameters the flavour serves (`remarl_fc.sitl.params`)."""
 
     def __init__(
         self,
@@ -241,6 +250,54 @@ class Autopilot:
             msg.target_system, msg.target_component
         ):
             self.on_request_data_stream(msg, now_s)
+        elif mid in (
+            MsgId.PARAM_REQUEST_LIST,
+            MsgId.PARAM_REQUEST_READ,
+            MsgId.PARAM_SET,
+        ) and self.for_me(msg.target_system, msg.target_component):
+            self.on_param_message(msg)
+
+    # -- parameters ---------------------------------------------------------------------
+
+    def params(self) -> object:
+        """The flavour's live parameter values (a `remarl_fc.sitl.config` dataclass)."""
+        raise NotImplementedError
+
+    def set_params(self, values: Any) -> None:
+        """Replace the live parameter values (they apply from the next message or tick)."""
+        raise NotImplementedError
+
+    def on_param_message(self, msg: Any) -> None:
+        """Answer the parameter protocol's three requests with PARAM_VALUE.
+
+        PARAM_REQUEST_LIST → every parameter; PARAM_REQUEST_READ → one; PARAM_SET → set it and
+        send its value (the unchanged one, and a STATUSTEXT saying why, if refused). A name the
+        flavour does not serve gets no PARAM_VALUE, as on a real vehicle; a PARAM_SET of one
+        also gets a STATUSTEXT, so that nobody takes the silence for success.
+        """
+        table, mid = self.param_table, msg.get_msgId()
+        if mid == MsgId.PARAM_REQUEST_LIST:
+            for each in range(len(table)):
+                self.emit(table.value_message(self.factory, self.params(), each))
+            return
+        name = param_name(msg.param_id)
+        index = int(msg.param_index) if mid == MsgId.PARAM_REQUEST_READ else -1
+        k = table.find(name, index)
+        if k is None:
+            self.counters.params_unknown[name or f"#{index}"] += 1
+            if mid == MsgId.PARAM_SET:
+                self.say(Severity.WARNING, f"Unknown parameter {name}")
+            return
+        if mid == MsgId.PARAM_SET:
+            try:
+                self.set_params(
+                    table.set(self.params(), k, float(msg.param_value), int(msg.param_type))
+                )
+                self.counters.params_set[name] += 1
+            except ParamRejected as exc:
+                self.counters.params_refused[name] += 1
+                self.say(Severity.WARNING, str(exc))
+        self.emit(table.value_message(self.factory, self.params(), k))
 
     def ignore_setpoint(self, reason: str) -> bool:
         """Count a setpoint that changes nothing; returns False."""

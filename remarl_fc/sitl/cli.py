@@ -13,6 +13,7 @@ import sys
 from typing import Any
 
 from remarl_fc.sitl.faults import parse_glitch, parse_pilot_switch, parse_window
+from remarl_fc.sitl.params import parse_override
 
 EXIT_TIMED_OUT = 3
 """Exit status of ``sitl --until-done`` when the time limit came first."""
@@ -86,6 +87,15 @@ def add_sitl_parser(sub: Any) -> None:
     p.add_argument("--signing-key", default=None, help="MAVLink 2 signing key file (32 bytes)")
     p.add_argument("--gps-noise", type=float, default=0.0, help="position noise σ, m")
     p.add_argument("--gust", type=float, default=0.0, help="gust velocity σ, m/s")
+    p.add_argument(
+        "--param",
+        type=_arg(parse_override),
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="start with this autopilot parameter, in its own units (repeatable; e.g. "
+        "COM_OBL_RC_ACT=5 or RTL_ALT=2500); clients can also set them over MAVLink",
+    )
     faults = p.add_argument_group("faults")
     faults.add_argument("--loss", type=float, default=0.0, help="packet loss, percent")
     faults.add_argument("--latency-ms", type=float, default=0.0, help="one-way latency")
@@ -130,13 +140,25 @@ def cmd_sitl(args: argparse.Namespace) -> int:
     """Run the fleet until Ctrl-C, --until-done or --timeout; write the summary."""
     from remarl_fc.errors import ConfigError
     from remarl_fc.mavlink.codec import load_signing_key
-    from remarl_fc.sitl.config import DEFAULT_HOME, SitlConfig, VehicleModelConfig
+    from remarl_fc.sitl.config import (
+        DEFAULT_HOME,
+        ArduPilotParams,
+        Px4Params,
+        SitlConfig,
+        VehicleModelConfig,
+    )
     from remarl_fc.sitl.faults import Faults
+    from remarl_fc.sitl.params import ARDUPILOT_PARAMS, PX4_PARAMS, with_overrides
     from sim.scenarios import load_scenario
 
     scenario = load_scenario(args.scenario) if args.scenario else None
     try:
         model = VehicleModelConfig(gps_noise_m=args.gps_noise, gust_m_s=args.gust)
+        ardupilot, px4 = ArduPilotParams(), Px4Params()
+        if args.flavour == "px4":
+            px4 = with_overrides(px4, PX4_PARAMS, args.param)
+        else:
+            ardupilot = with_overrides(ardupilot, ARDUPILOT_PARAMS, args.param)
         cfg = SitlConfig(
             vehicles=scenario.uav.count if scenario else (args.vehicles or 1),
             flavour=args.flavour,
@@ -150,6 +172,8 @@ def cmd_sitl(args: argparse.Namespace) -> int:
             seed=args.seed,
             cruise_alt_m=args.cruise_alt,
             model=model,
+            ardupilot=ardupilot,
+            px4=px4,
         )
         faults = Faults(
             loss=args.loss / 100.0,

@@ -2,6 +2,7 @@
 
 Autopilot parameters carry the real parameter's name and default (ArduCopter `Parameters.cpp`,
 PX4 `commander_params.yaml` and the PX4 docs); values that are the mock's own choices say so.
+The named ones are also served over MAVLink's parameter protocol (`remarl_fc.sitl.params`).
 """
 
 from __future__ import annotations
@@ -35,7 +36,7 @@ class ArduPilotParams:
     guid_timeout_s: float = 3.0
     """GUID_TIMEOUT: velocity/acceleration targets are zeroed after this long without one."""
     disarm_delay_s: float = 10.0
-    """DISARM_DELAY: auto-disarm this long after landing or arming on the ground."""
+    """DISARM_DELAY: auto-disarm this long after landing or arming on the ground (0: never)."""
     wpnav_speed_up_m_s: float = 2.5
     """WPNAV_SPEED_UP: take-off climb rate (250 cm/s)."""
     wpnav_speed_dn_m_s: float = 1.5
@@ -68,9 +69,9 @@ class Px4Params:
     com_obl_rc_act: Literal["position", "hold", "return", "land"] = "position"
     """COM_OBL_RC_ACT: the offboard-loss action (0 Position, 5 Hold, 3 Return, 4 Land)."""
     com_disarm_prflt_s: float = 10.0
-    """COM_DISARM_PRFLT: auto-disarm this long after arming without taking off."""
+    """COM_DISARM_PRFLT: auto-disarm this long after arming without taking off (≤ 0: never)."""
     com_disarm_land_s: float = 2.0
-    """COM_DISARM_LAND: auto-disarm this long after landing."""
+    """COM_DISARM_LAND: auto-disarm this long after landing (≤ 0: never)."""
     mis_takeoff_alt_m: float = 2.5
     """MIS_TAKEOFF_ALT: take-off height above home when NAV_TAKEOFF gives none."""
     mpc_tko_speed_m_s: float = 1.5
@@ -80,7 +81,7 @@ class Px4Params:
     rtl_return_alt_m: float = 30.0
     """RTL_RETURN_ALT: RTL climbs to at least this height above home first."""
     rtl_speed_m_s: float = 5.0
-    """Horizontal speed of RTL (the mock's choice; PX4 flies it at MPC_XY_CRUISE)."""
+    """MPC_XY_CRUISE: horizontal speed of RTL (and of PX4's other auto modes)."""
     boot_s: float = 1.0
     """Time in MAV_STATE_BOOT after start (the mock's choice)."""
     position_estimate_s: float = 3.0

@@ -390,6 +390,7 @@ class SitlFleet:
                 "landed": ap.landed,
                 **self.truth.vehicle_summary(i),
                 **ap.counters.as_dict(),
+                "params": ap.param_table.snapshot(ap.params()),
                 "link": {
                     **self.link_stats[i],
                     "bad_frames": codec.bad_frames,

@@ -17,6 +17,8 @@ from remarl_fc.sitl.autopilot import (
     Autopilot,
     Command,
 )
+from remarl_fc.sitl.config import Px4Params
+from remarl_fc.sitl.params import PX4_PARAMS
 from remarl_fc.sitl.setpoints import Setpoint
 from remarl_fc.sitl.vehicle import Guidance, YawMode
 
@@ -30,6 +32,7 @@ class Px4Logic(Autopilot):
 
     autopilot_id = MavAutopilot.PX4
     flavour = "px4"
+    param_table = PX4_PARAMS
     MAIN_MODES: ClassVar[frozenset[int]] = frozenset({1, 2, 3, 4, 6, 7})
     AUTO_SUBS: ClassVar[frozenset[int]] = frozenset({2, 3, 5, 6})
     OFFBOARD, AUTO, POSCTL = 6, 4, 3
@@ -44,6 +47,14 @@ class Px4Logic(Autopilot):
 
     def _pack(self) -> int:
         return (self.main << 16) | (self.sub << 24)
+
+    def params(self) -> Px4Params:
+        """The live PX4 parameters."""
+        return self.p
+
+    def set_params(self, values: Px4Params) -> None:
+        """Replace the live PX4 parameters."""
+        self.p = values
 
     def boot_s(self) -> float:
         """PX4 boot time (`Px4Params.boot_s`)."""
@@ -219,9 +230,9 @@ class Px4Logic(Autopilot):
         if self.armed and self.landed and f.guidance[i] != Guidance.CLIMB:
             if self.flew and self._landed_since_s is not None:
                 f.set_idle(i)
-                if now_s - self._landed_since_s >= p.com_disarm_land_s:
+                if 0 < p.com_disarm_land_s <= now_s - self._landed_since_s:
                     self.do_disarm()
-            elif not self.flew and now_s - self._armed_at_s >= p.com_disarm_prflt_s:
+            elif not self.flew and 0 < p.com_disarm_prflt_s <= now_s - self._armed_at_s:
                 self.do_disarm()
                 self.say(Severity.INFO, "Disarmed: no takeoff")
         if not self.armed and self.landed and self.failsafe and self.failsafe_since_s is None:

@@ -46,9 +46,9 @@ the wrong vehicle shows; the yaw is not the direction of travel. The vehicles st
 FLY_S = 4.0
 """Simulated seconds of offboard flight (5 velocity time constants)."""
 
-TAKEOFF_M = {"px4": 2.5, "ardupilot": 5.0}
-"""Take-off height: PX4's MIS_TAKEOFF_ALT default (MAVSDK sets it through a parameter, which
-the mock does not serve), and MAVSDK's NAV_TAKEOFF p7 on ArduPilot."""
+TAKEOFF_M = {"px4": 4.0, "ardupilot": 5.0}
+"""Take-off height MAVSDK is told: on PX4 it sets the parameter MIS_TAKEOFF_ALT (default 2.5 m),
+on ArduPilot it sends the height in NAV_TAKEOFF's p7."""
 
 OFFBOARD_MODE = {"px4": px4_custom_mode(Px4MainMode.OFFBOARD), "ardupilot": CopterMode.GUIDED}
 HOLD_MODE = {
@@ -138,8 +138,8 @@ async def fly_with(
     await action.arm()
     assert ap.armed
 
-    if flavour == "ardupilot":
-        await action.set_takeoff_altitude(TAKEOFF_M[flavour])
+    await action.set_takeoff_altitude(TAKEOFF_M[flavour])
+    assert await action.get_takeoff_altitude() == pytest.approx(TAKEOFF_M[flavour])
     await action.takeoff()
     await until(
         f"vehicle {i + 1} to finish its take-off and settle",
@@ -225,4 +225,6 @@ async def test_mavsdk_discovers_arms_takes_off_and_flies_offboard(flavour: Flavo
         assert commands["DO_SET_MODE"] == mode_changes, commands
         assert v["setpoints_applied"] > 0.5 * 20 * FLY_S  # MAVSDK streams at 20 Hz (wall)
         assert v["link"]["bad_frames"] == 0
+        assert v["params_set"] == ({"MIS_TAKEOFF_ALT": 1} if flavour == "px4" else {})
+        assert v["params_refused"] == {}
     assert summary["collisions_vehicle_vehicle"] == 0

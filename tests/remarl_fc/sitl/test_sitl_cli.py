@@ -40,6 +40,8 @@ def test_until_done_times_out_with_status_3(tmp_path):
         (["--out", "nowhere"], "HOST:PORT"),
         (["--home", "1,2"], "LAT,LON,ALT"),
         (["--scenario", "3u2o", "--vehicles", "2"], "not allowed with"),
+        (["--param", "RTL_ALT"], "NAME=VALUE"),
+        (["--param", "RTL_ALT=high"], "NAME=VALUE"),
     ],
 )
 def test_bad_options_exit_2_with_a_clear_message(extra, message, capsys):
@@ -54,6 +56,31 @@ def test_bad_signing_key_and_scenario_exit_2(tmp_path, capsys):
     assert "cannot read the key file" in capsys.readouterr().err
     assert main(["sitl", "--scenario", "9u9o"]) == 2
     assert "3u2o" in capsys.readouterr().err  # lists the known scenarios
+
+
+def test_params_at_start_reach_the_vehicles(tmp_path, capsys):
+    out = tmp_path / "summary.json"
+    args = ["sitl", "--flavour", "px4", "--vehicles", "2", "--base-port", "0", "--speedup", "50"]
+    params = ["--param", "com_obl_rc_act=5", "--param", "MIS_TAKEOFF_ALT=7.5"]
+    assert main([*args, *params, "--timeout", "1", "--summary", str(out)]) == 0
+    for v in json.loads(out.read_text())["vehicles"]:
+        assert v["params"]["COM_OBL_RC_ACT"] == 5 and v["params"]["MIS_TAKEOFF_ALT"] == 7.5
+        assert v["params"]["COM_OF_LOSS_T"] == 1.0  # the others keep their defaults
+        assert v["params_set"] == {}  # nobody set one over MAVLink
+
+
+@pytest.mark.parametrize(
+    ("flavour", "param", "message"),
+    [
+        ("ardupilot", "FS_GCS_ENABLE=1", "not modelled here; this flavour serves DISARM_DELAY"),
+        ("px4", "RTL_ALT=2500", "COM_DISARM_LAND"),  # ArduPilot's name on PX4
+        ("ardupilot", "LAND_SPEED=0", "LAND_SPEED=0 outside"),
+        ("px4", "COM_OBL_RC_ACT=6", "not modelled: use 0,3,4,5"),
+    ],
+)
+def test_bad_params_exit_2_naming_what_is_served(flavour, param, message, capsys):
+    assert main(["sitl", "--flavour", flavour, "--base-port", "0", "--param", param]) == 2
+    assert message in capsys.readouterr().err
 
 
 def test_busy_port_is_a_clear_error(capsys):
