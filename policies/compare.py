@@ -23,6 +23,8 @@ import csv
 import importlib
 import json
 import multiprocessing
+import os
+import threading
 import time
 import warnings
 from dataclasses import asdict, dataclass, field
@@ -244,6 +246,29 @@ def _run_benchmarl(job: Job) -> dict[str, Any]:
     return summary
 
 
+PARENT_POLL_S = 1.0
+"""How often a pool worker checks that the `compare` process that started it is alive, s."""
+
+EXIT_ORPHANED = 70
+"""Exit status of a pool worker whose `compare` process is gone (EX_SOFTWARE)."""
+
+
+def exit_with_parent(parent_pid: int) -> None:
+    """Pool initializer: end this worker as soon as the process that started it is gone.
+
+    A `compare` killed by a signal it cannot catch would otherwise leave its workers training,
+    for up to hours, as orphans. Their cells are unfinished (no result.json) and are trained
+    again on the next run.
+    """
+
+    def watch() -> None:
+        while os.getppid() == parent_pid:
+            time.sleep(PARENT_POLL_S)
+        os._exit(EXIT_ORPHANED)
+
+    threading.Thread(target=watch, name="exit-with-parent", daemon=True).start()
+
+
 def run_grid(cfg: CompareConfig, *, ray_address: str | None = None) -> list[dict[str, Any]]:
     """Run every unfinished cell; returns every cell's result."""
     todo = jobs(cfg)
@@ -258,7 +283,9 @@ def run_grid(cfg: CompareConfig, *, ray_address: str | None = None) -> list[dict
     if cfg.workers == 1:
         return [run_job(j) for j in todo]
     ctx = multiprocessing.get_context("spawn")
-    with concurrent.futures.ProcessPoolExecutor(cfg.workers, mp_context=ctx) as pool:
+    with concurrent.futures.ProcessPoolExecutor(
+        cfg.workers, mp_context=ctx, initializer=exit_with_parent, initargs=(os.getpid(),)
+    ) as pool:
         return list(pool.map(run_job, todo))
 
 

@@ -66,3 +66,43 @@ def test_episode_counts_come_from_the_results():
         {"method": "mappo", "episodes": 200.0},
     ]
     assert _episode_counts(cfg, results) == "remarl 200, mappo 100–200"
+
+
+ORPHAN_SCRIPT = """
+import concurrent.futures, multiprocessing, os, sys, time
+from policies.compare import exit_with_parent
+ctx = multiprocessing.get_context("spawn")
+pool = concurrent.futures.ProcessPoolExecutor(
+    1, mp_context=ctx, initializer=exit_with_parent, initargs=(os.getpid(),)
+)
+print(pool.submit(os.getpid).result(), flush=True)
+pool.submit(time.sleep, 120)  # a long cell
+time.sleep(120)
+"""
+
+
+def test_pool_workers_end_when_compare_is_killed():
+    """A SIGKILLed `compare` must not leave its workers training as orphans."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    with subprocess.Popen(
+        [sys.executable, "-c", ORPHAN_SCRIPT], stdout=subprocess.PIPE, text=True
+    ) as parent:
+        assert parent.stdout is not None
+        worker = int(parent.stdout.readline())
+        os.kill(worker, 0)  # alive, busy with its cell
+        parent.send_signal(signal.SIGKILL)
+        parent.wait(10)
+    deadline = time.monotonic() + 15
+    while time.monotonic() < deadline:
+        try:
+            os.kill(worker, 0)
+        except ProcessLookupError:
+            return
+        time.sleep(0.2)
+    os.kill(worker, signal.SIGKILL)
+    pytest.fail("the worker outlived its compare process by 15 s")
