@@ -62,6 +62,7 @@ async def fly_on_mock(
     geofence: Geofence | None = None,
     link_per_vehicle: bool = False,
     signing_key: bytes | None = None,
+    sitl_options: dict[str, Any] | None = None,
 ) -> MockFlight:
     """Fly ``policy`` (default: the zoo policy of ``scenario``) on a mock of ``scenario``.
 
@@ -73,6 +74,7 @@ async def fly_on_mock(
         link_per_vehicle: one ``udpout:`` connection per vehicle port (ArduPilot SITL style)
             instead of one ``udpin:`` port that every vehicle sends to.
         signing_key: sign both sides with this key (the mock then rejects unsigned commands).
+        sitl_options: extra `SitlConfig` fields (e.g. ``px4=Px4Params(...)``).
     """
     cfg = load_scenario(scenario)
     pol = load_policy(policy or scenario)
@@ -86,6 +88,7 @@ async def fly_on_mock(
         speedup=speedup,
         cruise_alt_m=CRUISE_ALT_M,
         seed=seed,
+        **(sitl_options or {}),
     )
     mission = Mission.from_scenario(cfg, DEFAULT_HOME, CRUISE_ALT_M)
     if geofence is not None:

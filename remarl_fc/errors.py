@@ -12,7 +12,8 @@ converted where they enter (``raise X from exc``), so callers need to know only 
      ├── LinkError                           a MAVLink link that cannot be used
      │    ├── LinkTimeout                    an awaited message did not come in time
      │    └── LinkLost                       the socket failed or the peer went silent
-     └── CommandRejected                     an autopilot answered a command with a refusal
+     ├── CommandRejected                     an autopilot answered a command with a refusal
+     └── UnsafeParameters                    a vehicle's failsafe parameters would defeat `fly`
 
 Messages say what to do next.
 """
@@ -32,6 +33,7 @@ __all__ = [
     "RemarlError",
     "ScenarioError",
     "SigningKeyError",
+    "UnsafeParameters",
 ]
 
 
@@ -134,3 +136,19 @@ class CommandRejected(RemarlError):
         self.command, self.command_name = command, command_name
         self.result, self.result_name = result, result_name
         self.system_id, self.reason = system_id, reason
+
+
+class UnsafeParameters(RemarlError):
+    """A vehicle's parameters would make the flight fail (checked before anything is armed).
+
+    Attributes:
+        system_id: the vehicle; problems: one sentence per parameter, saying what to set.
+    """
+
+    def __init__(self, *, system_id: int, problems: tuple[str, ...]) -> None:
+        super().__init__(
+            f"vehicle {system_id} has unsafe parameters: {'; '.join(problems)}. Set them on the "
+            "ground station (docs/FLYING.md, autopilot parameters), or fly with --no-param-check "
+            "if you are sure"
+        )
+        self.system_id, self.problems = system_id, problems

@@ -48,6 +48,11 @@ def add_parsers(sub: Any, bench: Any) -> None:
         help="take off first: to ALT_M, or without a value to each vehicle's mission alt_m",
     )
     p.add_argument("--dry-run", action="store_true", help="compute and log, send nothing")
+    p.add_argument(
+        "--no-param-check",
+        action="store_true",
+        help="do not read and judge the vehicles' failsafe parameters before arming",
+    )
     p.add_argument("--log", default=None, metavar="DIR", help="write flight.tlog + decisions")
     p.add_argument("--signing-key", default=None, help="MAVLink 2 signing key file")
     p.add_argument(
@@ -156,6 +161,7 @@ def cmd_fly(args: argparse.Namespace) -> int:
             takeoff_m=None if by_mission else args.takeoff,
             takeoff_to_mission_alt=by_mission,
             dry_run=args.dry_run,
+            check_params=not args.no_param_check,
             log_dir=Path(args.log) if args.log else None,
             signing=signing,
             setpoint_hz=args.setpoint_hz,

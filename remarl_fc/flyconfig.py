@@ -125,6 +125,9 @@ class FlyConfig:
     """Topic prefix on the bus."""
     peer_timeout_s: float = 1.5
     """A peer silent on the bus this long is treated as lost (an obstacle at its last track)."""
+    check_params: bool = True
+    """Read and judge every vehicle's failsafe parameters before arming
+    (`remarl_fc.paramcheck`); an error finding stops the flight."""
 
     def __post_init__(self) -> None:
         if not self.connections:

@@ -6,8 +6,9 @@
 One `asyncio.TaskGroup` owns every task, each named ``remarl.<what>``:
 
 * ``heartbeat`` — the controller's HEARTBEAT at 1 Hz (MAV_TYPE_ONBOARD_CONTROLLER);
-* ``mission`` — prepare every vehicle (streams, position, optional take-off, take control),
-  then the decision loop: every dt, one policy decision for the whole swarm;
+* ``mission`` — prepare every vehicle (streams, failsafe parameters checked by
+  `remarl_fc.paramcheck`, position, optional take-off, take control), then the decision loop:
+  every dt, one policy decision for the whole swarm;
 * ``setpoints`` — at ≥ 10 Hz, each controlled vehicle's point on its arc as
   SET_POSITION_TARGET_LOCAL_NED velocity + yaw (type_mask 2503), after the safety checks:
   stale telemetry (> `FlyConfig.stale_s`) → the vehicle is no longer commanded and becomes an
@@ -37,7 +38,7 @@ from remarl_fc.bus.core import SwarmBus
 from remarl_fc.bus.memory import MemoryBroker, MemoryBus
 from remarl_fc.commands import Commander, enum_name
 from remarl_fc.control import ControlSpec, Decision, PolicyLike, SwarmController
-from remarl_fc.errors import CommandRejected, ConfigError, RemarlError
+from remarl_fc.errors import CommandRejected, ConfigError, RemarlError, UnsafeParameters
 from remarl_fc.flightlog import DecisionLog, mission_header
 from remarl_fc.flyconfig import (
     PX4_TELEMETRY,
@@ -60,6 +61,7 @@ from remarl_fc.mavlink.consts import (
     MsgId,
 )
 from remarl_fc.mavlink.link import MavlinkLink, TlogWriter
+from remarl_fc.paramcheck import ParamReader, check_params, checked_names
 from remarl_fc.peers import Peers
 from remarl_fc.tracking import TrafficPicture, VehicleTrack
 
@@ -124,6 +126,11 @@ class SwarmRuntime:
         self.codec = Codec(cfg.system_id, cfg.component_id, signing=cfg.signing)
         self.links: list[MavlinkLink] = []
         self.commands = Commander(cfg, self.codec, self.clock, self.links)
+        self.params = ParamReader(
+            lambda sysid, msg: self.commands.send(self.by_sysid[sysid], msg, harmless=True),
+            self.codec.factory,
+            self.clock.timeout,
+        )
         self._stack: contextlib.AsyncExitStack | None = None
         self._log: DecisionLog | None = None
         self._done = asyncio.Event()
@@ -203,6 +210,8 @@ class SwarmRuntime:
         member.track.update(msg, now)
         if mid == MsgId.COMMAND_ACK:
             self.commands.on_ack(member.system_id, msg)
+        elif mid == MsgId.PARAM_VALUE:
+            self.params.on_value(member.system_id, msg, bytewise=member.track.is_px4)
 
     # -- the flight ---------------------------------------------------------------------
 
@@ -300,6 +309,8 @@ class SwarmRuntime:
             )
         except CommandRejected as exc:
             self._event(m, f"ADSB_VEHICLE rate not set ({exc.result_name}): relying on its default")
+        if cfg.check_params:
+            await self._check_params(m)
         for mid in (MsgId.GLOBAL_POSITION_INT, MsgId.ATTITUDE):
             name = enum_name(MsgId, mid)
             await self.commands.wait_until(
@@ -335,6 +346,24 @@ class SwarmRuntime:
             await self.commands.set_mode(m, "external")
         m.prestream = t.is_px4  # PX4 leaves OFFBOARD after 1 s without setpoints: keep them
         m.status = Status.READY
+
+    async def _check_params(self, m: Member) -> None:
+        """Read and judge the vehicle's failsafe parameters; raise on an error finding."""
+        px4 = m.track.is_px4
+        readout = await self.params.read(m.system_id, checked_names(px4))
+        period_s = 1.0 / self.cfg.setpoint_hz
+        findings = check_params(readout.values, px4=px4, setpoint_period_s=period_s)
+        if readout.values:
+            read = ", ".join(f"{k}={v:g}" for k, v in readout.values.items())
+            self._event(m, f"parameters: {read}")
+        if readout.unread:
+            unread = ", ".join(readout.unread)
+            self._event(m, f"parameters not read (not on this vehicle?): {unread}")
+        for f in findings:
+            self._event(m, f"parameter {f.level}: {f.text}")
+        errors = tuple(f.text for f in findings if f.level == "error")
+        if errors:
+            raise UnsafeParameters(system_id=m.system_id, problems=errors)
 
     def _takeoff_alt(self, m: Member) -> float:
         """Take-off height of ``m``: ``--takeoff ALT_M``, else its mission ``alt_m``."""

@@ -32,8 +32,9 @@ from remarl_fc.mavlink.consts import (
     MsgId,
     Severity,
 )
+from remarl_fc.mavlink.params import param_name
 from remarl_fc.sitl.config import SitlConfig
-from remarl_fc.sitl.params import ParamRejected, ParamTable, param_name
+from remarl_fc.sitl.params import ParamRejected, ParamTable
 from remarl_fc.sitl.setpoints import Setpoint, parse_setpoint
 from remarl_fc.sitl.telemetry import statustext
 from remarl_fc.sitl.vehicle import Airframes, Guidance, YawMode

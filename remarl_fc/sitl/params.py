@@ -5,37 +5,24 @@ names, types and units (ArduCopter in centimetres, PX4 in metres), answers PARAM
 PARAM_REQUEST_READ and PARAM_SET with PARAM_VALUE (https://mavlink.io/en/services/parameter.html),
 and a value set takes effect at once: a new MIS_TAKEOFF_ALT changes the next take-off.
 
-Integer parameters travel in PARAM_VALUE's float field the way each autopilot puts them there:
-ArduPilot converts the number (``MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST``), PX4 copies its
-bytes (``…_PARAM_ENCODE_BYTEWISE``). Only the parameters that change the mock's behaviour are
-served; the others a ground station asks for get no answer, as on a vehicle without them.
+Integer parameters travel in PARAM_VALUE's float field the way each autopilot puts them there
+(`remarl_fc.mavlink.params`): ArduPilot converts the number, PX4 copies its bytes. Only the
+parameters that change the mock's behaviour are served; the others a ground station asks for
+get no answer, as on a vehicle without them.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
-import struct
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, TypeVar
 
 from remarl_fc.mavlink.consts import MavParamType
+from remarl_fc.mavlink.params import INT_FORMATS, PARAM_ID_LEN, from_wire, to_wire
 
 P = TypeVar("P")
-
-PARAM_ID_LEN = 16
-"""PARAM_VALUE.param_id: at most 16 characters (common.xml)."""
-
-INT_FORMATS: Mapping[MavParamType, tuple[str, int, int]] = {
-    MavParamType.UINT8: ("<B", 0, 0xFF),
-    MavParamType.INT8: ("<b", -0x80, 0x7F),
-    MavParamType.UINT16: ("<H", 0, 0xFFFF),
-    MavParamType.INT16: ("<h", -0x8000, 0x7FFF),
-    MavParamType.UINT32: ("<I", 0, 0xFFFF_FFFF),
-    MavParamType.INT32: ("<i", -0x8000_0000, 0x7FFF_FFFF),
-}
-"""Integer MAV_PARAM_TYPEs: struct format and range."""
 
 
 class ParamRejected(ValueError):
@@ -87,37 +74,6 @@ class ParamSpec:
                 raise ParamRejected(f"{self.name}={value:g} outside {self.low:g}..{self.high:g}")
             new = value / self.per_unit
         return dataclasses.replace(values, **{self.field: new})  # type: ignore[type-var]
-
-
-def to_wire(value: float, ptype: int, *, bytewise: bool) -> float:
-    """PARAM_VALUE.param_value of ``value``.
-
-    The number itself (C cast), or for an integer type under byte-wise encoding the float
-    whose bytes are the integer's.
-    """
-    fmt = INT_FORMATS.get(MavParamType(ptype))
-    if not bytewise or fmt is None:
-        return float(value)
-    packed = struct.pack(fmt[0], int(value)).ljust(4, b"\0")
-    result: float = struct.unpack("<f", packed)[0]
-    return result
-
-
-def from_wire(raw: float, ptype: int, *, bytewise: bool) -> float:
-    """The value a PARAM_SET.param_value carries (inverse of `to_wire`)."""
-    fmt = INT_FORMATS.get(MavParamType(ptype))
-    if not bytewise or fmt is None:
-        return float(raw)
-    size = struct.calcsize(fmt[0])
-    result: int = struct.unpack(fmt[0], struct.pack("<f", raw)[:size])[0]
-    return float(result)
-
-
-def param_name(param_id: str | bytes) -> str:
-    """A param_id field as text (pymavlink gives str or bytes, NUL-padded)."""
-    if isinstance(param_id, bytes):
-        param_id = param_id.decode("ascii", "replace")
-    return param_id.split("\0", 1)[0]
 
 
 class ParamTable:

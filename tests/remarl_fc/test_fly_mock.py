@@ -51,6 +51,16 @@ async def test_shipped_policy_flies_the_mock_to_every_target(scenario, flavour, 
     assert all(v["custom_mode"] == hold for v in truth["vehicles"])
     assert (tmp_path / "flight.tlog").stat().st_size > 0
     assert (tmp_path / "decisions.jsonl").read_text().count('"action"') >= 3 * 10
+    # the failsafe parameters were read and judged before arming
+    events = [e for _, e in flight.runtime["vehicles"][0]["events"]]
+    if flavour == "ardupilot":
+        assert "parameters: GUID_TIMEOUT=3" in events
+        unread = "FS_GCS_ENABLE, AVD_ENABLE, AVD_F_ACTION, FENCE_ENABLE"  # the mock lacks them
+    else:
+        assert "parameters: COM_OF_LOSS_T=1, COM_OBL_RC_ACT=0" in events
+        assert any(e.startswith("parameter warning: COM_OBL_RC_ACT 0 (Position)") for e in events)
+        unread = "NAV_DLL_ACT, COM_RC_IN_MODE, GF_ACTION"
+    assert f"parameters not read (not on this vehicle?): {unread}" in events
 
 
 async def test_lossy_late_link_still_no_collision():
@@ -190,3 +200,35 @@ async def test_signed_flight_on_px4():
     flight = await fly_on_mock("3u2o", flavour="px4", speedup=SPEEDUP, signing_key=os.urandom(32))
     assert_safe_and_arrived(flight.ground_truth)
     assert all(v["link"]["rejected_unsigned"] == 0 for v in flight.ground_truth["vehicles"])
+
+
+async def test_a_setpoint_timeout_shorter_than_the_stream_stops_the_flight_before_arming():
+    from remarl_fc.errors import UnsafeParameters
+    from remarl_fc.sitl.config import Px4Params
+
+    box = {}
+
+    async def keep(fleet, runtime) -> None:
+        box["fleet"] = fleet
+        await asyncio.Event().wait()
+
+    short = {"px4": Px4Params(com_of_loss_t_s=0.15)}  # under two 10 Hz setpoint periods
+    with pytest.raises(ExceptionGroup) as info:
+        await fly_on_mock("3u2o", flavour="px4", speedup=SPEEDUP, during=keep, sitl_options=short)
+    (error,) = info.value.subgroup(UnsafeParameters).exceptions  # one vehicle is enough
+    assert "COM_OF_LOSS_T 0.15 s is under two setpoint periods (0.2 s)" in str(error)
+    assert "--no-param-check" in str(error)
+    truth = box["fleet"].summary()["vehicles"]
+    assert all(not v["armed"] and v["landed"] for v in truth)
+    assert all("COMPONENT_ARM_DISARM" not in v["commands"] for v in truth)
+
+
+async def test_no_param_check_reads_no_parameter():
+    flight = await fly_on_mock(
+        "3u2o",
+        speedup=SPEEDUP,
+        fly_options={"check_params": False, "dry_run": True, "max_flight_s": 2.0},
+    )
+    assert all(v["params_unknown"] == {} for v in flight.ground_truth["vehicles"])
+    events = [e for v in flight.runtime["vehicles"] for _, e in v["events"]]
+    assert not any(e.startswith("parameter") for e in events)

@@ -18,16 +18,9 @@ from remarl_fc.mavlink.consts import (
     MavParamType,
     MsgId,
 )
+from remarl_fc.mavlink.params import INT_FORMATS, from_wire, to_wire
 from remarl_fc.sitl.config import ArduPilotParams, Px4Params
-from remarl_fc.sitl.params import (
-    ARDUPILOT_PARAMS,
-    INT_FORMATS,
-    PX4_PARAMS,
-    ParamRejected,
-    ParamTable,
-    from_wire,
-    to_wire,
-)
+from remarl_fc.sitl.params import ARDUPILOT_PARAMS, PX4_PARAMS, ParamRejected, ParamTable
 
 TABLES = {"ardupilot": ARDUPILOT_PARAMS, "px4": PX4_PARAMS}
 QUIET_S = 1.0
