@@ -85,7 +85,8 @@ class SwarmRuntime:
         cfg: flight settings.
         policy: the policy (numpy).
         spec: control constants (from the policy file).
-        on_status: called with a one-line-per-vehicle status at every decision (the demo).
+        on_status: called with a one-line-per-vehicle status at every decision, and with
+            each vehicle's events as they happen (the console of `fly` and the demo).
     """
 
     def __init__(
@@ -585,6 +586,8 @@ class SwarmRuntime:
         m.events.append((now, text))
         if self._log is not None:
             self._log.event(now, m.system_id, text)
+        if self.on_status is not None:
+            self.on_status(f"t={now:6.1f}s vehicle {m.system_id}: {text}")
 
     def _log_decision(self, d: Decision) -> None:
         if self._log is None:
