@@ -24,6 +24,7 @@ import importlib
 import json
 import multiprocessing
 import os
+import signal
 import threading
 import time
 import warnings
@@ -247,30 +248,37 @@ def _run_benchmarl(job: Job) -> dict[str, Any]:
 
 
 PARENT_POLL_S = 1.0
-"""How often a pool worker checks that the `compare` process that started it is alive, s."""
+"""How often a pool worker checks that it should go on (its `compare` alive, no stop), s."""
 
-EXIT_ORPHANED = 70
-"""Exit status of a pool worker whose `compare` process is gone (EX_SOFTWARE)."""
+EXIT_STOPPED = 70
+"""Exit status of a pool worker told to stop, or whose `compare` process is gone."""
 
 
-def exit_with_parent(parent_pid: int) -> None:
-    """Pool initializer: end this worker as soon as the process that started it is gone.
+def worker_setup(parent_pid: int, stop: Any) -> None:
+    """Pool initializer: leave Ctrl-C to the parent, and end when told or orphaned.
 
-    A `compare` killed by a signal it cannot catch would otherwise leave its workers training,
-    for up to hours, as orphans. Their cells are unfinished (no result.json) and are trained
-    again on the next run.
+    The parent handles Ctrl-C (the terminal sends it to every worker too: ignored here) and
+    sets ``stop`` (a `multiprocessing.Event`); a `compare` killed by a signal it cannot catch
+    is noticed by its changed parent id. Either way the worker exits within `PARENT_POLL_S`
+    instead of training on, for up to hours. Its cell is unfinished (no result.json) and is
+    trained again on the next run.
     """
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
     def watch() -> None:
-        while os.getppid() == parent_pid:
-            time.sleep(PARENT_POLL_S)
-        os._exit(EXIT_ORPHANED)
+        while os.getppid() == parent_pid and not stop.wait(PARENT_POLL_S):
+            pass
+        os._exit(EXIT_STOPPED)
 
-    threading.Thread(target=watch, name="exit-with-parent", daemon=True).start()
+    threading.Thread(target=watch, name="worker-watch", daemon=True).start()
 
 
 def run_grid(cfg: CompareConfig, *, ray_address: str | None = None) -> list[dict[str, Any]]:
-    """Run every unfinished cell; returns every cell's result."""
+    """Run every unfinished cell; returns every cell's result.
+
+    On Ctrl-C (KeyboardInterrupt) or any error the workers stop at once and the exception
+    propagates; the finished cells are kept and the next run resumes from them.
+    """
     todo = jobs(cfg)
     if ray_address is not None:
         try:
@@ -283,10 +291,17 @@ def run_grid(cfg: CompareConfig, *, ray_address: str | None = None) -> list[dict
     if cfg.workers == 1:
         return [run_job(j) for j in todo]
     ctx = multiprocessing.get_context("spawn")
-    with concurrent.futures.ProcessPoolExecutor(
-        cfg.workers, mp_context=ctx, initializer=exit_with_parent, initargs=(os.getpid(),)
-    ) as pool:
+    stop = ctx.Event()
+    pool = concurrent.futures.ProcessPoolExecutor(
+        cfg.workers, mp_context=ctx, initializer=worker_setup, initargs=(os.getpid(), stop)
+    )
+    try:
         return list(pool.map(run_job, todo))
+    except BaseException:
+        stop.set()  # running cells end now instead of at their budget
+        raise
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
 
 
 def read_curve(path: Path) -> np.ndarray:

@@ -248,7 +248,14 @@ def _cmd_compare(args: argparse.Namespace) -> int:
         if value is not None  # unset: the preset's own
     }
     cfg = dataclasses.replace(cfg, **episodes)
-    results = run_grid(cfg, ray_address=args.ray_address)
+    try:
+        results = run_grid(cfg, ray_address=args.ray_address)
+    except KeyboardInterrupt:
+        print(
+            f"interrupted: the finished cells are kept in {out}; run the same command to resume",
+            file=sys.stderr,
+        )
+        return 130
     paths = write_reports(cfg, results)
     payload = {"cells": len(results), "out": str(out), **paths}
     _emit(args, payload, "\n".join(f"wrote {p}" for p in paths.values()))

@@ -70,10 +70,10 @@ def test_episode_counts_come_from_the_results():
 
 ORPHAN_SCRIPT = """
 import concurrent.futures, multiprocessing, os, sys, time
-from policies.compare import exit_with_parent
+from policies.compare import worker_setup
 ctx = multiprocessing.get_context("spawn")
 pool = concurrent.futures.ProcessPoolExecutor(
-    1, mp_context=ctx, initializer=exit_with_parent, initargs=(os.getpid(),)
+    1, mp_context=ctx, initializer=worker_setup, initargs=(os.getpid(), ctx.Event())
 )
 print(pool.submit(os.getpid).result(), flush=True)
 pool.submit(time.sleep, 120)  # a long cell
@@ -106,3 +106,47 @@ def test_pool_workers_end_when_compare_is_killed():
         time.sleep(0.2)
     os.kill(worker, signal.SIGKILL)
     pytest.fail("the worker outlived its compare process by 15 s")
+
+
+def _children(pid: int) -> set[int]:
+    """Process ids whose parent is ``pid`` (from /proc)."""
+    from pathlib import Path
+
+    kids = set()
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue  # gone meanwhile
+        if int(fields[1]) == pid:
+            kids.add(int(stat.parent.name))
+    return kids
+
+
+def test_ctrl_c_stops_the_workers_at_once_and_says_how_to_resume(tmp_path):
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    args = ["compare", "--scenarios", "2u1o", "--methods", "remarl,coma", "--seeds", "1"]
+    args += ["--budget", "1000000", "--workers", "2", "--out", str(tmp_path)]
+    env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    with subprocess.Popen(
+        [sys.executable, "-m", "remarl_fc", *args], stderr=subprocess.PIPE, text=True, env=env
+    ) as parent:
+        deadline = time.monotonic() + 90
+        while len(workers := _children(parent.pid)) < 3:  # 2 workers + the tracker
+            assert time.monotonic() < deadline and parent.poll() is None, "no workers started"
+            time.sleep(0.2)
+        time.sleep(2.0)  # the cells are training
+        parent.send_signal(signal.SIGINT)  # the parent only: it must stop its workers itself
+        _, err = parent.communicate(timeout=30)
+    assert parent.returncode == 130, err
+    assert "run the same command to resume" in err and "Traceback" not in err
+    deadline = time.monotonic() + 10
+    while any(os.path.exists(f"/proc/{w}") for w in workers):
+        assert time.monotonic() < deadline, "a worker outlived compare"
+        time.sleep(0.2)
+    assert not list(tmp_path.glob("runs/*/*/*/result.json"))  # nothing finished, nothing faked
