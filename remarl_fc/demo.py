@@ -61,6 +61,7 @@ async def fly_on_mock(
     fly_options: dict[str, Any] | None = None,
     geofence: Geofence | None = None,
     link_per_vehicle: bool = False,
+    tcp: bool = False,
     signing_key: bytes | None = None,
     sitl_options: dict[str, Any] | None = None,
 ) -> MockFlight:
@@ -73,6 +74,8 @@ async def fly_on_mock(
         geofence: add this fence to the scenario's mission.
         link_per_vehicle: one ``udpout:`` connection per vehicle port (ArduPilot SITL style)
             instead of one ``udpin:`` port that every vehicle sends to.
+        tcp: the vehicles are TCP servers and the runtime connects ``tcp:`` to each (ArduPilot
+            SITL's serial-over-TCP ports).
         signing_key: sign both sides with this key (the mock then rejects unsigned commands).
         sitl_options: extra `SitlConfig` fields (e.g. ``px4=Px4Params(...)``).
     """
@@ -84,7 +87,8 @@ async def fly_on_mock(
         vehicles=cfg.uav.count,
         flavour=flavour,
         base_port=0,
-        out=None if link_per_vehicle else ("127.0.0.1", port),
+        transport="tcp" if tcp else "udp",
+        out=None if link_per_vehicle or tcp else ("127.0.0.1", port),
         speedup=speedup,
         cruise_alt_m=CRUISE_ALT_M,
         seed=seed,
@@ -99,8 +103,9 @@ async def fly_on_mock(
     # the fleet outlives the runtime: the runtime's hold commands on exit must reach it
     async with fleet:
         connections: tuple[str, ...] = (f"udpin:127.0.0.1:{port}",)
-        if link_per_vehicle:
-            connections = tuple(f"udpout:{h}:{p}" for h, p in fleet.addresses)
+        if link_per_vehicle or tcp:
+            kind = "tcp" if tcp else "udpout"
+            connections = tuple(f"{kind}:{h}:{p}" for h, p in fleet.addresses)
         fly = FlyConfig(
             connections=connections,
             mission=mission,

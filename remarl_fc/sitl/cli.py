@@ -65,7 +65,13 @@ def add_sitl_parser(sub: Any) -> None:
         "--base-port",
         type=int,
         default=None,
-        help="port of vehicle 0 (default 14550 ArduPilot, 18570 PX4; 0 = any free port)",
+        help="port of vehicle 0 (default UDP 14550 ArduPilot, 18570 PX4, TCP 5760; 0 = any free)",
+    )
+    p.add_argument(
+        "--tcp",
+        action="store_true",
+        help="each vehicle a TCP server for one client (ArduPilot SITL's 5760, 5770, ...) "
+        "instead of a UDP endpoint",
     )
     p.add_argument(
         "--port-step", type=int, default=None, help="port increment (default 10 / 1 for PX4)"
@@ -163,6 +169,7 @@ def cmd_sitl(args: argparse.Namespace) -> int:
             vehicles=scenario.uav.count if scenario else (args.vehicles or 1),
             flavour=args.flavour,
             host=args.host,
+            transport="tcp" if args.tcp else "udp",
             base_port=args.base_port,
             port_step=args.port_step,
             out=args.out,
@@ -224,7 +231,8 @@ async def _serve(
                 for i, (host, port) in enumerate(fleet.addresses):
                     out = cfg.out_address(i)
                     to = f", sending to {out[0]}:{out[1]}" if out else ""
-                    print(f"vehicle {i + 1} ({cfg.flavour}): udp {host}:{port}{to}", flush=True)
+                    kind = cfg.transport
+                    print(f"vehicle {i + 1} ({cfg.flavour}): {kind} {host}:{port}{to}", flush=True)
             finished = await fleet.wait(until_done=args.until_done, timeout_s=args.timeout)
     finally:
         if started:  # a fleet that never bound its ports has nothing to report

@@ -15,6 +15,7 @@ from remarl_fc.frames import GeoPoint
 
 Flavour = Literal["ardupilot", "px4"]
 FLAVOURS: tuple[Flavour, ...] = ("ardupilot", "px4")
+Transport = Literal["udp", "tcp"]
 
 DEFAULT_HOME = GeoPoint(47.397742, 8.545594, 488.0)
 """Home of the arena origin: the PX4 SITL default location (Zurich), lat/lon degrees, AMSL m."""
@@ -27,6 +28,9 @@ PX4_BASE_PORT = 18570
 """PX4 SITL layout: instance i's GCS link listens on 18570 + i and sends to 14540 + i."""
 
 PX4_PORT_STEP = 1
+
+ARDUPILOT_TCP_BASE_PORT = 5760
+"""ArduPilot SITL's SERIAL0 as a TCP server: instance i listens on 5760 + 10·i."""
 
 
 @dataclass(frozen=True)
@@ -143,10 +147,13 @@ class SitlConfig:
     """Which autopilot to imitate."""
     host: str = "127.0.0.1"
     """Address every vehicle binds."""
+    transport: Transport = "udp"
+    """"udp": each vehicle a UDP endpoint; "tcp": each a TCP server taking one client at a time
+    (ArduPilot SITL's serial-over-TCP port; a new client replaces the previous one)."""
     base_port: int | None = None
-    """Port of vehicle 0; None = the flavour's SITL default (14550 ArduPilot, 18570 PX4)."""
+    """Port of vehicle 0; None = the SITL default (UDP 14550 ArduPilot, 18570 PX4; TCP 5760)."""
     port_step: int | None = None
-    """Port increment per vehicle; None = the flavour's (10 ArduPilot, 1 PX4)."""
+    """Port increment per vehicle; None = the SITL default (10 ArduPilot and TCP, 1 PX4)."""
     out: tuple[str, int] | None = None
     """Address every vehicle also sends to from the start (PX4 style), or None to send only
     to the peer it last heard from (ArduPilot style)."""
@@ -177,6 +184,10 @@ class SitlConfig:
             raise ValueError(f"vehicles must be 1..250 (system ids), not {self.vehicles}")
         if not self.speedup > 0:
             raise ValueError(f"speedup must be > 0, not {self.speedup}")
+        if self.transport not in ("udp", "tcp"):
+            raise ValueError(f"transport {self.transport!r} is not udp or tcp")
+        if self.transport == "tcp" and self.out is not None:
+            raise ValueError("--out is for UDP: a TCP vehicle sends to the client connected to it")
         if not self.physics_hz >= 10:
             raise ValueError(f"physics_hz must be ≥ 10, not {self.physics_hz}")
         last = self.port(self.vehicles - 1)
@@ -188,11 +199,14 @@ class SitlConfig:
         if self.base_port == 0:
             return 0
         base = self.base_port
-        if base is None:
+        ten_per_instance = self.transport == "tcp" or self.flavour == "ardupilot"
+        if base is None and self.transport == "tcp":
+            base = ARDUPILOT_TCP_BASE_PORT
+        elif base is None:
             base = ARDUPILOT_BASE_PORT if self.flavour == "ardupilot" else PX4_BASE_PORT
         step = self.port_step
         if step is None:
-            step = ARDUPILOT_PORT_STEP if self.flavour == "ardupilot" else PX4_PORT_STEP
+            step = ARDUPILOT_PORT_STEP if ten_per_instance else PX4_PORT_STEP
         return base + step * index
 
     def out_address(self, index: int) -> tuple[str, int] | None:

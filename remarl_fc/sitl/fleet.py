@@ -1,4 +1,4 @@
-"""The mock fleet: N vehicles, each a MAVLink 2 endpoint on its own UDP port, in one event loop.
+"""The mock fleet: N vehicles, each a MAVLink 2 endpoint on its own UDP (or TCP) port, one loop.
 
     async with SitlFleet(SitlConfig(vehicles=3, flavour="px4", base_port=0)) as fleet:
         print(fleet.addresses)        # where to connect
@@ -8,7 +8,8 @@
 One task (``sitl.physics``, owned by the fleet's TaskGroup) runs the simulated clock: each
 physics tick steps every airframe at once, records the ground truth, runs the autopilot timers
 and sends whatever HEARTBEAT, telemetry and ADS-B is due. Datagrams are handled as they arrive
-(``datagram_received`` → codec → autopilot), stamped with the simulated time. The simulated
+(``datagram_received`` or, over TCP, ``data_received`` → codec → autopilot), stamped with the
+simulated time; the faults act on frames the same way on both transports. The simulated
 clock is the tick count × tick length, paced to ``speedup`` × wall time; when the host cannot
 keep up the simulation slows down rather than skipping physics (``summary()["achieved_speedup"]``
 says by how much).
@@ -27,6 +28,7 @@ from typing import Any, Self
 import numpy as np
 from numpy.typing import NDArray
 
+from remarl_fc.errors import LinkLost
 from remarl_fc.frames import GeoPoint, heading_to_yaw, ned_to_geodetic, sim_to_ne
 from remarl_fc.mavlink.codec import Codec, SigningConfig
 from remarl_fc.mavlink.consts import MavComponent, MsgId
@@ -56,6 +58,28 @@ UNSIGNED_ALLOWED = {
 
 MAX_LAG_S = 0.5
 """Wall seconds the physics loop may fall behind before it stops trying to catch up."""
+
+
+class _TcpVehicle(asyncio.Protocol):
+    """One TCP connection to vehicle ``index``: bytes in go to the fleet as a stream."""
+
+    def __init__(self, fleet: SitlFleet, index: int) -> None:
+        self.fleet, self.index = fleet, index
+        self.transport: asyncio.Transport | None = None
+        self.peer: Address = ("", 0)
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        assert isinstance(transport, asyncio.Transport)
+        self.transport = transport
+        host, port = transport.get_extra_info("peername")[:2]
+        self.peer = (str(host), int(port))
+        self.fleet._tcp_connected(self.index, self)
+
+    def data_received(self, data: bytes) -> None:
+        self.fleet._on_datagram(self.index, data, self.peer, stream=True)
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        self.fleet._tcp_disconnected(self.index, self)
 
 
 def make_autopilot(
@@ -158,6 +182,8 @@ class SitlFleet:
             for _ in range(n)
         ]
         self.endpoints: list[UdpEndpoint] = []
+        self.tcp_clients: list[_TcpVehicle | None] = [None] * n
+        """The client connected to each vehicle (TCP transport)."""
         self._ports: list[int] = []
         self._ticks = 0
         self._dt = 1.0 / cfg.physics_hz
@@ -181,6 +207,9 @@ class SitlFleet:
         await stack.__aenter__()
         try:
             for i in range(self.n):
+                if self.cfg.transport == "tcp":
+                    self._ports.append(await self._serve_tcp(i, stack))
+                    continue
                 ep = UdpEndpoint(
                     (self.cfg.host, self.cfg.port(i)),
                     on_datagram=functools.partial(self._on_datagram, i),
@@ -215,6 +244,41 @@ class SitlFleet:
             await stack.__aexit__(exc_type, exc, tb)  # let the TaskGroup see its own cancel
         else:  # the caller's own error propagates as it is, not wrapped in a group
             await stack.aclose()
+
+    async def _serve_tcp(self, i: int, stack: contextlib.AsyncExitStack) -> int:
+        """Listen for vehicle ``i``'s TCP client; returns the port."""
+        loop = asyncio.get_running_loop()
+        host, port = self.cfg.host, self.cfg.port(i)
+        try:
+            server = await loop.create_server(lambda: _TcpVehicle(self, i), host, port)
+        except OSError as exc:
+            raise LinkLost(
+                f"cannot listen ({exc.strerror or exc}); is another program using the port?",
+                link=f"sitl vehicle {i + 1} tcp:{host}:{port}",
+            ) from exc
+
+        async def close() -> None:
+            server.close()
+            client = self.tcp_clients[i]
+            if client is not None and client.transport is not None:
+                client.transport.close()
+            await server.wait_closed()
+
+        stack.push_async_callback(close)
+        bound: int = server.sockets[0].getsockname()[1]
+        return bound
+
+    def _tcp_connected(self, i: int, client: _TcpVehicle) -> None:
+        old = self.tcp_clients[i]
+        if old is not None and old.transport is not None:
+            old.transport.close()  # one client at a time, as a serial port over TCP
+        self.tcp_clients[i] = client
+        self.peers[i] = client.peer
+
+    def _tcp_disconnected(self, i: int, client: _TcpVehicle) -> None:
+        if self.tcp_clients[i] is client:
+            self.tcp_clients[i] = None
+            self.peers[i] = None
 
     @property
     def addresses(self) -> list[Address]:
@@ -340,26 +404,32 @@ class SitlFleet:
                 self._raw_send(i, frame, dest)
 
     def _raw_send(self, i: int, frame: bytes, dest: Address) -> None:
+        if self.cfg.transport == "tcp":
+            client = self.tcp_clients[i]
+            transport = client.transport if client is not None and client.peer == dest else None
+            if transport is not None and not transport.is_closing():
+                transport.write(frame)
+            return
         ep = self.endpoints[i] if i < len(self.endpoints) else None
         if ep is not None and ep.is_open:
             ep.send(frame, dest)
 
-    def _on_datagram(self, i: int, data: bytes, addr: Address) -> None:
+    def _on_datagram(self, i: int, data: bytes, addr: Address, *, stream: bool = False) -> None:
         now = self.now_s()
         if self.faults.link_down(i, now) or self.faults.drop(self.rng):
-            self.link_stats[i]["dropped_in"] += 1
+            self.link_stats[i]["dropped_in"] += 1  # over TCP: a cut frame, as on a noisy serial
             return
         delay = self.faults.delay_s(self.rng) / self.cfg.speedup
         if delay > 0 and self._loop is not None:
-            self._loop.call_later(delay, self._deliver, i, data, addr)
+            self._loop.call_later(delay, self._deliver, i, data, addr, stream)
         else:
-            self._deliver(i, data, addr)
+            self._deliver(i, data, addr, stream)
 
-    def _deliver(self, i: int, data: bytes, addr: Address) -> None:
+    def _deliver(self, i: int, data: bytes, addr: Address, stream: bool = False) -> None:
         self.link_stats[i]["datagrams_in"] += 1
         ap = self.vehicles[i]
         try:
-            msgs = self.codecs[i].decode(data, addr, datagram=True)
+            msgs = self.codecs[i].decode(data, addr, datagram=not stream)
             if msgs:
                 self.peers[i] = addr
             now = self.now_s()

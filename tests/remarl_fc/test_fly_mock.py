@@ -155,6 +155,12 @@ async def test_one_link_per_vehicle_ardupilot_sitl_style():
     assert_safe_and_arrived(flight.ground_truth)
 
 
+async def test_over_tcp_ardupilot_sitl_serial_ports():
+    flight = await fly_on_mock("3u2o", speedup=SPEEDUP, tcp=True)
+    assert_safe_and_arrived(flight.ground_truth)
+    assert all(v["link"]["bad_frames"] == 0 for v in flight.ground_truth["vehicles"])
+
+
 async def test_geofence_breach_ahead_holds_the_vehicle():
     from remarl_fc.mission import Geofence
 

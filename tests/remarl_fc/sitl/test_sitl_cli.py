@@ -83,6 +83,15 @@ def test_bad_params_exit_2_naming_what_is_served(flavour, param, message, capsys
     assert message in capsys.readouterr().err
 
 
+def test_tcp_refuses_out_and_serves_tcp(capsys):
+    assert main(["sitl", "--tcp", "--out", "127.0.0.1:14540"]) == 2
+    assert "--out is for UDP" in capsys.readouterr().err
+    args = ["sitl", "--tcp", "--vehicles", "2", "--base-port", "0", "--timeout", "0.5"]
+    assert main([*args, "--speedup", "10"]) == 0
+    out = capsys.readouterr().out
+    assert out.count("(ardupilot): tcp 127.0.0.1:") == 2
+
+
 def test_busy_port_is_a_clear_error(capsys):
     import socket
 
