@@ -28,6 +28,7 @@ import signal
 import threading
 import time
 import warnings
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -273,13 +274,35 @@ def worker_setup(parent_pid: int, stop: Any) -> None:
     threading.Thread(target=watch, name="worker-watch", daemon=True).start()
 
 
-def run_grid(cfg: CompareConfig, *, ray_address: str | None = None) -> list[dict[str, Any]]:
-    """Run every unfinished cell; returns every cell's result.
+CellReport = Callable[[int, int, dict[str, Any]], None]
+"""Called as each cell finishes: (cells finished so far, cells in all, its result)."""
 
+
+def cell_line(done: int, total: int, result: dict[str, Any]) -> str:
+    """One progress line for a finished cell.
+
+    >>> cell_line(3, 9, {"scenario": "7u2o", "method": "remarl", "seed": 1,
+    ...                  "success_rate": 0.995, "swarming_return": 71.23, "wall_s": 812.4})
+    '[3/9] 7u2o remarl seed 1: success 99.5%, Swarming return 71.2 (812 s)'
+    """
+    return (
+        f"[{done}/{total}] {result['scenario']} {result['method']} seed {result['seed']}: "
+        f"success {result['success_rate']:.1%}, Swarming return {result['swarming_return']:.1f} "
+        f"({result['wall_s']:.0f} s)"
+    )
+
+
+def run_grid(
+    cfg: CompareConfig, *, ray_address: str | None = None, on_cell: CellReport | None = None
+) -> list[dict[str, Any]]:
+    """Run every unfinished cell; returns every cell's result, in `jobs` order.
+
+    ``on_cell`` hears of each cell as it finishes (finished ones from an earlier run first).
     On Ctrl-C (KeyboardInterrupt) or any error the workers stop at once and the exception
     propagates; the finished cells are kept and the next run resumes from them.
     """
     todo = jobs(cfg)
+    report: CellReport = on_cell or (lambda done, total, result: None)
     if ray_address is not None:
         try:
             import ray
@@ -289,14 +312,21 @@ def run_grid(cfg: CompareConfig, *, ray_address: str | None = None) -> list[dict
         remote = ray.remote(run_job)
         return list(ray.get([remote.remote(j) for j in todo]))
     if cfg.workers == 1:
-        return [run_job(j) for j in todo]
+        results = []
+        for k, job in enumerate(todo):
+            results.append(run_job(job))
+            report(k + 1, len(todo), results[-1])
+        return results
     ctx = multiprocessing.get_context("spawn")
     stop = ctx.Event()
     pool = concurrent.futures.ProcessPoolExecutor(
         cfg.workers, mp_context=ctx, initializer=worker_setup, initargs=(os.getpid(), stop)
     )
     try:
-        return list(pool.map(run_job, todo))
+        futures = [pool.submit(run_job, job) for job in todo]
+        for k, fut in enumerate(concurrent.futures.as_completed(futures)):
+            report(k + 1, len(todo), fut.result())
+        return [fut.result() for fut in futures]
     except BaseException:
         stop.set()  # running cells end now instead of at their budget
         raise

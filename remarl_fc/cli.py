@@ -222,7 +222,7 @@ def _cmd_bench(args: argparse.Namespace) -> int:
 
 
 def _cmd_compare(args: argparse.Namespace) -> int:
-    from policies.compare import METHODS, CompareConfig, run_grid, write_reports
+    from policies.compare import METHODS, CompareConfig, cell_line, run_grid, write_reports
 
     scenarios = tuple(s for s in args.scenarios.split(",") if s)
     methods = tuple(m for m in (args.methods or ",".join(METHODS)).split(",") if m)
@@ -249,7 +249,13 @@ def _cmd_compare(args: argparse.Namespace) -> int:
     }
     cfg = dataclasses.replace(cfg, **episodes)
     try:
-        results = run_grid(cfg, ray_address=args.ray_address)
+        results = run_grid(
+            cfg,
+            ray_address=args.ray_address,
+            on_cell=lambda done, total, result: print(
+                cell_line(done, total, result), file=sys.stderr, flush=True
+            ),
+        )
     except KeyboardInterrupt:
         print(
             f"interrupted: the finished cells are kept in {out}; run the same command to resume",

@@ -16,8 +16,16 @@ def test_quick_compare_two_methods_writes_every_output(tmp_path, capsys):
     out = tmp_path / "results"
     args = ["compare", "--quick", "--scenarios", "2u1o,3u2o", "--methods", "remarl,coma,e2coop"]
     assert main([*args, "--out", str(out), "--json"]) == 0
-    paths = json.loads(capsys.readouterr().out)
+    printed = capsys.readouterr()
+    paths = json.loads(printed.out)
     assert paths["cells"] == 6
+    progress = printed.err.splitlines()  # one line per cell as it finishes, on stderr
+    assert [line.split("]")[0] for line in progress if line.startswith("[")] == [
+        f"[{k}/6" for k in range(1, 7)
+    ]
+    assert any(
+        line.startswith("[") and " 2u1o e2coop seed 0: success " in line for line in progress
+    )
     for name in ("learning_curves.png", "summary.md", "table2.md", "table2.csv", "config.json"):
         assert (out / name).stat().st_size > 0, name
     with (out / "table2.csv").open() as fh:
