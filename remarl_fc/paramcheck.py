@@ -68,6 +68,10 @@ class Readout:
     unread: tuple[str, ...]
 
 
+Rule = Callable[[Mapping[str, float], float], Finding | None]
+"""Judges one aspect of a vehicle's parameters, given the setpoint period (s)."""
+
+
 def checked_names(px4: bool) -> tuple[str, ...]:
     """The parameters read from a vehicle of this autopilot."""
     return PX4_CHECKED if px4 else ARDUPILOT_CHECKED
@@ -78,15 +82,11 @@ def check_params(
 ) -> list[Finding]:
     """Judge the parameters read from one vehicle (missing ones are not judged)."""
     rules = _px4_rules if px4 else _ardupilot_rules
-    findings: list[Finding] = []
-    for rule in rules:
-        found = rule(values, setpoint_period_s)
-        if found is not None:
-            findings.append(found)
-    return findings
+    found = (rule(values, setpoint_period_s) for rule in rules)
+    return [f for f in found if f is not None]
 
 
-def _timeout_rule(name: str, default_s: float, what: str) -> Callable[..., Finding | None]:
+def _timeout_rule(name: str, default_s: float, what: str) -> Rule:
     def rule(values: Mapping[str, float], period_s: float) -> Finding | None:
         timeout_s = values.get(name)
         least = SETPOINT_PERIODS_MIN * period_s
@@ -112,7 +112,7 @@ def _guid_timeout_long(values: Mapping[str, float], period_s: float) -> Finding 
     )
 
 
-def _equals(name: str, bad: float, text: str) -> Callable[..., Finding | None]:
+def _equals(name: str, bad: float, text: str) -> Rule:
     def rule(values: Mapping[str, float], period_s: float) -> Finding | None:
         value = values.get(name)
         if value is None or value != bad:
@@ -145,7 +145,7 @@ def _offboard_loss_action(values: Mapping[str, float], period_s: float) -> Findi
     )
 
 
-_ardupilot_rules: tuple[Callable[[Mapping[str, float], float], Finding | None], ...] = (
+_ardupilot_rules: tuple[Rule, ...] = (
     _timeout_rule("GUID_TIMEOUT", 3.0, "the vehicle would stop between setpoints"),
     _guid_timeout_long,
     _equals(
@@ -157,7 +157,7 @@ _ardupilot_rules: tuple[Callable[[Mapping[str, float], float], Finding | None], 
     _equals("FENCE_ENABLE", 0, "no fence: nothing stops a vehicle if fly misbehaves"),
 )
 
-_px4_rules: tuple[Callable[[Mapping[str, float], float], Finding | None], ...] = (
+_px4_rules: tuple[Rule, ...] = (
     _timeout_rule("COM_OF_LOSS_T", 1.0, "OFFBOARD would be lost between setpoints"),
     _offboard_loss_action,
     _equals("NAV_DLL_ACT", 0, "losing the data link does nothing; use Hold, Return or Land"),
