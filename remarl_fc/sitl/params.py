@@ -44,11 +44,20 @@ class ParamSpec:
     per_unit: float = 1.0
     """Parameter units per field unit: 100 for ArduPilot's cm and cm/s from m and m/s."""
     low: float = 0.0
-    """Smallest value the mock can fly, in parameter units."""
+    """Smallest value the mock can fly, in parameter units (an integer type's range also
+    bounds it)."""
     high: float = math.inf
-    """Largest value the mock can fly, in parameter units."""
+    """Largest value the mock can fly, in parameter units (an integer type's range also
+    bounds it)."""
     choices: Mapping[int, str] | None = None
     """For an enumerated parameter: wire value → field value (the options the mock models)."""
+
+    def bounds(self) -> tuple[float, float]:
+        """The values the mock takes: `low`..`high` within the type's range."""
+        fmt = INT_FORMATS.get(self.ptype)
+        if fmt is None:
+            return self.low, self.high
+        return max(self.low, fmt[1]), min(self.high, fmt[2])
 
     def read(self, values: object) -> float:
         """The parameter's value, in its own units, from a config dataclass."""
@@ -70,8 +79,9 @@ class ParamSpec:
                 raise ParamRejected(f"{self.name}={int(value)} not modelled: use {modelled}")
             new: Any = self.choices[int(value)]
         else:
-            if not self.low <= value <= self.high:
-                raise ParamRejected(f"{self.name}={value:g} outside {self.low:g}..{self.high:g}")
+            low, high = self.bounds()
+            if not low <= value <= high:
+                raise ParamRejected(f"{self.name}={value:g} outside {low:g}..{high:g}")
             new = value / self.per_unit
         return dataclasses.replace(values, **{self.field: new})  # type: ignore[type-var]
 
@@ -125,7 +135,7 @@ CM = 100.0
 
 ARDUPILOT_PARAMS = ParamTable(
     (
-        ParamSpec("DISARM_DELAY", "disarm_delay_s", MavParamType.INT8, high=127),
+        ParamSpec("DISARM_DELAY", "disarm_delay_s", MavParamType.INT8),
         ParamSpec("GUID_TIMEOUT", "guid_timeout_s"),
         ParamSpec("LAND_ALT_LOW", "land_alt_low_m", MavParamType.INT16, CM),
         ParamSpec("LAND_SPEED", "land_speed_m_s", MavParamType.INT16, CM, low=1),

@@ -92,6 +92,15 @@ def test_values_the_mock_cannot_fly_are_refused():
         table.set(Px4Params(), k, 0.0, MavParamType.REAL32)
     with pytest.raises(ParamRejected, match="not a number"):
         table.set(Px4Params(), k, math.nan, MavParamType.REAL32)
+    # an integer parameter is bounded by its type too: LAND_ALT_LOW is an INT16 (cm)
+    k = ARDUPILOT_PARAMS.find("LAND_ALT_LOW")
+    assert k is not None
+    with pytest.raises(ParamRejected, match=r"outside 0\.\.32767"):
+        ARDUPILOT_PARAMS.set(ArduPilotParams(), k, 40_000.0, MavParamType.INT16)
+    k = ARDUPILOT_PARAMS.find("DISARM_DELAY")
+    assert k is not None
+    with pytest.raises(ParamRejected, match=r"outside 0\.\.127"):
+        ARDUPILOT_PARAMS.set(ArduPilotParams(), k, 128.0, MavParamType.INT8)
     with pytest.raises(ValueError, match="over 16"):
         ParamTable((type(table.specs[0])("SEVENTEEN_LETTERS", "x"),), bytewise=True)
 
@@ -196,7 +205,7 @@ async def test_ardupilot_set_converts_units_refuses_and_takes_effect(sitl):
         mark = param_set(gcs, "LAND_SPEED", 0.0, MavParamType.INT16)  # cannot land at 0 cm/s
         assert (await value_of(gcs, "LAND_SPEED")).param_value == 50.0  # unchanged
         (text,) = heard_since(gcs, mark, "STATUSTEXT")  # sent before the PARAM_VALUE
-        assert text.text == "LAND_SPEED=0 outside 1..inf"
+        assert text.text == "LAND_SPEED=0 outside 1..32767"  # INT16 cm/s
 
         mark = param_set(gcs, "FS_GCS_ENABLE", 1.0, MavParamType.INT8)  # not modelled: said so
         await gcs.wait_for("STATUSTEXT", lambda m: m.text == "Unknown parameter FS_GCS_ENABLE")
