@@ -17,12 +17,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from remarl_fc.control import ControlSpec
-from remarl_fc.flyconfig import FlyConfig
+from remarl_fc.flight.config import FlyConfig
+from remarl_fc.flight.control import ControlSpec
+from remarl_fc.flight.mission import Geofence, Mission
+from remarl_fc.flight.runtime import SwarmRuntime
 from remarl_fc.mavlink.codec import SigningConfig
-from remarl_fc.mission import Geofence, Mission
 from remarl_fc.policy_io import load_policy
-from remarl_fc.runtime import SwarmRuntime
 from remarl_fc.sitl.config import DEFAULT_HOME, Flavour, SitlConfig
 from remarl_fc.sitl.faults import Faults
 from remarl_fc.sitl.fleet import SitlFleet

@@ -32,8 +32,8 @@ def test_imports_point_one_way(package, forbidden):
 
 def test_cli_and_sim_import_without_torch():
     code = (
-        "import sys; import remarl_fc.cli, remarl_fc.plots, remarl_fc.bench, sim, sim.reward; "
-        "import remarl_fc.policy_io, remarl_fc.evaluate, remarl_fc.rollout, sim.env; "
+        "import sys; import remarl_fc.cli, remarl_fc.offline.plots, remarl_fc.bench.sim, sim, sim.reward; "
+        "import remarl_fc.policy_io, remarl_fc.offline.evaluate, remarl_fc.offline.rollout, sim.env; "
         "assert 'torch' not in sys.modules and 'policies' not in sys.modules"
     )
     subprocess.run([sys.executable, "-c", code], check=True)
@@ -48,8 +48,8 @@ def test_sitl_runs_with_torch_unimportable(tmp_path):
         "        if name.split('.')[0] == 'torch':\n"
         "            raise ImportError('blocked: ' + name)\n"
         "sys.meta_path.insert(0, Block())\n"
-        "import remarl_fc.sitl.fleet, remarl_fc.sitl.bench, remarl_fc.mavlink.udp\n"
-        "import remarl_fc.runtime, remarl_fc.demo, remarl_fc.flightlog, remarl_fc.benchfly\n"
+        "import remarl_fc.sitl.fleet, remarl_fc.bench.sitl, remarl_fc.mavlink.udp\n"
+        "import remarl_fc.flight.runtime, remarl_fc.demo, remarl_fc.flight.flightlog, remarl_fc.bench.fly\n"
         "from remarl_fc.policy_io import load_policy; load_policy('3u2o')\n"
         "assert 'policies' not in sys.modules\n"
         "from remarl_fc.cli import main\n"

@@ -16,7 +16,7 @@ from pathlib import Path
 
 from policies.config import TrainConfig
 from policies.train import train
-from remarl_fc.evaluate import evaluate_policy
+from remarl_fc.offline.evaluate import evaluate_policy
 
 EVAL_SEED = 7_000_000
 

@@ -16,7 +16,7 @@ import time
 
 import numpy as np
 
-from remarl_fc.bench import AUTHORS_BUDGET, bench_pso, crowded_line
+from remarl_fc.bench.sim import AUTHORS_BUDGET, bench_pso, crowded_line
 from sim.config import PSOConfig
 from sim.pso import INFEASIBLE_COST
 

@@ -16,7 +16,7 @@ import json
 import time
 from typing import Any
 
-from remarl_fc.bench import bench_sim
+from remarl_fc.bench.sim import bench_sim
 
 
 def vmas_agent_steps(agents: int, batch: int, seconds: float) -> float | None:

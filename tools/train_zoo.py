@@ -18,7 +18,7 @@ from typing import Any
 from policies.config import DDPGConfig, TrainConfig
 from policies.export import export_policy
 from policies.train import train
-from remarl_fc.evaluate import evaluate_policy
+from remarl_fc.offline.evaluate import evaluate_policy
 
 ZOO = Path(__file__).resolve().parents[1] / "policies" / "zoo"
 PAPER = ["2u1o", "3u1o", "5u1o", "7u1o", "10u1o", "3u2o", "5u2o", "7u2o"]

@@ -35,7 +35,7 @@ MAX_DETECTIONS = 64
 STATUSES = frozenset(
     {"waiting", "taking-off", "ready", "controlled", "lost", "held", "reached", "pilot"}
 )
-"""Vehicle statuses a state may carry (`remarl_fc.flyconfig.Status` values)."""
+"""Vehicle statuses a state may carry (`remarl_fc.flight.config.Status` values)."""
 
 
 class PayloadError(ValueError):

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from numpy.typing import NDArray
 
-from remarl_fc.control import ControlSpec, SwarmController
+from remarl_fc.flight.control import ControlSpec, SwarmController
 from remarl_fc.frames import heading_to_yaw, ne_to_sim, sim_to_ne
 from remarl_fc.policy_io import load_policy
 from sim.observation import ObservationLayout, build_observations

@@ -11,7 +11,7 @@ import asyncio
 import pytest
 
 from remarl_fc.demo import fly_on_mock
-from remarl_fc.flyconfig import Status
+from remarl_fc.flight.status import Status
 from remarl_fc.mavlink.consts import CopterMode
 from remarl_fc.sitl.faults import Faults
 
@@ -31,7 +31,7 @@ def assert_safe_and_arrived(truth: dict, reached: int | None = None) -> None:
 
 async def until_controlled(runtime) -> float:
     await runtime.commands.wait_until(
-        "control", lambda: all(m.status == Status.CONTROLLED for m in runtime.members), 120
+        "control", lambda: all(s == Status.CONTROLLED for s in runtime.statuses()), 120
     )
     return runtime.clock.now()
 
@@ -162,7 +162,7 @@ async def test_over_tcp_ardupilot_sitl_serial_ports():
 
 
 async def test_geofence_breach_ahead_holds_the_vehicle():
-    from remarl_fc.mission import Geofence
+    from remarl_fc.flight.mission import Geofence
 
     # the targets lie 270 m east of the origin: a 230 m fence stops everyone before them
     flight = await fly_on_mock("3u2o", speedup=SPEEDUP, geofence=Geofence(radius_m=230.0))

@@ -11,8 +11,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from remarl_fc.errors import ConfigError, PolicySpecMismatch
-from remarl_fc.frames import GeoPoint, ned_to_geodetic, sim_to_ne
-from remarl_fc.mission import (
+from remarl_fc.flight.mission import (
     DEFAULT_ALT_M,
     Geofence,
     Mission,
@@ -21,6 +20,7 @@ from remarl_fc.mission import (
     initial_yaw_rad,
     load_mission,
 )
+from remarl_fc.frames import GeoPoint, ned_to_geodetic, sim_to_ne
 from remarl_fc.sitl.config import DEFAULT_HOME
 from sim.scenarios import load_scenario
 from sim.spawn import swarm_layout

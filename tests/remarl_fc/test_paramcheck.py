@@ -7,16 +7,16 @@ import struct
 
 import pytest
 
-from remarl_fc.flyconfig import Clock
-from remarl_fc.mavlink.codec import Codec
-from remarl_fc.mavlink.consts import MavParamType
-from remarl_fc.mavlink.params import param_name, to_wire
-from remarl_fc.paramcheck import (
+from remarl_fc.flight.config import Clock
+from remarl_fc.flight.paramcheck import (
     PARAM_READ_ATTEMPTS,
     ParamReader,
     check_params,
     checked_names,
 )
+from remarl_fc.mavlink.codec import Codec
+from remarl_fc.mavlink.consts import MavParamType
+from remarl_fc.mavlink.params import param_name, to_wire
 
 PERIOD_S = 0.1  # 10 Hz setpoints
 

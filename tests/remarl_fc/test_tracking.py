@@ -10,6 +10,12 @@ import pytest
 from hypothesis import assume, given
 from hypothesis import strategies as st
 
+from remarl_fc.flight.tracking import (
+    MAX_SPEED_M_S,
+    STATUSTEXT_KEPT,
+    TrafficPicture,
+    VehicleTrack,
+)
 from remarl_fc.frames import GeoPoint, ned_to_geodetic, to_deg_e7, yaw_to_cdeg
 from remarl_fc.mavlink.codec import Codec
 from remarl_fc.mavlink.consts import (
@@ -24,12 +30,6 @@ from remarl_fc.mavlink.consts import (
     Px4AutoSubMode,
     Px4MainMode,
     px4_custom_mode,
-)
-from remarl_fc.tracking import (
-    MAX_SPEED_M_S,
-    STATUSTEXT_KEPT,
-    TrafficPicture,
-    VehicleTrack,
 )
 
 ORIGIN = GeoPoint(47.397742, 8.545594, 488.0)

@@ -7,17 +7,22 @@ One `asyncio.TaskGroup` owns every task, each named ``remarl.<what>``:
 
 * ``heartbeat`` — the controller's HEARTBEAT at 1 Hz (MAV_TYPE_ONBOARD_CONTROLLER);
 * ``mission`` — prepare every vehicle (streams, failsafe parameters checked by
-  `remarl_fc.paramcheck`, position, optional take-off, take control), then the decision loop:
+  `remarl_fc.flight.paramcheck`, position, optional take-off, take control), then the decision loop:
   every dt, one policy decision for the whole swarm;
-* ``setpoints`` — at ≥ 10 Hz, each controlled vehicle's point on its arc as
-  SET_POSITION_TARGET_LOCAL_NED velocity + yaw (type_mask 2503), after the safety checks:
-  stale telemetry (> `FlyConfig.stale_s`) → the vehicle is no longer commanded and becomes an
-  obstacle at its last track, and is told to hold when it comes back; a mode the pilot chose →
-  released, never fought; a geofence breach ahead → hold; target reached → hold and release.
+* ``setpoints`` — at ≥ 10 Hz, one tick of the sans-I/O core (`remarl_fc.flight.core`): an
+  immutable snapshot of each vehicle's telemetry goes in; setpoints
+  (SET_POSITION_TARGET_LOCAL_NED velocity + yaw, type_mask 2503), holds and events come out,
+  after the safety checks: stale telemetry → an obstacle, held when it comes back; a mode the
+  pilot chose → released, never fought; a geofence breach ahead → hold; target reached →
+  hold and release. Status changes follow `remarl_fc.flight.status`;
+* ``holds`` — sends the hold mode the core asks for (each waits for its ACK);
+* ``bus_rx``, ``bus_tx`` — the swarm bus (`remarl_fc.flight.peers`).
 
-Receiving is callback-driven (`remarl_fc.mavlink.link`); commands, mode changes and waits go
-through `remarl_fc.commands.Commander`; the settings and per-vehicle rows are in
-`remarl_fc.flyconfig`. Every wait has a deadline on the monotonic clock and raises
+Receiving is callback-driven (`remarl_fc.mavlink.link`); vehicle preparation and take-off are
+in `remarl_fc.flight.prepare`; commands, mode changes and waits go through
+`remarl_fc.flight.commands.Commander`; the settings and per-vehicle I/O rows are in
+`remarl_fc.flight.config`; the console lines, log rows and summary in
+`remarl_fc.flight.report`. Every wait has a deadline on the monotonic clock and raises
 (`LinkTimeout`, `CommandRejected`); on any exit — the end of the mission, an error, Ctrl-C —
 every vehicle still under control is sent the hold mode.
 """
@@ -29,6 +34,7 @@ import contextlib
 import math
 import time
 from collections.abc import Callable
+from dataclasses import replace
 from types import TracebackType
 from typing import Any, Self
 
@@ -36,24 +42,33 @@ import numpy as np
 
 from remarl_fc.bus.core import SwarmBus
 from remarl_fc.bus.memory import MemoryBroker, MemoryBus
-from remarl_fc.commands import Commander, enum_name
-from remarl_fc.control import ControlSpec, Decision, PolicyLike, SwarmController
-from remarl_fc.errors import CommandRejected, ConfigError, RemarlError, UnsafeParameters
-from remarl_fc.flightlog import DecisionLog, mission_header
-from remarl_fc.flyconfig import (
-    PX4_TELEMETRY,
-    TELEMETRY,
-    Clock,
-    FlyConfig,
-    Member,
-    Status,
-    bus_core,
+from remarl_fc.errors import ConfigError, RemarlError
+from remarl_fc.flight.commands import Commander
+from remarl_fc.flight.config import Clock, FlyConfig, Member, bus_core
+from remarl_fc.flight.control import ControlSpec, PolicyLike, SwarmController
+from remarl_fc.flight.core import (
+    Command,
+    Event,
+    Hold,
+    Rules,
+    Setpoint,
+    Telemetry,
+    Vehicle,
+    hold_all,
+    next_actions,
+    transition,
 )
+from remarl_fc.flight.flightlog import DecisionLog, mission_header
+from remarl_fc.flight.paramcheck import ParamReader
+from remarl_fc.flight.peers import Peers
+from remarl_fc.flight.prepare import Preparation
+from remarl_fc.flight.report import decision_rows, status_lines, vehicle_summaries
+from remarl_fc.flight.status import IN_FLIGHT, OBSTACLE, Status
+from remarl_fc.flight.tracking import TrafficPicture, VehicleTrack
 from remarl_fc.mavlink.codec import Codec
 from remarl_fc.mavlink.consts import (
     TYPE_MASK_VELOCITY_YAW,
     MavAutopilot,
-    MavCmd,
     MavComponent,
     MavFrame,
     MavState,
@@ -61,21 +76,9 @@ from remarl_fc.mavlink.consts import (
     MsgId,
 )
 from remarl_fc.mavlink.link import MavlinkLink, TlogWriter
-from remarl_fc.paramcheck import ParamReader, check_params, checked_names
-from remarl_fc.peers import Peers
-from remarl_fc.tracking import TrafficPicture, VehicleTrack
 
 HOLD_CONFIRM_S = 6.0
 """At the end, wait at most this long for the last hold commands to be confirmed."""
-
-ADSB_HZ = 2.0
-"""ADSB_VEHICLE rate asked for (best effort: not every autopilot takes it)."""
-
-CLIMB_RATE_M_S = 1.5
-"""PX4 take-off climb in OFFBOARD (MPC_TKO_SPEED's default)."""
-
-TAKEOFF_DONE_FRACTION = 0.95
-"""A take-off is done at this fraction of its height."""
 
 
 class SwarmRuntime:
@@ -121,9 +124,16 @@ class SwarmRuntime:
         self.bus: SwarmBus = bus or MemoryBus(MemoryBroker(), bus_core(cfg, local))
         self.peers = Peers(
             self.bus, self.members, self.traffic, self.clock, cfg.peer_timeout_s,
-            lambda m: m.status.value,
+            lambda m: self.vehicles[m.system_id].status.value,
         )  # fmt: skip
         self.controller = SwarmController(policy, spec, mission.targets_ne_m())
+        self.vehicles: dict[int, Vehicle] = {
+            m.system_id: Vehicle(m.system_id, m.slot) for m in self.members
+        }
+        """The decision state of every vehicle (immutable values, replaced on each change)."""
+        self.rules = Rules(
+            stale_s=cfg.stale_s, dt_s=spec.dt_s, dry_run=cfg.dry_run, geofence=mission.geofence
+        )
         self.codec = Codec(cfg.system_id, cfg.component_id, signing=cfg.signing)
         self.links: list[MavlinkLink] = []
         self.commands = Commander(cfg, self.codec, self.clock, self.links)
@@ -132,6 +142,10 @@ class SwarmRuntime:
             self.codec.factory,
             self.clock.timeout,
         )
+        self.preparation = Preparation(
+            cfg, self.commands, self.params, self.clock, self.plans,
+            lambda sysid: self.vehicles[sysid], self._update, self._apply, self._event,
+        )  # fmt: skip
         self._stack: contextlib.AsyncExitStack | None = None
         self._log: DecisionLog | None = None
         self._done = asyncio.Event()
@@ -273,7 +287,9 @@ class SwarmRuntime:
         )
         async with asyncio.TaskGroup() as tg:
             for m in mine:
-                tg.create_task(self._prepare_one(m), name=f"remarl[{m.system_id}].prepare")
+                tg.create_task(
+                    self.preparation.prepare_one(m), name=f"remarl[{m.system_id}].prepare"
+                )
         for m in mine:
             m.ready_ne_m, m.ready_t = m.track.ne_m.copy(), time.time()
         plan: list[tuple[np.ndarray, float]] = []
@@ -294,119 +310,13 @@ class SwarmRuntime:
         start = self.clock.now() - (time.time() - start_unix) * self.clock.speedup
         self.controller.start(positions, start)
         for m in mine:
-            m.prestream = False
-            m.status = Status.CONTROLLED
-            self._event(m, "under control")
-
-    async def _prepare_one(self, m: Member) -> None:
-        t, cfg = m.track, self.cfg
-        for mid, hz in TELEMETRY.items():
-            if t.is_px4 and mid not in PX4_TELEMETRY:
-                continue
-            await self.commands.command(m, MavCmd.SET_MESSAGE_INTERVAL, int(mid), 1e6 / hz)
-        try:  # ArduPilot relays its ADS-B receiver's traffic only when asked (ADSB_TYPE=1)
-            await self.commands.command(
-                m, MavCmd.SET_MESSAGE_INTERVAL, int(MsgId.ADSB_VEHICLE), 1e6 / ADSB_HZ
-            )
-        except CommandRejected as exc:
-            self._event(m, f"ADSB_VEHICLE rate not set ({exc.result_name}): relying on its default")
-        if cfg.check_params:
-            await self._check_params(m)
-        for mid in (MsgId.GLOBAL_POSITION_INT, MsgId.ATTITUDE):
-            name = enum_name(MsgId, mid)
-            await self.commands.wait_until(
-                f"vehicle {m.system_id}: {name} after asking for it at {TELEMETRY[mid]:g} Hz",
-                lambda name=name: t.seen[name] > 0,  # type: ignore[misc]
-                cfg.ready_timeout_s,
-            )
-        if cfg.dry_run:  # nothing is sent: fly the setpoints on paper from where it is
-            await self.commands.wait_until(
-                f"vehicle {m.system_id}: a position",
-                lambda: math.isfinite(t.t_position),
-                cfg.ready_timeout_s,
-            )
-            m.status = Status.READY
-            return
-        await self.commands.wait_until(
-            f"vehicle {m.system_id}: out of boot with a position (EKF flags on ArduPilot)",
-            lambda: t.system_status != MavState.BOOT and t.position_ok(),
-            cfg.ready_timeout_s,
-        )
-        if cfg.takeoff_m is not None or cfg.takeoff_to_mission_alt:
-            m.status = Status.TAKING_OFF
-            self._event(m, f"taking off to {self._takeoff_alt(m):g} m")
-            await (self._takeoff_px4(m) if t.is_px4 else self._takeoff_ardupilot(m))
-        else:
-            if t.height_m < 1.0 or t.landed_state == 1:
-                raise RemarlError(
-                    f"vehicle {m.system_id} is on the ground; use --takeoff ALT_M to take off"
-                )
-            if t.is_px4:
-                m.prestream = True
-                await self.clock.sleep(0.5)
-            await self.commands.set_mode(m, "external")
-        m.prestream = t.is_px4  # PX4 leaves OFFBOARD after 1 s without setpoints: keep them
-        m.status = Status.READY
-
-    async def _check_params(self, m: Member) -> None:
-        """Read and judge the vehicle's failsafe parameters; raise on an error finding."""
-        px4 = m.track.is_px4
-        readout = await self.params.read(m.system_id, checked_names(px4))
-        period_s = 1.0 / self.cfg.setpoint_hz
-        findings = check_params(readout.values, px4=px4, setpoint_period_s=period_s)
-        if readout.values:
-            read = ", ".join(f"{k}={v:g}" for k, v in readout.values.items())
-            self._event(m, f"parameters: {read}")
-        if readout.unread:
-            unread = ", ".join(readout.unread)
-            self._event(m, f"parameters not read (not on this vehicle?): {unread}")
-        for f in findings:
-            self._event(m, f"parameter {f.level}: {f.text}")
-        errors = tuple(f.text for f in findings if f.level == "error")
-        if errors:
-            raise UnsafeParameters(system_id=m.system_id, problems=errors)
-
-    def _takeoff_alt(self, m: Member) -> float:
-        """Take-off height of ``m``: ``--takeoff ALT_M``, else its mission ``alt_m``."""
-        if self.cfg.takeoff_m is not None:
-            return float(self.cfg.takeoff_m)
-        return self.plans[m.system_id].alt_m
-
-    async def _takeoff_ardupilot(self, m: Member) -> None:
-        alt = self._takeoff_alt(m)
-        await self.commands.set_mode(m, "external")
-        await self.commands.command(m, MavCmd.COMPONENT_ARM_DISARM, 1, done=lambda: m.track.armed)
-        await self.commands.wait_until(f"vehicle {m.system_id} armed", lambda: m.track.armed, 3.0)
-        await self.commands.command(
-            m, MavCmd.NAV_TAKEOFF, 0, 0, 0, math.nan, 0, 0, alt,
-            done=lambda: m.track.height_m > 0.5 or m.track.landed_state in (2, 3),
-        )  # fmt: skip
-        await self._wait_height(m, alt)
-
-    async def _takeoff_px4(self, m: Member) -> None:
-        alt = self._takeoff_alt(m)
-        m.prestream = True  # zero-velocity setpoints: OFFBOARD needs a stream first
-        await self.clock.sleep(0.5)
-        await self.commands.set_mode(m, "external")
-        await self.commands.command(m, MavCmd.COMPONENT_ARM_DISARM, 1, done=lambda: m.track.armed)
-        await self.commands.wait_until(f"vehicle {m.system_id} armed", lambda: m.track.armed, 3.0)
-        m.climb_target_m = alt
-        await self._wait_height(m, alt)
-        m.climb_target_m = None
-
-    async def _wait_height(self, m: Member, alt: float) -> None:
-        await self.commands.wait_until(
-            f"vehicle {m.system_id} at {TAKEOFF_DONE_FRACTION:.0%} of {alt:g} m",
-            lambda: m.track.height_m >= TAKEOFF_DONE_FRACTION * alt,
-            self.cfg.takeoff_timeout_s,
-        )
+            self._apply(self.vehicles[m.system_id], Status.CONTROLLED, "under control")
 
     async def _fly(self) -> None:
         dt = self.spec.dt_s
         t_next = self.clock.now()
         end = t_next + self.cfg.max_flight_s
-        mine = self.local_members()
-        while any(m.status in (Status.CONTROLLED, Status.LOST) for m in mine):
+        while any(self.vehicles[m.system_id].status in IN_FLIGHT for m in self.local_members()):
             now = self.clock.now()
             if now > end:
                 await self.hold_all(reason="max flight time")
@@ -421,7 +331,7 @@ class SwarmRuntime:
             pos.append(intr.predicted_ne_m(now))
             vel.append(intr.vel_ne_m_s)
         for m in self.members:
-            if m.status in (Status.LOST, Status.PILOT, Status.HELD) and math.isfinite(
+            if self.vehicles[m.system_id].status in OBSTACLE and math.isfinite(
                 m.track.t_position
             ):
                 pos.append(m.track.predicted_ne_m(now))
@@ -439,27 +349,26 @@ class SwarmRuntime:
         decision = self.controller.decide(now, positions, obstacles, obstacle_vel)
         self.decide_s.append(time.perf_counter() - t0)
         self.decisions += 1
-        self._log_decision(decision)
+        if self._log is not None:
+            for row in decision_rows(self._report_rows(), self.controller, decision, self.decide_s):
+                self._log.write(row)
         if self.on_status is not None:
             self.on_status(self.status_line(now))
 
+    def _report_rows(self) -> list[tuple[Member, Status]]:
+        return [(m, self.vehicles[m.system_id].status) for m in self.members]
+
     def status_line(self, now: float) -> str:
         """One line per vehicle: status, position, height, distance to target."""
-        lines = []
-        targets = self.cfg.mission.targets_ne_m()
-        for m in self.members:
-            t = m.track
-            gap = (
-                float(np.hypot(*(t.ne_m - targets[m.slot])))
-                if math.isfinite(t.t_position)
-                else math.nan
-            )
-            lines.append(
-                f"t={now:6.1f}s vehicle {m.system_id}: {m.status.value:10} "
-                f"N {t.ne_m[0]:7.1f} E {t.ne_m[1]:7.1f} up {t.height_m:5.1f} m, "
-                f"{gap:6.1f} m to target"
-            )
-        return "\n".join(lines)
+        return status_lines(self._report_rows(), self.cfg.mission.targets_ne_m(), now)
+
+    def status(self, system_id: int) -> Status:
+        """Where vehicle ``system_id`` is in the flight."""
+        return self.vehicles[system_id].status
+
+    def statuses(self) -> list[Status]:
+        """Every vehicle's status, in slot order."""
+        return [self.vehicles[m.system_id].status for m in self.members]
 
     # -- setpoints and safety -----------------------------------------------------------
 
@@ -472,57 +381,38 @@ class SwarmRuntime:
                 self.setpoint_deadline_misses += 1
                 t_next = now
             t0 = time.perf_counter()
-            self._sync_peers(now)
-            for m in self.members:
-                if m.local:
-                    self._tick_member(m, now)
+            self.tick(now)
             self.tick_s.append(time.perf_counter() - t0)
             t_next += period
             await self.clock.sleep(t_next - self.clock.now())
 
-    def _tick_member(self, m: Member, now: float) -> None:
-        t = m.track
-        if m.prestream or m.climb_target_m is not None:
-            vz = 0.0
-            if (
-                m.climb_target_m is not None
-                and t.height_m < TAKEOFF_DONE_FRACTION * m.climb_target_m
-            ):
-                vz = -CLIMB_RATE_M_S
-            yaw = t.yaw_rad if math.isfinite(t.yaw_rad) else 0.0
-            self._stream(m, 0.0, 0.0, vz, yaw)
-            return
-        if m.status == Status.LOST and t.position_age_s(now) <= self.cfg.stale_s:
-            self._event(m, "telemetry back: told to hold, not resumed")
-            m.status = Status.HELD
-            self._spawn_hold(m)
-            return
-        if m.status != Status.CONTROLLED:
-            return
-        if t.position_age_s(now) > self.cfg.stale_s:
-            m.status = Status.LOST
-            self._event(m, f"telemetry stale for {t.position_age_s(now):.1f} s: an obstacle now")
-            return
-        if not self.cfg.dry_run and not t.in_external_control_mode():
-            m.status = Status.PILOT
-            self._event(m, f"mode changed to {t.custom_mode} by someone else: released")
-            return
-        if self.controller.reached(m.slot, t.ne_m):
-            m.status = Status.REACHED
-            self._event(m, "target reached: hold and release")
-            self._spawn_hold(m)
-            return
-        fence = self.cfg.mission.geofence
-        if fence is not None:
-            vn, ve, _ = self.controller.setpoint(m.slot, now)
-            ahead = t.ne_m + np.array([vn, ve]) * self.spec.dt_s
-            if not fence.inside(ahead, t.height_m):
-                m.status = Status.HELD
-                self._event(m, "geofence breach ahead: hold")
-                self._spawn_hold(m)
-                return
-        vn, ve, yaw = self.controller.setpoint(m.slot, now)
-        self._stream(m, vn, ve, 0.0, yaw)
+    def tick(self, now: float) -> None:
+        """One setpoint tick: snapshot every local vehicle, decide (`next_actions`), carry out."""
+        self._sync_peers(now)
+        telemetry = {m.system_id: Telemetry.of(m.track, now) for m in self.local_members()}
+        self.vehicles, commands = next_actions(
+            self.vehicles, telemetry, now, self.rules, self.controller
+        )
+        self._carry_out(commands)
+
+    def _apply(self, v: Vehicle, new: Status, why: str | None) -> None:
+        """A status change of one vehicle, through the status machine."""
+        v, commands = transition(v, new, why)
+        self.vehicles[v.system_id] = v
+        self._carry_out(commands)
+
+    def _update(self, v: Vehicle) -> None:
+        self.vehicles[v.system_id] = v
+
+    def _carry_out(self, commands: list[Command] | tuple[Command, ...]) -> None:
+        for c in commands:
+            m = self.by_sysid[c.system_id]
+            if isinstance(c, Setpoint):
+                self._stream(m, c.vn, c.ve, c.vd, c.yaw)
+            elif isinstance(c, Hold):
+                self._to_hold.put_nowait(m)  # the holds task sends it (it waits for the ACK)
+            else:
+                self._event(m, c.text)
 
     def _stream(self, m: Member, vn: float, ve: float, vd: float, yaw: float) -> None:
         msg = self.codec.factory.set_position_target_local_ned_encode(
@@ -532,9 +422,6 @@ class SwarmRuntime:
         )  # fmt: skip
         if self.commands.send(m, msg):
             m.sent += 1
-
-    def _spawn_hold(self, m: Member) -> None:
-        self._to_hold.put_nowait(m)  # the holds task sends it (commands wait for their ACK)
 
     async def _hold_loop(self) -> None:
         while True:
@@ -553,14 +440,12 @@ class SwarmRuntime:
 
     async def hold_all(self, *, reason: str) -> None:
         """Send the hold mode to every vehicle still flown by this runtime (never raises)."""
-        flown = [
-            m
-            for m in self.local_members()
-            if m.status in (Status.CONTROLLED, Status.TAKING_OFF, Status.READY)
-        ]
-        for m in flown:
-            m.status = Status.HELD
-            self._event(m, f"{reason}: hold")
+        mine = frozenset(m.system_id for m in self.local_members())
+        self.vehicles, commands = hold_all(self.vehicles, mine, reason)
+        flown = [self.by_sysid[c.system_id] for c in commands if isinstance(c, Hold)]
+        for c in commands:
+            if isinstance(c, Event):
+                self._event(self.by_sysid[c.system_id], c.text)
         if self.cfg.dry_run or not flown:
             return
         results = await asyncio.gather(*(self._hold(m) for m in flown), return_exceptions=True)
@@ -571,15 +456,20 @@ class SwarmRuntime:
     # -- logs ---------------------------------------------------------------------------
 
     def _sync_peers(self, now: float) -> None:
-        """Bring the remote vehicles' rows up to date from the swarm bus."""
+        """Bring the remote vehicles' rows up to date from the swarm bus.
+
+        A remote vehicle's status is its own process's word (that process runs the status
+        machine for it): it is mirrored, not checked here.
+        """
         self.peers.sync(now)
         for m in self.members:
             if m.local or m.remote_status is None:
                 continue
             status = Status(m.remote_status)
-            if status != m.status:
+            v = self.vehicles[m.system_id]
+            if status != v.status:
                 self._event(m, f"peer: {status.value}")
-                m.status = status
+                self.vehicles[m.system_id] = replace(v, status=status)
 
     def _event(self, m: Member, text: str) -> None:
         now = self.clock.now()
@@ -589,47 +479,13 @@ class SwarmRuntime:
         if self.on_status is not None:
             self.on_status(f"t={now:6.1f}s vehicle {m.system_id}: {text}")
 
-    def _log_decision(self, d: Decision) -> None:
-        if self._log is None:
-            return
-        for m in self.members:
-            k = m.slot
-            vn, ve, yaw = self.controller.setpoint(k, d.t)
-            row = {
-                "t": round(d.t, 3),
-                "system_id": m.system_id,
-                "slot": k,
-                "status": m.status.value,
-                "ne_m": [round(float(v), 2) for v in d.positions_ne_m[k]],
-                "height_m": round(m.track.height_m, 2),
-                "obs": [round(float(v), 4) for v in d.obs[k]],
-                "action": round(float(d.action[k]), 4),
-                "turn_rad": round(float(d.turn_rad[k]), 4),
-                "heading_rad": round(float(d.heading_rad[k]), 4),
-                "setpoint": {"vn": round(vn, 3), "ve": round(ve, 3), "yaw": round(yaw, 4)},
-                "obstacles_ne_m": [[round(float(v), 2) for v in p] for p in d.obstacles_ne_m],
-                "decide_ms": round(self.decide_s[-1] * 1000, 3) if self.decide_s else None,
-            }
-            self._log.write(row)
-
     def summary(self) -> dict[str, Any]:
         """What happened to each vehicle."""
         return {
             "decisions": self.decisions,
             "setpoint_deadline_misses": self.setpoint_deadline_misses,
             "bus": self.bus.core.stats.as_dict(),
-            "vehicles": [
-                {
-                    "system_id": m.system_id,
-                    "slot": m.slot,
-                    "local": m.local,
-                    "status": m.status.value,
-                    "setpoints_sent": m.sent,
-                    "telemetry_rejected": dict(m.track.rejected),
-                    "events": [[round(t, 2), e] for t, e in m.events],
-                }
-                for m in self.members
-            ],
+            "vehicles": vehicle_summaries(self._report_rows()),
         }
 
 

@@ -16,7 +16,7 @@ from collections.abc import Callable
 from typing import Any
 
 from remarl_fc.errors import CommandRejected, LinkTimeout
-from remarl_fc.flyconfig import Clock, FlyConfig, Member
+from remarl_fc.flight.config import Clock, FlyConfig, Member
 from remarl_fc.mavlink.codec import Codec
 from remarl_fc.mavlink.consts import (
     CopterMode,

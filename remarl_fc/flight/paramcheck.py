@@ -170,10 +170,10 @@ class ParamReader:
     """Reads parameters by name from the flight's vehicles.
 
     Args:
-        send: sends a message to a vehicle (`remarl_fc.commands.Commander.send` with
+        send: sends a message to a vehicle (`remarl_fc.flight.commands.Commander.send` with
             ``harmless=True``: a read changes nothing).
         factory: the MAVLink message factory of the flight's codec.
-        timeout: the flight clock's ``timeout`` (`remarl_fc.flyconfig.Clock.timeout`).
+        timeout: the flight clock's ``timeout`` (`remarl_fc.flight.config.Clock.timeout`).
     """
 
     def __init__(

@@ -244,7 +244,7 @@ async def _serve(
 
 def cmd_bench_sitl(args: argparse.Namespace) -> int:
     """Print the SITL benchmark figures."""
-    from remarl_fc.sitl.bench import bench_sitl
+    from remarl_fc.bench.sitl import bench_sitl
 
     result = asyncio.run(
         bench_sitl(

@@ -1,16 +1,15 @@
-"""One flight's settings and bookkeeping: `FlyConfig`, `Clock`, `Member` and `Status`.
+"""One flight's settings and I/O bookkeeping: `FlyConfig`, `Clock` and `Member`.
 
 Also the messages asked of every vehicle (`TELEMETRY`) and the bus endpoint's core (`bus_core`).
 
-Kept apart from `remarl_fc.runtime` so that the command layer (`remarl_fc.commands`), the swarm
-bus glue (`remarl_fc.peers`) and the tools (`remarl_fc.benchfly`, `remarl_fc.demo`) share them
-without importing the flight itself.
+Kept apart from `remarl_fc.flight.runtime` so that the command layer
+(`remarl_fc.flight.commands`), the swarm bus glue (`remarl_fc.flight.peers`) and the tools
+(`remarl_fc.bench.fly`, `remarl_fc.demo`) share them without importing the flight itself.
 """
 
 from __future__ import annotations
 
 import asyncio
-import enum
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -19,11 +18,11 @@ from typing import Literal
 import numpy as np
 
 from remarl_fc.bus.core import BusCore
+from remarl_fc.flight.mission import Mission
+from remarl_fc.flight.tracking import VehicleTrack
 from remarl_fc.mavlink.codec import SigningConfig
 from remarl_fc.mavlink.consts import MavComponent, MsgId
 from remarl_fc.mavlink.link import LinkAddress, MavlinkLink
-from remarl_fc.mission import Mission
-from remarl_fc.tracking import VehicleTrack
 
 HoldMode = Literal["brake", "loiter"]
 
@@ -67,19 +66,6 @@ class Clock:
     def timeout(self, seconds: float) -> asyncio.Timeout:
         """`asyncio.timeout` for ``seconds`` of this clock."""
         return asyncio.timeout(seconds / self.speedup)
-
-
-class Status(enum.StrEnum):
-    """Where a vehicle is in the flight."""
-
-    WAITING = "waiting"
-    TAKING_OFF = "taking-off"
-    READY = "ready"
-    CONTROLLED = "controlled"
-    LOST = "lost"  # telemetry stale: not commanded, an obstacle at its last track
-    HELD = "held"  # told to hold after a loss, a breach or the end
-    REACHED = "reached"  # at its target: held and released
-    PILOT = "pilot"  # the pilot took it: released, never fought
 
 
 @dataclass(frozen=True)
@@ -127,7 +113,7 @@ class FlyConfig:
     """A peer silent on the bus this long is treated as lost (an obstacle at its last track)."""
     check_params: bool = True
     """Read and judge every vehicle's failsafe parameters before arming
-    (`remarl_fc.paramcheck`); an error finding stops the flight."""
+    (`remarl_fc.flight.paramcheck`); an error finding stops the flight."""
 
     def __post_init__(self) -> None:
         if not self.connections:
@@ -142,15 +128,16 @@ class FlyConfig:
 
 @dataclass
 class Member:
-    """One vehicle of the flight, as the runtime sees it."""
+    """One vehicle's I/O side: its telemetry track, link, counters and event log.
+
+    Its status and setpoint stream live in the flight's immutable decision state
+    (`remarl_fc.flight.core.Vehicle`), not here.
+    """
 
     slot: int
     system_id: int
     track: VehicleTrack
-    status: Status = Status.WAITING
     link: MavlinkLink | None = None
-    climb_target_m: float | None = None  # PX4 offboard take-off
-    prestream: bool = False  # PX4: stream zero-velocity setpoints before OFFBOARD
     sent: int = 0
     events: list[tuple[float, str]] = field(default_factory=list)
     local: bool = True  # flown by this process (else a peer's, known from the swarm bus)

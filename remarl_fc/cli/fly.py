@@ -140,13 +140,13 @@ def _status_printer(enabled: bool) -> Any:
 
 def cmd_fly(args: argparse.Namespace) -> int:
     """Fly; exit 0 when every vehicle reached its target, 4 otherwise."""
-    from remarl_fc.control import ControlSpec
     from remarl_fc.errors import ConfigError
-    from remarl_fc.flyconfig import FlyConfig
+    from remarl_fc.flight.config import FlyConfig
+    from remarl_fc.flight.control import ControlSpec
+    from remarl_fc.flight.mission import load_mission
+    from remarl_fc.flight.runtime import SwarmRuntime
     from remarl_fc.mavlink.codec import SigningConfig, load_signing_key
-    from remarl_fc.mission import load_mission
     from remarl_fc.policy_io import load_policy
-    from remarl_fc.runtime import SwarmRuntime
 
     policy = load_policy(args.policy)
     mission = load_mission(args.mission)
@@ -202,7 +202,7 @@ def _make_bus(args: argparse.Namespace, cfg: Any) -> Any:
     if args.bus == "memory":
         return None
     from remarl_fc.bus.mqtt import MqttBus, MqttSettings
-    from remarl_fc.flyconfig import bus_core
+    from remarl_fc.flight.config import bus_core
 
     settings = MqttSettings.from_url(
         args.bus,
@@ -227,7 +227,7 @@ def _fly_text(summary: dict[str, Any]) -> str:
 def cmd_demo(args: argparse.Namespace) -> int:
     """Mock fleet + runtime in one process; plot and ground truth at the end."""
     from remarl_fc.demo import fly_on_mock
-    from remarl_fc.flightlog import plot_flight
+    from remarl_fc.flight.flightlog import plot_flight
     from remarl_fc.sitl.groundtruth import write_json_atomic
 
     with tempfile.TemporaryDirectory(prefix="remarl-demo-") as tmp:
@@ -266,7 +266,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
 def cmd_plot_flight(args: argparse.Namespace) -> int:
     """Draw a flight log."""
-    from remarl_fc.flightlog import plot_flight
+    from remarl_fc.flight.flightlog import plot_flight
 
     result = plot_flight(args.log, args.out)
     print(json.dumps(result) if args.json else f"wrote {result['out']}")
@@ -275,7 +275,7 @@ def cmd_plot_flight(args: argparse.Namespace) -> int:
 
 def cmd_bench_fly(args: argparse.Namespace) -> int:
     """Runtime timings against the mock."""
-    from remarl_fc.benchfly import bench_fly
+    from remarl_fc.bench.fly import bench_fly
 
     result = asyncio.run(bench_fly(args.vehicles, args.seconds))
     if args.json:
@@ -294,7 +294,7 @@ def cmd_bench_fly(args: argparse.Namespace) -> int:
 
 def cmd_bench_bus(args: argparse.Namespace) -> int:
     """State latency through the broker."""
-    from remarl_fc.bus.bench import bench_bus
+    from remarl_fc.bench.bus import bench_bus
     from remarl_fc.bus.mqtt import MqttSettings
 
     host, port = "127.0.0.1", None

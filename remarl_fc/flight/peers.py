@@ -22,10 +22,10 @@ import numpy as np
 
 from remarl_fc.bus.core import SwarmBus
 from remarl_fc.bus.schema import STATUSES, Detection, Detections, VehicleState
-from remarl_fc.tracking import Intruder, TrafficPicture
+from remarl_fc.flight.tracking import Intruder, TrafficPicture
 
 if TYPE_CHECKING:
-    from remarl_fc.flyconfig import Member
+    from remarl_fc.flight.config import Member
 
 STATE_HZ = 10.0
 """State publication rate per local vehicle."""
@@ -35,7 +35,7 @@ DETECTIONS_EVERY = 5
 
 
 class ClockLike(Protocol):
-    """The runtime's clock (`remarl_fc.flyconfig.Clock`)."""
+    """The runtime's clock (`remarl_fc.flight.config.Clock`)."""
 
     speedup: float
 

@@ -15,9 +15,9 @@ from pathlib import Path
 from typing import Any
 
 from remarl_fc._version import __version__
+from remarl_fc.cli.fly import add_parsers as add_fly_parsers
+from remarl_fc.cli.sitl import add_bench_parser, add_sitl_parser
 from remarl_fc.errors import ConfigError, RemarlError
-from remarl_fc.flycli import add_parsers as add_fly_parsers
-from remarl_fc.sitl.cli import add_bench_parser, add_sitl_parser
 
 EXIT_USAGE = 2
 """Exit status for bad input (also argparse's)."""
@@ -61,7 +61,7 @@ def _cmd_scenarios(args: argparse.Namespace) -> int:
 
 
 def _cmd_field(args: argparse.Namespace) -> int:
-    from remarl_fc.plots import draw_field
+    from remarl_fc.offline.plots import draw_field
     from sim.scenarios import load_scenario
 
     cfg = load_scenario(args.scenario)
@@ -81,7 +81,7 @@ def _cmd_field(args: argparse.Namespace) -> int:
 
 
 def _cmd_rollout(args: argparse.Namespace) -> int:
-    from remarl_fc.rollout import rollout
+    from remarl_fc.offline.rollout import rollout
 
     result = rollout(args.scenario, args.policy, Path(args.out), seed=args.seed)
     outcome = "success" if result.get("success") else "no success"
@@ -157,7 +157,7 @@ def _progress_bar(total: int, *, enabled: bool) -> Any:
 
 
 def _cmd_eval(args: argparse.Namespace) -> int:
-    from remarl_fc.evaluate import evaluate_policy, plot_episode
+    from remarl_fc.offline.evaluate import evaluate_policy, plot_episode
 
     policy, result = evaluate_policy(args.policy, args.scenario, args.episodes, args.seed)
     if args.plot:
@@ -192,7 +192,7 @@ def _cmd_export(args: argparse.Namespace) -> int:
 
 
 def _cmd_bench_sim(args: argparse.Namespace) -> int:
-    from remarl_fc.bench import bench_sim
+    from remarl_fc.bench.sim import bench_sim
 
     result = bench_sim(args.scenario, args.batch, args.actions, args.seconds, args.seed)
     human = (
@@ -204,7 +204,7 @@ def _cmd_bench_sim(args: argparse.Namespace) -> int:
 
 
 def _cmd_bench(args: argparse.Namespace) -> int:
-    from remarl_fc.bench import bench_pso
+    from remarl_fc.bench.sim import bench_pso
     from sim.config import PSOConfig
 
     cfg = PSOConfig(particles=args.particles, iterations=args.iterations)

@@ -22,10 +22,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from remarl_fc.errors import ConfigError
+from remarl_fc.flight.mission import Mission
 from remarl_fc.frames import GeoPoint, from_deg_e7, geodetic_to_ned
 from remarl_fc.mavlink.codec import Codec
 from remarl_fc.mavlink.consts import MsgId
-from remarl_fc.mission import Mission
 
 FloatArray = NDArray[np.float64]
 

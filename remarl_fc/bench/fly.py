@@ -22,12 +22,13 @@ from typing import Any
 
 import numpy as np
 
-from remarl_fc.control import ControlSpec
 from remarl_fc.demo import free_udp_port
-from remarl_fc.flyconfig import FlyConfig, Status
-from remarl_fc.mission import Mission, VehiclePlan
+from remarl_fc.flight.config import FlyConfig
+from remarl_fc.flight.control import ControlSpec
+from remarl_fc.flight.mission import Mission, VehiclePlan
+from remarl_fc.flight.runtime import SwarmRuntime
+from remarl_fc.flight.status import Status
 from remarl_fc.policy_io import Policy, load_policy
-from remarl_fc.runtime import SwarmRuntime
 from remarl_fc.sitl.config import DEFAULT_HOME, SitlConfig
 from remarl_fc.sitl.fleet import DEFAULT_D_COL_M, SitlFleet, grid_layout
 from sim.spawn import SPAWN_SPACING_FACTOR
@@ -75,7 +76,7 @@ async def bench_fly(vehicles: int = 10, seconds: float = 10.0) -> dict[str, Any]
         async def watch() -> None:
             await runtime.commands.wait_until(
                 "every vehicle under control",
-                lambda: all(m.status == Status.CONTROLLED for m in runtime.members),
+                lambda: all(s == Status.CONTROLLED for s in runtime.statuses()),
                 cfg.ready_timeout_s + cfg.takeoff_timeout_s,
             )
             runtime.tick_s.clear()
@@ -86,7 +87,7 @@ async def bench_fly(vehicles: int = 10, seconds: float = 10.0) -> dict[str, Any]
             window.append(time.monotonic())
             await runtime.commands.wait_until(
                 "the end of the measured flight",
-                lambda: not any(m.status == Status.CONTROLLED for m in runtime.members),
+                lambda: not any(s == Status.CONTROLLED for s in runtime.statuses()),
                 seconds + 30.0,
             )
             window.append(time.monotonic())
