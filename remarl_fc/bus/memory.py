@@ -8,7 +8,6 @@ transport differs. Retained status messages are replayed to endpoints that join 
 from __future__ import annotations
 
 import asyncio
-from types import TracebackType
 from typing import Self
 
 from remarl_fc.bus.core import BusCore
@@ -19,6 +18,7 @@ from remarl_fc.bus.schema import (
     encode_state,
     topic,
 )
+from remarl_fc.resource import Resource
 
 
 class MemoryBroker:
@@ -36,7 +36,7 @@ class MemoryBroker:
             ep.core.accept(topic_name, payload)
 
 
-class MemoryBus:
+class MemoryBus(Resource):
     """One endpoint of a `MemoryBroker` (implements `SwarmBus`).
 
     Args:
@@ -58,12 +58,8 @@ class MemoryBus:
             self.broker.publish(self._topic(uav, "status"), b"online", retain=True)
         return self
 
-    async def __aexit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
+    async def aclose(self, exc_type: type[BaseException] | None = None) -> None:
+        """Say our vehicles are offline and leave the broker."""
         for uav in self.core.own_ids:
             self.broker.publish(self._topic(uav, "status"), b"offline", retain=True)
         self.broker.endpoints.remove(self)

@@ -17,7 +17,6 @@ import random
 import ssl
 from dataclasses import dataclass
 from pathlib import Path
-from types import TracebackType
 from typing import Self
 from urllib.parse import urlsplit
 
@@ -32,6 +31,7 @@ from remarl_fc.bus.schema import (
     topic,
 )
 from remarl_fc.errors import ConfigError
+from remarl_fc.resource import Resource
 
 KEEPALIVE_S = 5
 """MQTT keepalive: the broker publishes our will ≈ 1.5 × this after we vanish."""
@@ -125,7 +125,7 @@ class MqttSettings:
         return ctx
 
 
-class MqttBus:
+class MqttBus(Resource):
     """One MQTT endpoint (implements `SwarmBus`).
 
     Args:
@@ -170,12 +170,8 @@ class MqttBus:
     async def __aenter__(self) -> Self:
         return self
 
-    async def __aexit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
+    async def aclose(self, exc_type: type[BaseException] | None = None) -> None:
+        """Forget the client (the receive task owns the connection and closes it)."""
         self._client = None
 
     async def run(self) -> None:

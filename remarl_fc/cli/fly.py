@@ -1,4 +1,4 @@
-"""``remarl-fc fly``, ``demo``, ``plot-flight`` and ``bench fly``: parsers and handlers.
+"""``remarl-fc fly``, ``demo``, ``plot-flight``, ``bench fly`` and ``bench bus``: parsers, handlers.
 
 Nothing heavy is imported until a handler runs; nothing here imports torch.
 """
@@ -14,12 +14,11 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-EXIT_NOT_ALL_REACHED = 4
-"""Exit status of ``fly`` when the flight ended with a vehicle short of its target."""
+from remarl_fc.cli.common import EXIT_NOT_ALL_REACHED, FLAVOURS, add_choice, finish
 
 
-def add_parsers(sub: Any, bench: Any) -> None:
-    """Add ``fly``, ``demo``, ``plot-flight`` and ``bench fly``."""
+def add_parsers(sub: Any) -> None:
+    """Add ``fly``, ``demo`` and ``plot-flight``."""
     p = sub.add_parser(
         "fly",
         help="fly a swarm policy on ArduPilot/PX4 vehicles over MAVLink",
@@ -55,10 +54,10 @@ def add_parsers(sub: Any, bench: Any) -> None:
     )
     p.add_argument("--log", default=None, metavar="DIR", help="write flight.tlog + decisions")
     p.add_argument("--signing-key", default=None, help="MAVLink 2 signing key file")
-    p.add_argument(
+    add_choice(
+        p,
         "--hold",
-        choices=["brake", "loiter"],
-        default="brake",
+        ["brake", "loiter"],
         help="ArduPilot hold mode (default brake: holds without RC input)",
     )
     p.add_argument("--setpoint-hz", type=float, default=10.0, help="setpoint rate (≥ 10)")
@@ -92,40 +91,38 @@ def add_parsers(sub: Any, bench: Any) -> None:
     bus.add_argument("--bus-cert", default=None, help="client certificate for TLS")
     bus.add_argument("--bus-key", default=None, help="client key for TLS")
     p.add_argument("--quiet", action="store_true", help="no live status lines")
-    p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
-    p.set_defaults(handler=cmd_fly)
+    finish(p, cmd_fly, json_help="print the summary as one JSON object")
 
     p = sub.add_parser(
         "demo",
         help="fly the shipped policy on the built-in mock fleet (no SITL, no training)",
     )
     p.add_argument("--scenario", default="3u2o", help="scenario with a zoo policy (default 3u2o)")
-    p.add_argument("--flavour", choices=["ardupilot", "px4"], default="ardupilot")
+    add_choice(p, "--flavour", FLAVOURS)
     p.add_argument("--speedup", type=float, default=2.0, help="simulated s per wall s")
     p.add_argument("--out", default="flight.png", help="the flight plot (default flight.png)")
     p.add_argument("--log", default=None, metavar="DIR", help="keep the logs here")
     p.add_argument("--summary", default=None, help="write the ground truth here (JSON)")
-    p.add_argument("--json", action="store_true", help="print one JSON object")
-    p.set_defaults(handler=cmd_demo)
+    finish(p, cmd_demo)
 
     p = sub.add_parser("plot-flight", help="draw a flight from its log folder")
     p.add_argument("log", help="the --log folder of fly or demo")
     p.add_argument("--out", default="flight.png")
-    p.add_argument("--json", action="store_true", help="print one JSON object")
-    p.set_defaults(handler=cmd_plot_flight)
+    finish(p, cmd_plot_flight)
 
+
+def add_bench_parsers(bench: Any) -> None:
+    """Add ``bench fly`` and ``bench bus``."""
     b = bench.add_parser("fly", help="runtime vs the mock: decision and setpoint tick times")
     b.add_argument("--vehicles", type=int, default=10)
     b.add_argument("--seconds", type=float, default=10.0, help="seconds under control")
-    b.add_argument("--json", action="store_true", help="print one JSON object")
-    b.set_defaults(handler=cmd_bench_fly)
+    finish(b, cmd_bench_fly)
 
     b = bench.add_parser("bus", help="swarm bus: state latency through an MQTT broker")
     b.add_argument("--vehicles", type=int, default=50)
     b.add_argument("--seconds", type=float, default=5.0)
     b.add_argument("--bus", default=None, help="mqtt://HOST:PORT (default: start mosquitto)")
-    b.add_argument("--json", action="store_true", help="print one JSON object")
-    b.set_defaults(handler=cmd_bench_bus)
+    finish(b, cmd_bench_bus)
 
 
 def _status_printer(enabled: bool) -> Any:

@@ -1,7 +1,6 @@
 """``remarl-fc sitl`` and ``remarl-fc bench sitl``: parsers and handlers.
 
-Kept apart from `remarl_fc.cli` so the main parser stays short; nothing heavy is imported until
-a handler runs.
+Nothing heavy is imported until a handler runs; nothing here imports torch.
 """
 
 from __future__ import annotations
@@ -10,13 +9,12 @@ import argparse
 import asyncio
 import json
 import sys
+from collections.abc import Callable
 from typing import Any
 
+from remarl_fc.cli.common import EXIT_TIMED_OUT, FLAVOURS, add_choice, add_seed, finish
 from remarl_fc.sitl.faults import parse_glitch, parse_pilot_switch, parse_window
 from remarl_fc.sitl.params import parse_override
-
-EXIT_TIMED_OUT = 3
-"""Exit status of ``sitl --until-done`` when the time limit came first."""
 
 
 def _arg(parse: Any) -> Any:
@@ -30,6 +28,13 @@ def _arg(parse: Any) -> Any:
 
     convert.__name__ = getattr(parse, "__name__", "value")
     return convert
+
+
+def _repeatable(
+    p: Any, flag: str, parse: Callable[[str], Any], metavar: str, help: str | None = None
+) -> None:
+    """Add an option that may be given many times, each value read by ``parse``."""
+    p.add_argument(flag, type=_arg(parse), action="append", default=[], metavar=metavar, help=help)
 
 
 def _host_port(text: str) -> tuple[str, int]:
@@ -59,7 +64,7 @@ def add_sitl_parser(sub: Any) -> None:
     who = p.add_mutually_exclusive_group()
     who.add_argument("--scenario", help="place vehicles, targets and intruders as this scenario")
     who.add_argument("--vehicles", type=int, default=None, help="N vehicles on a grid (default 1)")
-    p.add_argument("--flavour", choices=["ardupilot", "px4"], default="ardupilot")
+    add_choice(p, "--flavour", FLAVOURS)
     p.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")
     p.add_argument(
         "--base-port",
@@ -80,7 +85,7 @@ def add_sitl_parser(sub: Any) -> None:
     p.add_argument("--out-step", type=int, default=0, help="--out port increment per vehicle")
     p.add_argument("--home", type=_arg(_geo), default=None, help="LAT,LON,ALT of the origin")
     p.add_argument("--speedup", type=float, default=1.0, help="simulated s per wall s")
-    p.add_argument("--seed", type=int, default=0)
+    add_seed(p)
     p.add_argument("--summary", default=None, help="write the ground truth here on exit (JSON)")
     p.add_argument(
         "--until-done",
@@ -93,12 +98,11 @@ def add_sitl_parser(sub: Any) -> None:
     p.add_argument("--signing-key", default=None, help="MAVLink 2 signing key file (32 bytes)")
     p.add_argument("--gps-noise", type=float, default=0.0, help="position noise σ, m")
     p.add_argument("--gust", type=float, default=0.0, help="gust velocity σ, m/s")
-    p.add_argument(
+    _repeatable(
+        p,
         "--param",
-        type=_arg(parse_override),
-        action="append",
-        default=[],
-        metavar="NAME=VALUE",
+        parse_override,
+        "NAME=VALUE",
         help="start with this autopilot parameter, in its own units (repeatable; e.g. "
         "COM_OBL_RC_ACT=5 or RTL_ALT=2500); clients can also set them over MAVLink",
     )
@@ -106,28 +110,11 @@ def add_sitl_parser(sub: Any) -> None:
     faults.add_argument("--loss", type=float, default=0.0, help="packet loss, percent")
     faults.add_argument("--latency-ms", type=float, default=0.0, help="one-way latency")
     faults.add_argument("--jitter-ms", type=float, default=0.0, help="extra uniform delay")
-    faults.add_argument(
-        "--cut-link", type=_arg(parse_window), action="append", default=[], metavar="V:S:E"
-    )
-    faults.add_argument(
-        "--heartbeat-dropout",
-        type=_arg(parse_window),
-        action="append",
-        default=[],
-        metavar="V:S:E",
-    )
-    faults.add_argument(
-        "--gps-glitch", type=_arg(parse_glitch), action="append", default=[], metavar="V:S:E:M"
-    )
-    faults.add_argument(
-        "--pilot-mode",
-        type=_arg(parse_pilot_switch),
-        action="append",
-        default=[],
-        metavar="V:AT:MODE",
-    )
-    p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
-    p.set_defaults(handler=cmd_sitl)
+    _repeatable(faults, "--cut-link", parse_window, "V:S:E")
+    _repeatable(faults, "--heartbeat-dropout", parse_window, "V:S:E")
+    _repeatable(faults, "--gps-glitch", parse_glitch, "V:S:E:M")
+    _repeatable(faults, "--pilot-mode", parse_pilot_switch, "V:AT:MODE")
+    finish(p, cmd_sitl, json_help="print the summary as one JSON object")
 
 
 def add_bench_parser(bench: Any) -> None:
@@ -136,10 +123,9 @@ def add_bench_parser(bench: Any) -> None:
     b.add_argument("--vehicles", type=int, default=100)
     b.add_argument("--rate", type=float, default=10.0, help="Hz asked for each message")
     b.add_argument("--seconds", type=float, default=5.0, help="simulated seconds measured")
-    b.add_argument("--flavour", choices=["ardupilot", "px4"], default="ardupilot")
+    add_choice(b, "--flavour", FLAVOURS)
     b.add_argument("--speedup", type=float, default=1.0)
-    b.add_argument("--json", action="store_true", help="print one JSON object")
-    b.set_defaults(handler=cmd_bench_sitl)
+    finish(b, cmd_bench_sitl)
 
 
 def cmd_sitl(args: argparse.Namespace) -> int:

@@ -147,9 +147,7 @@ class Event:
 Command = Setpoint | Hold | Event
 
 
-def transition(
-    v: Vehicle, new: Status, why: str | None
-) -> tuple[Vehicle, tuple[Command, ...]]:
+def transition(v: Vehicle, new: Status, why: str | None) -> tuple[Vehicle, tuple[Command, ...]]:
     """``v`` in status ``new``: an `Event` saying ``why`` (if any), a `Hold` where ``new`` needs it.
 
     Raises:

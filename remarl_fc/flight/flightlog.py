@@ -80,6 +80,10 @@ class DecisionLog:
         """One JSON line."""
         self._fh.write(json.dumps(row) + "\n")
 
+    def flush(self) -> None:
+        """Hand what is written to the OS (after each decision: a crash loses at most one)."""
+        self._fh.flush()
+
 
 def mission_header(
     mission: Mission, *, d_col_m: float, speed_m_s: float, dt_s: float, speedup: float

@@ -184,4 +184,3 @@ class Preparation:
             lambda: m.track.height_m >= TAKEOFF_DONE_FRACTION * alt,
             self.cfg.takeoff_timeout_s,
         )
-

@@ -35,7 +35,6 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import replace
-from types import TracebackType
 from typing import Any, Self
 
 import numpy as np
@@ -76,12 +75,13 @@ from remarl_fc.mavlink.consts import (
     MsgId,
 )
 from remarl_fc.mavlink.link import MavlinkLink, TlogWriter
+from remarl_fc.resource import Resource
 
 HOLD_CONFIRM_S = 6.0
 """At the end, wait at most this long for the last hold commands to be confirmed."""
 
 
-class SwarmRuntime:
+class SwarmRuntime(Resource):
     """The flight (see the module docstring).
 
     Args:
@@ -191,12 +191,8 @@ class SwarmRuntime:
         self._stack = stack
         return self
 
-    async def __aexit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
+    async def aclose(self, exc_type: type[BaseException] | None = None) -> None:
+        """Hold every vehicle still flown, then close the links, logs and bus."""
         try:
             await self.hold_all(reason=f"exit ({exc_type.__name__})" if exc_type else "exit")
         finally:
@@ -331,9 +327,7 @@ class SwarmRuntime:
             pos.append(intr.predicted_ne_m(now))
             vel.append(intr.vel_ne_m_s)
         for m in self.members:
-            if self.vehicles[m.system_id].status in OBSTACLE and math.isfinite(
-                m.track.t_position
-            ):
+            if self.vehicles[m.system_id].status in OBSTACLE and math.isfinite(m.track.t_position):
                 pos.append(m.track.predicted_ne_m(now))
                 vel.append(m.track.vel_ned_m_s[:2])
         if not pos:
@@ -352,6 +346,7 @@ class SwarmRuntime:
         if self._log is not None:
             for row in decision_rows(self._report_rows(), self.controller, decision, self.decide_s):
                 self._log.write(row)
+            self._log.flush()
         if self.on_status is not None:
             self.on_status(self.status_line(now))
 

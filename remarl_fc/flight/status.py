@@ -33,9 +33,7 @@ TRANSITIONS: Mapping[Status, frozenset[Status]] = {
     Status.WAITING: frozenset({Status.TAKING_OFF, Status.READY, Status.HELD}),
     Status.TAKING_OFF: frozenset({Status.READY, Status.HELD}),
     Status.READY: frozenset({Status.CONTROLLED, Status.HELD}),
-    Status.CONTROLLED: frozenset(
-        {Status.LOST, Status.HELD, Status.REACHED, Status.PILOT}
-    ),
+    Status.CONTROLLED: frozenset({Status.LOST, Status.HELD, Status.REACHED, Status.PILOT}),
     Status.LOST: frozenset({Status.HELD}),
     Status.HELD: frozenset(),
     Status.REACHED: frozenset(),

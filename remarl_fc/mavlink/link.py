@@ -25,12 +25,12 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from types import TracebackType
 from typing import IO, Any, Self
 
 from remarl_fc.errors import LinkLost
 from remarl_fc.mavlink.codec import Codec, Message
 from remarl_fc.mavlink.udp import Address, UdpEndpoint, parse_host_port
+from remarl_fc.resource import Resource
 
 MessageHandler = Callable[[Message, float], None]
 """Called with (message, monotonic receive time s) for every valid message."""
@@ -139,7 +139,7 @@ class _Stream(asyncio.Protocol):
         self.link._lost(exc or ConnectionError("closed by the peer"))
 
 
-class MavlinkLink:
+class MavlinkLink(Resource):
     """One connection to one or more vehicles (an async context manager).
 
     Args:
@@ -198,12 +198,8 @@ class MavlinkLink:
             raise
         return self
 
-    async def __aexit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
+    async def aclose(self, exc_type: type[BaseException] | None = None) -> None:
+        """Close the connection and the log."""
         self.close()
 
     def close(self) -> None:

@@ -12,10 +12,10 @@ import asyncio
 import collections
 import socket
 from collections.abc import Callable
-from types import TracebackType
 from typing import Self
 
 from remarl_fc.errors import LinkLost, LinkTimeout
+from remarl_fc.resource import Resource
 
 Address = tuple[str, int]
 DatagramHandler = Callable[[bytes, Address], None]
@@ -57,7 +57,7 @@ class _Protocol(asyncio.DatagramProtocol):
         self.owner._lost(exc)
 
 
-class UdpEndpoint:
+class UdpEndpoint(Resource):
     """A bound UDP socket in the event loop.
 
     Args:
@@ -112,12 +112,8 @@ class UdpEndpoint:
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, self.receive_buffer_bytes)
         return self
 
-    async def __aexit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
+    async def aclose(self, exc_type: type[BaseException] | None = None) -> None:
+        """Close the socket."""
         self.close()
 
     def close(self) -> None:

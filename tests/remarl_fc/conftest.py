@@ -7,6 +7,7 @@ import socket
 import subprocess
 import time
 from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -61,13 +62,14 @@ class Broker:
         self.proc = None
 
 
-@pytest.fixture
-def mosquitto(tmp_path: Path) -> Iterator[Broker]:
-    """An anonymous broker on a free port, loopback only."""
+@contextmanager
+def running_broker(folder: Path, *, anonymous: bool, extra_config: str = "") -> Iterator[Broker]:
+    """A broker on a free loopback port, configured in folder, stopped on exit."""
     port = free_tcp_port()
-    conf = tmp_path / "mosquitto.conf"
+    conf = folder / "mosquitto.conf"
     conf.write_text(
-        f"listener {port} 127.0.0.1\nallow_anonymous true\npersistence false\n{ROOT_OK}"
+        f"listener {port} 127.0.0.1\nallow_anonymous {str(anonymous).lower()}\n"
+        f"persistence false\n{ROOT_OK}{extra_config}"
     )
     broker = Broker(port, conf)
     broker.start()
@@ -78,10 +80,16 @@ def mosquitto(tmp_path: Path) -> Iterator[Broker]:
 
 
 @pytest.fixture
+def mosquitto(tmp_path: Path) -> Iterator[Broker]:
+    """An anonymous broker on a free port, loopback only."""
+    with running_broker(tmp_path, anonymous=True) as broker:
+        yield broker
+
+
+@pytest.fixture
 def secured_mosquitto(tmp_path: Path) -> Iterator[Broker]:
     """A broker with passwords and per-vehicle ACLs: user N (a system id) with password "pw-N"
     may publish only under remarl/SWARM/uav/N/."""
-    port = free_tcp_port()
     passwd = tmp_path / "passwd"
     exe = shutil.which("mosquitto_passwd") or "/usr/bin/mosquitto_passwd"
     for n in (1, 2, 3):
@@ -91,14 +99,6 @@ def secured_mosquitto(tmp_path: Path) -> Iterator[Broker]:
         subprocess.run(args, check=True, capture_output=True)
     acl = tmp_path / "acl"
     acl.write_text("pattern read remarl/+/uav/+/+\npattern write remarl/+/uav/%u/+\n")
-    conf = tmp_path / "mosquitto.conf"
-    conf.write_text(
-        f"listener {port} 127.0.0.1\nallow_anonymous false\npersistence false\n{ROOT_OK}"
-        f"password_file {passwd}\nacl_file {acl}\n"
-    )
-    broker = Broker(port, conf)
-    broker.start()
-    try:
+    extra = f"password_file {passwd}\nacl_file {acl}\n"
+    with running_broker(tmp_path, anonymous=False, extra_config=extra) as broker:
         yield broker
-    finally:
-        broker.stop()

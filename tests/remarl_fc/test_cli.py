@@ -75,17 +75,8 @@ def test_bench_pso_json(capsys):
 @pytest.mark.parametrize(("scenario", "suffix"), [("3u2o", ".png"), ("10u1o", ".gif")])
 def test_rollout_draws_an_episode(capsys, tmp_path, scenario, suffix):
     out = tmp_path / f"run{suffix}"
-    code, text, _ = run(
-        capsys,
-        "rollout",
-        "--scenario",
-        scenario,
-        "--policy",
-        "straight",
-        "--out",
-        str(out),
-        "--json",
-    )
+    args = ["rollout", "--scenario", scenario, "--policy", "straight", "--out", str(out)]
+    code, text, _ = run(capsys, *args, "--json")
     assert code == 0
     result = json.loads(text)
     assert result["length"] >= 1
@@ -112,24 +103,15 @@ def test_bench_sim_json(capsys):
     assert result["steps"] >= 5
 
 
+def train_2u1o(capsys, run_dir, options):
+    """`remarl-fc train` of a 2u1o run into run_dir, with these options."""
+    return run(capsys, "train", "--scenario", "2u1o", "--out", str(run_dir), *options.split())
+
+
 def test_train_export_eval_round_trip(capsys, tmp_path):
     run_dir = tmp_path / "run"
-    code, out, _ = run(
-        capsys,
-        "train",
-        "--scenario",
-        "2u1o",
-        "--steps",
-        "40",
-        "--envs",
-        "4",
-        "--eval-every",
-        "40",
-        "--eval-episodes",
-        "4",
-        "--out",
-        str(run_dir),
-        "--json",
+    code, out, _ = train_2u1o(
+        capsys, run_dir, "--steps 40 --envs 4 --eval-every 40 --eval-episodes 4 --json"
     )
     assert code == 0
     summary = json.loads(out)
@@ -139,41 +121,20 @@ def test_train_export_eval_round_trip(capsys, tmp_path):
     code, out, _ = run(capsys, "export", str(run_dir), "--out", str(policy_file), "--json")
     assert code == 0
     assert json.loads(out)["agents"] == 2
-    code, out, _ = run(
-        capsys,
-        "eval",
-        "--policy",
-        str(policy_file),
-        "--episodes",
-        "6",
-        "--plot",
-        str(tmp_path / "e.png"),
-        "--json",
-    )
+    plot = tmp_path / "e.png"
+    args = ["eval", "--policy", str(policy_file), "--episodes", "6", "--plot", str(plot)]
+    code, out, _ = run(capsys, *args, "--json")
     assert code == 0
     result = json.loads(out)
     assert result["episodes"] == 6
     assert 0.0 <= result["success_rate"] <= 1.0
     assert result["reaction_time_median_ms"] > 0
-    assert (tmp_path / "e.png").read_bytes()[:4] == b"\x89PNG"
+    assert plot.read_bytes()[:4] == b"\x89PNG"
 
 
 def test_eval_refuses_a_policy_for_another_scenario(capsys, tmp_path):
     run_dir = tmp_path / "run"
-    run(
-        capsys,
-        "train",
-        "--scenario",
-        "2u1o",
-        "--steps",
-        "5",
-        "--envs",
-        "2",
-        "--eval-episodes",
-        "2",
-        "--out",
-        str(run_dir),
-    )
+    train_2u1o(capsys, run_dir, "--steps 5 --envs 2 --eval-episodes 2")
     policy_file = tmp_path / "p.safetensors"
     run(capsys, "export", str(run_dir), "--out", str(policy_file))
     code, _, err = run(capsys, "eval", "--policy", str(policy_file), "--scenario", "3u2o")

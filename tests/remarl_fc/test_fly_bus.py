@@ -40,6 +40,17 @@ def _free(port: int) -> bool:
     return True
 
 
+def wait_for_logs(logs, done, what: str, timeout_s: float = 120.0) -> None:
+    """Poll the fly processes' decision logs until ``done(k, text)`` holds for each log k."""
+    deadline = time.monotonic() + timeout_s
+    pending = list(enumerate(logs))
+    while pending:
+        pending = [(k, p) for k, p in pending if not (p.exists() and done(k, p.read_text()))]
+        if pending and time.monotonic() > deadline:
+            raise AssertionError(f"{what}: not seen in {pending} after {timeout_s:g} s")
+        time.sleep(0.05)
+
+
 def fly_swarm(tmp_path: Path, broker, speedup: float, outage=None) -> tuple[list, dict]:
     """Three fly processes, one mock; returns (their summaries, the mock's ground truth)."""
     port = consecutive_udp_ports(3)
@@ -115,9 +126,12 @@ def test_broker_outage_mid_flight(tmp_path, mosquitto):
     speedup = 2.0
 
     def outage(broker) -> None:
-        time.sleep(12.0 / speedup)  # boot, take-off, some seconds under control
+        logs = [tmp_path / f"log{i}" / "decisions.jsonl" for i in (1, 2, 3)]
+        wait_for_logs(logs, lambda k, text: '"under control"' in text, "every vehicle controlled")
+        rows = [log.read_text().count('"action"') for log in logs]
         broker.stop()
-        time.sleep(5.0 / speedup)  # 5 s of flight without a broker
+        # three decisions (6 s of flight) in every process without a broker
+        wait_for_logs(logs, lambda k, text: text.count('"action"') >= rows[k] + 3 * 3, "decisions")
         broker.start()
 
     summaries, truth = fly_swarm(tmp_path, mosquitto, speedup=speedup, outage=outage)

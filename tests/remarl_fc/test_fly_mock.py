@@ -29,6 +29,14 @@ def assert_safe_and_arrived(truth: dict, reached: int | None = None) -> None:
     assert truth["reached_targets"] == n
 
 
+async def flown_for(fleet, runtime, seconds: float) -> None:
+    """Wait until the mock's own clock has run ``seconds`` further (not a wall-clock sleep)."""
+    t_end = fleet.now_s() + seconds
+    await runtime.commands.wait_until(
+        f"{seconds:g} s of flight", lambda: fleet.now_s() >= t_end, 120
+    )
+
+
 async def until_controlled(runtime) -> float:
     await runtime.commands.wait_until(
         "control", lambda: all(s == Status.CONTROLLED for s in runtime.statuses()), 120
@@ -75,7 +83,7 @@ async def test_link_cut_is_detected_within_a_second_and_the_vehicle_is_held():
 
     async def cut(fleet, runtime) -> None:
         await until_controlled(runtime)
-        await asyncio.sleep(4.0 / SPEEDUP)
+        await flown_for(fleet, runtime, 4.0)
         seen["cut_at"] = runtime.clock.now()
         fleet.faults.cut_link(1, fleet.now_s(), 5.0)  # vehicle 2 (index 1)
 
@@ -98,9 +106,9 @@ async def test_a_mode_the_pilot_takes_is_never_fought():
 
     async def pilot(fleet, runtime) -> None:
         await until_controlled(runtime)
-        await asyncio.sleep(3.0 / SPEEDUP)
+        await flown_for(fleet, runtime, 3.0)
         fleet.faults.switch_mode(0, fleet.now_s(), "LOITER")
-        await asyncio.sleep(2.0 / SPEEDUP)
+        await flown_for(fleet, runtime, 2.0)
         marks["sent"] = fleet.vehicles[0].counters.setpoints_received
         marks["modes"] = fleet.vehicles[0].counters.commands["DO_SET_MODE"]
 
@@ -121,7 +129,7 @@ async def test_cancellation_leaves_every_vehicle_holding():
     async def watch(fleet, runtime) -> None:
         box["fleet"] = fleet
         await until_controlled(runtime)
-        await asyncio.sleep(3.0 / SPEEDUP)
+        await flown_for(fleet, runtime, 3.0)
         flying.set()
         await asyncio.Event().wait()
 

@@ -212,7 +212,7 @@ async def test_mqtt_exchange_restart_and_hostile_publisher(mosquitto):
         await eventually(lambda: not b.connected.is_set())
         await a.publish_state(state(uav=1, seq=50))  # dropped, counted, no exception
         assert a.core.stats.publish_dropped >= 1
-        await asyncio.sleep(1.0)
+        await eventually(lambda: not a.connected.is_set())  # both saw the outage
         mosquitto.start()
         await asyncio.wait_for(a.connected.wait(), 15)
         await asyncio.wait_for(b.connected.wait(), 15)
@@ -286,7 +286,10 @@ async def test_acls_let_a_vehicle_publish_only_as_itself(secured_mosquitto):
         forged = topic("remarl", "s", 3, "state")
         assert a._client is not None
         await a._client.publish(forged, encode_state(state(uav=3, seq=1)))
-        await asyncio.sleep(0.5)
+        # a's own next state goes out after the forged one on the same connection: once b
+        # has it, the broker has dealt with the forged one too
+        await a.publish_state(state(uav=1, seq=2))
+        await eventually(lambda: b.core.states[1].value.seq == 2)
         assert 3 not in b.core.states
         assert not wrong.connected.is_set()  # a wrong password never connects
         for t in (ta, tb, tw):

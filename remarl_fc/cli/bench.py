@@ -1,0 +1,81 @@
+"""``remarl-fc bench``: the ``pso`` and ``sim`` micro-benchmarks, and the wiring of the others.
+
+``bench sitl`` lives in `remarl_fc.cli.sitl`, ``bench fly`` and ``bench bus`` in
+`remarl_fc.cli.fly`, next to the commands they measure.
+"""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+from remarl_fc.cli import fly, sitl
+from remarl_fc.cli.common import SCENARIO_HELP, add_choice, add_seed, emit, finish, positive_int
+
+
+def add_bench(sub: Any) -> None:
+    """Add ``bench`` and its subcommands: pso, sim, sitl, fly, bus."""
+    p = sub.add_parser("bench", help="micro-benchmarks")
+    bench = p.add_subparsers(dest="what", required=True, metavar="WHAT")
+
+    b = bench.add_parser("pso", help="contour-level PSO: time per call")
+    b.add_argument("--uavs", type=positive_int, default=10, help="UAVs per swarm (default 10)")
+    b.add_argument("--envs", type=positive_int, default=1, help="environments per call")
+    b.add_argument("--repeats", type=positive_int, default=50, help="timed calls")
+    b.add_argument(
+        "--particles",
+        type=positive_int,
+        default=200,
+        help="particles (default 200: with 30 iterations, the authors' 6,000 evaluations)",
+    )
+    b.add_argument("--iterations", type=positive_int, default=30, help="iterations (default 30)")
+    add_seed(b)
+    finish(b, cmd_bench_pso)
+
+    b = bench.add_parser("sim", help="simulator throughput with the full reMARL reward")
+    b.add_argument("--scenario", default="5u1o", help=SCENARIO_HELP)
+    b.add_argument("--batch", type=positive_int, default=1024, help="environments per step")
+    add_choice(
+        b,
+        "--actions",
+        ["uniform", "noise"],
+        help="uniform in [-1, 1] (default) or N(0, 0.1) around straight flight",
+    )
+    b.add_argument("--seconds", type=float, default=2.0, help="how long to time")
+    add_seed(b)
+    finish(b, cmd_bench_sim)
+
+    sitl.add_bench_parser(bench)
+    fly.add_bench_parsers(bench)
+
+
+def cmd_bench_pso(args: argparse.Namespace) -> int:
+    """Time the contour-level PSO."""
+    from remarl_fc.bench.sim import bench_pso
+    from sim.config import PSOConfig
+
+    cfg = PSOConfig(particles=args.particles, iterations=args.iterations)
+    result = bench_pso(
+        uavs=args.uavs, envs=args.envs, repeats=args.repeats, seed=args.seed, cfg=cfg
+    )
+    human = (
+        f"PSO, {result['uavs']} UAVs x {result['envs']} env(s): "
+        f"{result['ms_per_call']:.2f} ms per call (p90 {result['ms_p90']:.2f}), "
+        f"{result['evaluations']} cost evaluations; feasible {result['feasible_fraction']:.0%}, "
+        f"mean max shift {result['mean_max_shift_m']:.2f} m"
+    )
+    emit(args, result, human)
+    return 0
+
+
+def cmd_bench_sim(args: argparse.Namespace) -> int:
+    """Time the simulator with the full reMARL reward."""
+    from remarl_fc.bench.sim import bench_sim
+
+    result = bench_sim(args.scenario, args.batch, args.actions, args.seconds, args.seed)
+    human = (
+        f"{result['scenario']}, batch {result['batch']}, {result['actions']} actions: "
+        f"{result['agent_steps_per_s']:,.0f} agent-steps/s ({result['ms_per_step']:.2f} ms/step)"
+    )
+    emit(args, result, human)
+    return 0

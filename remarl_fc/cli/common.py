@@ -1,0 +1,85 @@
+"""What the command modules share: exit statuses, output, and the options many commands take.
+
+Nothing heavy is imported here; the command modules import their libraries inside handlers.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from collections.abc import Callable, Sequence
+from typing import Any
+
+EXIT_USAGE = 2
+"""Exit status for bad input (also argparse's)."""
+
+EXIT_TIMED_OUT = 3
+"""Exit status of ``sitl --until-done`` when the time limit came first."""
+
+EXIT_NOT_ALL_REACHED = 4
+"""Exit status of ``fly`` and ``demo`` when the flight ended with a vehicle short of its target."""
+
+EXIT_INTERRUPTED = 130
+"""Exit status of ``train`` and ``compare`` stopped by Ctrl-C (what a shell reports for SIGINT)."""
+
+JSON_HELP = "print one JSON object"
+SCENARIO_HELP = "scenario name or .toml path"
+FLAVOURS = ("ardupilot", "px4")
+"""The autopilots the mock imitates (``--flavour``); the first is the default."""
+
+Handler = Callable[[argparse.Namespace], int]
+
+
+def emit(args: argparse.Namespace, payload: dict[str, Any], human: str) -> None:
+    """Print ``payload`` as one JSON object under ``--json``, else the ``human`` text."""
+    print(json.dumps(payload) if getattr(args, "json", False) else human)
+
+
+def positive_int(text: str) -> int:
+    """An argparse type: an integer ≥ 1."""
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1, got {value}")
+    return value
+
+
+# argparse names the type in its "invalid _positive_int value: 'x'" errors; kept as it was.
+positive_int.__name__ = "_positive_int"
+
+
+def add_choice(
+    p: Any,
+    flag: str,
+    choices: Sequence[str],
+    *,
+    default: str | None = None,
+    help: str | None = None,
+) -> None:
+    """Add an option taking one of ``choices``; the default is the first unless given."""
+    first = choices[0] if default is None else default
+    p.add_argument(flag, choices=list(choices), default=first, help=help)
+
+
+def add_seed(p: Any, *, default: int = 0, help: str | None = None) -> None:
+    """Add ``--seed``."""
+    p.add_argument("--seed", type=int, default=default, help=help)
+
+
+def finish(p: argparse.ArgumentParser, handler: Handler, *, json_help: str = JSON_HELP) -> None:
+    """Close a command's parser: its ``--json`` (every command has one) and its handler."""
+    p.add_argument("--json", action="store_true", help=json_help)
+    p.set_defaults(handler=handler)
+
+
+def progress_bar(*, enabled: bool) -> Any:
+    """A rich progress bar of steps; its task, added by the caller, carries the total."""
+    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+    return Progress(
+        TextColumn("{task.description}"),
+        BarColumn(),
+        TextColumn("{task.completed}/{task.total} steps"),
+        TimeElapsedColumn(),
+        disable=not enabled,
+        transient=False,
+    )

@@ -1,0 +1,224 @@
+"""``remarl-fc train``, ``eval``, ``export`` and ``compare``: parsers and handlers.
+
+torch and `policies` are imported only inside the handlers that need them (train, export,
+compare), never when the parser is built.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+from remarl_fc.cli.common import (
+    EXIT_INTERRUPTED,
+    SCENARIO_HELP,
+    add_choice,
+    add_seed,
+    emit,
+    finish,
+    positive_int,
+    progress_bar,
+)
+from remarl_fc.errors import ConfigError
+
+
+def add_train(sub: Any) -> None:
+    """Add ``train``."""
+    p = sub.add_parser("train", help="train per-agent DDPG with the reMARL reward")
+    p.add_argument("--scenario", default="3u2o", help=SCENARIO_HELP)
+    p.add_argument("--steps", type=positive_int, default=20_000, help="vectorised env steps")
+    p.add_argument("--minutes", type=float, default=0.0, help="wall-clock budget (0: none)")
+    p.add_argument("--envs", type=positive_int, default=16, help="environments stepped at once")
+    add_seed(p)
+    p.add_argument("--out", default=None, help="run folder (default runs/SCENARIO-sSEED)")
+    p.add_argument("--resume", action="store_true", help="continue the run in --out")
+    p.add_argument("--shared", action="store_true", help="one network for all agents")
+    add_choice(
+        p,
+        "--reward",
+        ["remarl", "swarming"],
+        help="full reMARL reward (default) or its Swarming part only",
+    )
+    p.add_argument("--eval-every", type=positive_int, default=2_000, help="steps between evals")
+    p.add_argument("--eval-episodes", type=positive_int, default=100)
+    finish(p, cmd_train)
+
+
+def add_eval(sub: Any) -> None:
+    """Add ``eval``."""
+    p = sub.add_parser("eval", help="evaluate a policy file (numpy inference)")
+    p.add_argument("--policy", required=True, help="zoo name (e.g. 3u2o) or .safetensors path")
+    p.add_argument("--scenario", default=None, help="default: the policy's own scenario")
+    p.add_argument("--episodes", type=positive_int, default=1000)
+    add_seed(p, default=2_000_000, help="first evaluation seed")
+    p.add_argument("--plot", default=None, help="also draw one episode and its Q-values here")
+    finish(p, cmd_eval)
+
+
+def add_export(sub: Any) -> None:
+    """Add ``export``."""
+    p = sub.add_parser("export", help="write a policy file from a training run")
+    p.add_argument("run", help="run folder (the --out of train)")
+    p.add_argument("--out", required=True, help="the .safetensors file to write")
+    add_choice(p, "--checkpoint", ["best", "last"])
+    p.add_argument("--metrics", default=None, help="eval JSON to embed in the file")
+    finish(p, cmd_export)
+
+
+def add_compare(sub: Any) -> None:
+    """Add ``compare``."""
+    p = sub.add_parser(
+        "compare", help="the paper's comparisons: baselines, E2Coop, Table 2, learning curves"
+    )
+    p.add_argument("--scenarios", default="3u2o", help="comma-separated (default 3u2o)")
+    p.add_argument(
+        "--methods", default=None, help="comma-separated: remarl,coma,mappo,iql,vdn,qmix,e2coop"
+    )
+    p.add_argument("--seeds", type=positive_int, default=3)
+    p.add_argument("--budget", type=positive_int, default=200_000, help="env steps per run")
+    p.add_argument("--out", default="results", help="results folder (finished cells are kept)")
+    p.add_argument("--n-actions", type=positive_int, default=11, help="baselines' heading set")
+    p.add_argument("--workers", type=positive_int, default=2, help="cells run in parallel")
+    for what, per in (("eval", "trained run"), ("e2coop", "E2Coop seed")):
+        p.add_argument(
+            f"--{what}-episodes",
+            type=positive_int,
+            default=None,  # the preset's own
+            help=f"evaluation episodes per {per}",
+        )
+    p.add_argument("--quick", action="store_true", help="small budgets: minutes on 2 cores")
+    p.add_argument("--ray-address", default=None, help="run the cells on this Ray cluster")
+    finish(p, cmd_compare)
+
+
+def cmd_train(args: argparse.Namespace) -> int:
+    """Train with a progress bar; exit 130 on Ctrl-C (the run folder can be resumed)."""
+    from policies.config import DDPGConfig, TrainConfig
+    from policies.train import train
+    from sim.scenarios import load_scenario
+
+    cfg = TrainConfig(
+        scenario=args.scenario,
+        num_envs=args.envs,
+        total_steps=args.steps,
+        minutes=args.minutes,
+        seed=args.seed,
+        eval_every=args.eval_every,
+        eval_episodes=args.eval_episodes,
+        reward=args.reward,
+        ddpg=DDPGConfig(shared=args.shared),
+    )
+    load_scenario(cfg.scenario)  # a bad name fails here, before anything is written
+    out = Path(args.out or f"runs/{Path(cfg.scenario).stem}-s{cfg.seed}")
+    with progress_bar(enabled=not args.json) as progress:
+        task = progress.add_task("train", total=cfg.total_steps)
+
+        def report(scalars: dict[str, float]) -> None:
+            progress.update(
+                task,
+                completed=scalars["step"],
+                description=(
+                    f"success {scalars['charts/success']:.0%}  "
+                    f"swarming return {scalars['charts/episodic_swarming_return']:.1f}"
+                ),
+            )
+
+        try:
+            summary = train(cfg, out, resume=args.resume, progress=report)
+        except KeyboardInterrupt:
+            print(f"interrupted: resume with --resume --out {out}", file=sys.stderr)
+            return EXIT_INTERRUPTED
+    emit(
+        args,
+        {"config": dataclasses.asdict(cfg), **summary},
+        f"trained {summary['env_steps']:,} environment steps in {summary['elapsed_s']:.0f} s; "
+        f"best success {summary['best_success']:.1%}; run folder {out}",
+    )
+    return 0
+
+
+def cmd_eval(args: argparse.Namespace) -> int:
+    """Evaluate a policy file with numpy inference; optionally draw one episode."""
+    from remarl_fc.offline.evaluate import evaluate_policy, plot_episode
+
+    policy, result = evaluate_policy(args.policy, args.scenario, args.episodes, args.seed)
+    if args.plot:
+        plot_episode(policy, args.scenario, args.seed, Path(args.plot))
+        result["plot"] = args.plot
+    human = (
+        f"{result['scenario']}, {int(result['episodes'])} episodes: success "
+        f"{result['success_rate']:.1%}, collisions {result['collision_rate']:.1%} "
+        f"(U2O {result['collision_rate_u2o']:.1%}, U2U {result['collision_rate_u2u']:.1%}), "
+        f"min d_U2O {result['min_d_u2o_m']:.1f} m, min d_U2U {result['min_d_u2u_m']:.1f} m, "
+        f"energy {result['energy_rad']:.2f} rad, path ratio {result['path_length_ratio']:.3f}, "
+        f"swarming return {result['swarming_return']:.1f}, reaction time "
+        f"{result['reaction_time_median_ms'] * 1e3:.0f} µs median "
+        f"({result['reaction_time_p99_ms'] * 1e3:.0f} µs p99)"
+    )
+    emit(args, result, human)
+    return 0
+
+
+def cmd_export(args: argparse.Namespace) -> int:
+    """Write a policy file from a training run folder."""
+    from policies.export import export_policy
+
+    run = Path(args.run)
+    if not (run / "config.json").is_file():
+        raise ConfigError(f"{run}: not a training run folder (no config.json); pass --out of train")
+    metrics = json.loads(Path(args.metrics).read_text()) if args.metrics else None
+    meta = export_policy(run, Path(args.out), checkpoint=args.checkpoint, metrics=metrics)
+    emit(args, {"out": args.out, **meta}, f"wrote {args.out} ({meta['scenario']})")
+    return 0
+
+
+def cmd_compare(args: argparse.Namespace) -> int:
+    """Run the comparison grid (resumable) and write its reports; exit 130 on Ctrl-C."""
+    from policies.compare import METHODS, CompareConfig, cell_line, run_grid, write_reports
+
+    scenarios = tuple(s for s in args.scenarios.split(",") if s)
+    methods = tuple(m for m in (args.methods or ",".join(METHODS)).split(",") if m)
+    out = Path(args.out)
+    if args.quick:
+        cfg = CompareConfig.quick_preset(scenarios, methods, out)
+    else:
+        cfg = CompareConfig(
+            scenarios,
+            methods,
+            seeds=args.seeds,
+            budget_steps=args.budget,
+            out=out,
+            n_actions=args.n_actions,
+            workers=args.workers,
+        )
+    episodes = {
+        name: value
+        for name, value in (
+            ("eval_episodes", args.eval_episodes),
+            ("e2coop_episodes", args.e2coop_episodes),
+        )
+        if value is not None  # unset: the preset's own
+    }
+    cfg = dataclasses.replace(cfg, **episodes)
+    try:
+        results = run_grid(
+            cfg,
+            ray_address=args.ray_address,
+            on_cell=lambda done, total, result: print(
+                cell_line(done, total, result), file=sys.stderr, flush=True
+            ),
+        )
+    except KeyboardInterrupt:
+        print(
+            f"interrupted: the finished cells are kept in {out}; run the same command to resume",
+            file=sys.stderr,
+        )
+        return EXIT_INTERRUPTED
+    paths = write_reports(cfg, results)
+    payload = {"cells": len(results), "out": str(out), **paths}
+    emit(args, payload, "\n".join(f"wrote {p}" for p in paths.values()))
+    return 0
