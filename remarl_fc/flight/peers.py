@@ -22,7 +22,7 @@ import numpy as np
 
 from remarl_fc.bus.core import SwarmBus
 from remarl_fc.bus.schema import STATUSES, Detection, Detections, VehicleState
-from remarl_fc.flight.tracking import Intruder, TrafficPicture
+from remarl_fc.flight.traffic import Intruder, TrafficPicture
 
 if TYPE_CHECKING:
     from remarl_fc.flight.config import Member

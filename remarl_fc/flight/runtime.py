@@ -63,7 +63,8 @@ from remarl_fc.flight.peers import Peers
 from remarl_fc.flight.prepare import Preparation
 from remarl_fc.flight.report import decision_rows, status_lines, vehicle_summaries
 from remarl_fc.flight.status import IN_FLIGHT, OBSTACLE, Status
-from remarl_fc.flight.tracking import TrafficPicture, VehicleTrack
+from remarl_fc.flight.tracking import VehicleTrack
+from remarl_fc.flight.traffic import TrafficPicture
 from remarl_fc.mavlink.codec import Codec
 from remarl_fc.mavlink.consts import (
     TYPE_MASK_VELOCITY_YAW,

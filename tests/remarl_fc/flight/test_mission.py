@@ -25,7 +25,7 @@ from remarl_fc.sitl.config import DEFAULT_HOME
 from sim.scenarios import load_scenario
 from sim.spawn import swarm_layout
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 EXAMPLE = ROOT / "docs" / "examples" / "mission-3u2o.toml"
 
 ORIGIN = GeoPoint(47.397742, 8.545594, 488.0)
