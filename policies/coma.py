@@ -3,7 +3,8 @@
 The method, as the paper, on the swarm simulator's vectorised environment (`sim.env`):
 
 * **Actions.** Each UAV picks one of ``n_actions`` heading changes evenly spaced on
-  [−π/4, π/4] (`heading_actions`); the environment receives them normalised to [−1, 1].
+  [−π/4, π/4] (`policies.common.heading_actions`); the environment receives them normalised
+  to [−1, 1].
 * **Actor.** One network shared by every agent, its input the agent's observation with a one-hot
   agent id appended; a softmax policy mixed with ε-uniform exploration, ε annealed linearly.
   It is feed-forward (the paper's actor is a GRU): the observation is the per-step one the
@@ -12,13 +13,13 @@ The method, as the paper, on the swarm simulator's vectorised environment (`sim.
   in; Q(s, (u_−a, u')) for every action u' of agent a out, so the counterfactual baseline
   Σ_u' π_a(u'|τ_a) Q(s, (u_−a, u')) costs one forward pass (`counterfactual_advantage`).
 * **State.** The concatenation of all N agents' observations (zeroed for agents that are no
-  longer flying) followed by the N flags of the agents still flying. This is the environment's
-  own global state (`sim.env.SwarmParallelEnv.state`), so every centralised baseline sees the
-  same thing; its entries are dimensionless and O(1) (the observation builder scales them), so
-  it needs no normalisation, and like the observations it does not depend on where the arena is
-  or which way the swarm flies. A vector built from the raw simulator state (absolute
-  positions, headings, PSO contour levels) would need scales of its own and carry frame
-  information the policies never see.
+  longer flying) followed by the N flags of the agents still flying: the global state the
+  BenchMARL baselines get too (`policies.baseline_env.SwarmBaselineEnv.state`, observations
+  divided by 10), so every centralised baseline sees the same thing; its entries are
+  dimensionless and O(1) (the observation builder scales them), so it needs no normalisation,
+  and like the observations it does not depend on where the arena is or which way the swarm
+  flies. A vector built from the raw simulator state (absolute positions, headings, PSO contour
+  levels) would need scales of its own and carry frame information the policies never see.
 * **Targets.** TD(λ) returns (λ = 0.8, the paper's) bootstrapped with a target critic that is
   copied from the critic every ``target_update_interval`` batches.
 * **Batches.** On-policy: B environments stepped together for T steps; the B·T transitions of
@@ -35,54 +36,21 @@ The method, as the paper, on the swarm simulator's vectorised environment (`sim.
   gains γ·r_max/(1 − γ)/N when one of its N agents arrives; a collision is worth 0; the
   environment's rewards and the logged returns are unchanged.
 
-`train_coma` writes, in ``out_dir``::
-
-    config.json         the ComaConfig, scenario and seed
-    curve.csv           one row per finished training episode:
-                        env_steps, episode, swarming_return, success
-    model.safetensors   the actor (weights, and its shapes as JSON metadata)
-    summary.json        what `train_coma` returns
-
-Run it from the shell with ``python -m policies.coma --scenario 3u1o --budget-steps 200000``.
+The training loop, the model file and the greedy policy are in `policies.coma_train`
+(``python -m policies.coma_train --scenario 3u1o --budget-steps 200000``).
 """
 
 from __future__ import annotations
 
-import argparse
-import csv
-import dataclasses
-import json
-import time
-from collections.abc import Callable
 from dataclasses import dataclass
-from pathlib import Path
-from typing import Any
 
-import numpy as np
 import torch
-from numpy.typing import NDArray
-from safetensors import safe_open
-from safetensors.torch import load_file, save_file
 from torch import Tensor, nn
 
-from policies.train import EVAL_SEED_OFFSET, reward_upper_bound
-from sim.config import ScenarioConfig
-from sim.env import SwarmVectorEnv, make_vector_env
-from sim.evaluation import run_episodes, summarize
+from policies.config import check, check_at_least
 
 REWARD = "swarming"
 """The reward COMA trains on: the Swarming part alone, as the paper's baselines."""
-
-CURVE_COLUMNS = ("env_steps", "episode", "swarming_return", "success")
-"""Columns of ``curve.csv``."""
-
-MODEL_SCHEMA = 1
-"""Version of ``model.safetensors``'s layout."""
-
-
-def _check(ok: bool, name: str, message: str) -> None:
-    if not ok:
-        raise ValueError(f"{name}: {message}")
 
 
 @dataclass(frozen=True)
@@ -90,8 +58,8 @@ class ComaConfig:
     """COMA hyper-parameters, each default documented here once."""
 
     n_actions: int = 11
-    """Discrete heading changes (`heading_actions`); 11 holds straight ahead, 10 is the paper's
-    literal grid."""
+    """Discrete heading changes (`policies.common.heading_actions`); 11 holds straight ahead,
+    10 is the paper's literal grid."""
 
     hidden: int = 128
     """Units of each of the two hidden ReLU layers of the actor and of the critic."""
@@ -141,46 +109,29 @@ class ComaConfig:
     """Greedy evaluation episodes on held-out seeds at the end (0: none)."""
 
     def __post_init__(self) -> None:
-        _check(self.n_actions >= 2, "n_actions", "must be >= 2")
+        check(self.n_actions >= 2, "n_actions", "must be >= 2")
         for name in ("actor_lr", "critic_lr", "grad_clip"):
-            _check(getattr(self, name) > 0, name, "must be > 0")
-        _check(0 < self.gamma < 1, "gamma", "must be in (0, 1)")
-        _check(0 <= self.td_lambda <= 1, "td_lambda", "must be in [0, 1]")
-        for name in (
+            check(getattr(self, name) > 0, name, "must be > 0")
+        check(0 < self.gamma < 1, "gamma", "must be in (0, 1)")
+        check(0 <= self.td_lambda <= 1, "td_lambda", "must be in [0, 1]")
+        check_at_least(
+            self,
+            1,
             "hidden",
             "num_envs",
             "rollout_steps",
             "critic_steps",
             "target_update_interval",
             "budget_steps",
-        ):
-            _check(getattr(self, name) >= 1, name, "must be >= 1")
-        _check(0 <= self.epsilon_end <= self.epsilon_start <= 1, "epsilon_end", "must be in [0, 1]")
-        _check(0 < self.epsilon_anneal_frac <= 1, "epsilon_anneal_frac", "must be in (0, 1]")
-        _check(self.eval_episodes >= 0, "eval_episodes", "must be >= 0")
+        )
+        check(0 <= self.epsilon_end <= self.epsilon_start <= 1, "epsilon_end", "must be in [0, 1]")
+        check(0 < self.epsilon_anneal_frac <= 1, "epsilon_anneal_frac", "must be in (0, 1]")
+        check_at_least(self, 0, "eval_episodes")
 
     def epsilon(self, env_steps: int) -> float:
         """ε after ``env_steps`` environment steps of training."""
         frac = min(env_steps / (self.epsilon_anneal_frac * self.budget_steps), 1.0)
         return (1.0 - frac) * self.epsilon_start + frac * self.epsilon_end
-
-
-def heading_actions(n_actions: int = 11) -> NDArray[np.float32]:
-    """The discrete action set: ``n_actions`` normalised heading changes evenly on [−1, 1].
-
-    A normalised action a turns the UAV by a·π/4 over the decision step (`sim.env`), so the set
-    spans [−π/4, π/4]. An odd count holds 0, straight ahead: the default 11 are 9° apart.
-    ``n_actions=10`` is the paper's literal grid linspace(−1, 1, 10), 10° apart, with no
-    straight ahead. In degrees:
-
-    >>> (heading_actions() * 45).round(1).tolist()
-    [-45.0, -36.0, -27.0, -18.0, -9.0, 0.0, 9.0, 18.0, 27.0, 36.0, 45.0]
-    >>> (heading_actions(10) * 45).round(1).tolist()
-    [-45.0, -35.0, -25.0, -15.0, -5.0, 5.0, 15.0, 25.0, 35.0, 45.0]
-    """
-    _check(n_actions >= 2, "n_actions", "must be >= 2")
-    values: NDArray[np.float32] = np.linspace(-1.0, 1.0, n_actions).astype(np.float32)
-    return values
 
 
 def counterfactual_advantage(q_all: Tensor, pi: Tensor, actions: Tensor) -> Tensor:
@@ -385,7 +336,8 @@ def _team_mean(values: Tensor, active: Tensor) -> Tensor:
     return (values * w).sum(-1) / w.sum(-1).clamp_min(1.0)
 
 
-def _sample(probs: Tensor, generator: torch.Generator) -> Tensor:
+def sample_actions(probs: Tensor, generator: torch.Generator) -> Tensor:
+    """One action index per row of probabilities (..., U), drawn with ``generator``."""
     flat = probs.reshape(-1, probs.shape[-1])
     return torch.multinomial(flat, 1, generator=generator).reshape(probs.shape[:-1])
 
@@ -395,7 +347,7 @@ def sampled_value(
 ) -> Tensor:
     """Target-critic team value Q'(s, u) of states (K, N, D) with u drawn from the policy, (K,)."""
     with torch.no_grad():
-        actions = _sample(explore_probs(nets.actor(obs), epsilon), generator)
+        actions = sample_actions(explore_probs(nets.actor(obs), epsilon), generator)
         onehot = _onehot(actions, active, nets.actor.n_actions)
         q = nets.critic_target(global_state(obs, active), onehot)
         taken = q.gather(-1, actions[..., None]).squeeze(-1)
@@ -460,206 +412,7 @@ def coma_update(nets: ComaNets, batch: ComaBatch, cfg: ComaConfig) -> dict[str, 
     }
 
 
-def save_coma(path: Path, actor: ComaActor, meta: dict[str, Any]) -> None:
-    """The actor as safetensors, its shapes and ``meta`` as JSON metadata (atomic)."""
-    info = {
-        "schema": MODEL_SCHEMA,
-        "n_agents": actor.n_agents,
-        "obs_size": actor.obs_size,
-        "n_actions": actor.n_actions,
-        "hidden": actor.hidden,
-        **meta,
-    }
-    tensors = {k: v.contiguous() for k, v in actor.state_dict().items()}
-    tmp = path.with_name(path.name + ".part")
-    save_file(tensors, str(tmp), metadata={"remarl_coma": json.dumps(info)})
-    tmp.replace(path)
+if __name__ == "__main__":  # the documented ``python -m policies.coma`` still trains
+    from policies.coma_train import main
 
-
-def load_coma(path: Path) -> ComaActor:
-    """The actor saved by `save_coma` (nothing is unpickled)."""
-    with safe_open(str(path), framework="pt") as f:
-        info: dict[str, Any] = json.loads(f.metadata()["remarl_coma"])
-    if info.get("schema") != MODEL_SCHEMA:
-        raise ValueError(f"{path}: COMA model schema {info.get('schema')}, expected {MODEL_SCHEMA}")
-    actor = ComaActor(info["n_agents"], info["obs_size"], info["n_actions"], info["hidden"])
-    actor.load_state_dict(load_file(str(path)))
-    return actor
-
-
-def coma_policy(model: ComaActor) -> Callable[[NDArray[np.float32]], NDArray[np.float32]]:
-    """Greedy policy for `sim.evaluation.run_episodes`: flat obs (B, N, D) → actions (B, N).
-
-    Each agent takes its most probable action (the mode of the softmax, no ε), returned as the
-    normalised heading change in [−1, 1].
-    """
-    values = torch.from_numpy(heading_actions(model.n_actions))
-
-    def act(obs: NDArray[np.float32]) -> NDArray[np.float32]:
-        if obs.ndim != 3 or obs.shape[1:] != (model.n_agents, model.obs_size):
-            raise ValueError(
-                f"observations {obs.shape}: expected (B, {model.n_agents}, {model.obs_size})"
-            )
-        with torch.no_grad():
-            best = model(torch.from_numpy(np.ascontiguousarray(obs, np.float32))).argmax(-1)
-        actions: NDArray[np.float32] = values[best].numpy()
-        return actions
-
-    return act
-
-
-def train_coma(
-    cfg: ComaConfig,
-    scenario: str | Path | ScenarioConfig,
-    out_dir: Path,
-    seed: int,
-) -> dict[str, Any]:
-    """Train COMA on the Swarming reward for ``cfg.budget_steps`` environment steps.
-
-    Writes ``config.json``, ``curve.csv``, ``model.safetensors`` and ``summary.json`` in
-    ``out_dir`` (see the module docstring) and returns the summary: counts, time, the first
-    and last 100 training episodes' mean Swarming return and success, and the greedy
-    evaluation (`sim.evaluation.summarize`) when ``cfg.eval_episodes`` > 0.
-    """
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-
-    # ---- seeding: the only place training seeds anything
-    torch.manual_seed(seed)  # network initialisation
-    generator = torch.Generator().manual_seed(seed)  # action sampling
-    env: SwarmVectorEnv = make_vector_env(scenario, cfg.num_envs, reward=REWARD)
-    obs_np, info = env.reset(seed=seed)  # episodes (the environment's own generator)
-
-    # ---- networks, constants
-    n, b, steps = env.num_agents, cfg.num_envs, cfg.rollout_steps
-    nets = ComaNets.create(n, env.obs_layout_size, cfg)
-    action_values = heading_actions(cfg.n_actions)
-    goal_bonus = cfg.gamma * reward_upper_bound(env.cfg, REWARD) / (1.0 - cfg.gamma)
-    (out_dir / "config.json").write_text(
-        json.dumps(
-            {"coma": dataclasses.asdict(cfg), "scenario": env.cfg.name, "seed": seed}, indent=2
-        )
-    )
-    curve_file = (out_dir / "curve.csv").open("w", newline="")
-    curve = csv.writer(curve_file)
-    curve.writerow(CURVE_COLUMNS)
-
-    env_steps = updates = 0
-    episodes: list[tuple[float, float]] = []  # (swarming_return, success)
-    losses: dict[str, float] = {}
-    active_np = info["active"]
-    start = time.monotonic()
-    try:
-        while env_steps < cfg.budget_steps:
-            epsilon = cfg.epsilon(env_steps)
-            obs_b = torch.zeros(steps, b, n, env.obs_layout_size)
-            active_b = torch.zeros(steps, b, n, dtype=torch.bool)
-            actions_b = torch.zeros(steps, b, n, dtype=torch.int64)
-            rewards_b = torch.zeros(steps, b)
-            terminated_b = torch.zeros(steps, b, dtype=torch.bool)
-            truncated_b = torch.zeros(steps, b, dtype=torch.bool)
-            truncated_values = torch.zeros(steps, b)
-            # ---- collect T steps of the B environments with the behaviour policy
-            for t in range(steps):
-                obs = torch.from_numpy(obs_np)
-                with torch.no_grad():
-                    actions = _sample(explore_probs(nets.actor(obs), epsilon), generator)
-                obs_np, rewards, terminated, truncated, info = env.step(
-                    action_values[actions.numpy()]
-                )
-                env_steps += b
-                acted = info["acted"]
-                # team reward: mean over the N agents of those that flew, with arrivals' goal
-                team = np.where(acted, rewards + goal_bonus * info["arrived"], 0.0).sum(-1) / n
-                obs_b[t], actions_b[t] = obs, actions
-                active_b[t] = torch.from_numpy(acted)
-                rewards_b[t] = torch.from_numpy(team.astype(np.float32))
-                terminated_b[t] = torch.from_numpy(terminated)
-                truncated_b[t] = torch.from_numpy(truncated)
-                if truncated.any():  # bootstrap on the final observation of the cut episodes
-                    cut = np.flatnonzero(truncated)
-                    flying = torch.from_numpy(acted[cut] & ~info["arrived"][cut])
-                    final = torch.from_numpy(info["final_obs"][cut])
-                    truncated_values[t, cut] = sampled_value(
-                        nets, final, flying, epsilon, generator
-                    )
-                if "episode" in info:
-                    ep = info["episode"]
-                    for k in range(len(ep["success"])):
-                        row = (float(ep["swarming_return"][k]), float(ep["success"][k]))
-                        episodes.append(row)
-                        curve.writerow([env_steps, len(episodes), f"{row[0]:.6g}", int(row[1])])
-                active_np = info["active"]
-            last_value = sampled_value(
-                nets, torch.from_numpy(obs_np), torch.from_numpy(active_np), epsilon, generator
-            )
-
-            # ---- learn from the batch, once
-            batch = ComaBatch(
-                obs_b,
-                active_b,
-                actions_b,
-                rewards_b,
-                terminated_b,
-                truncated_b,
-                truncated_values,
-                last_value,
-                epsilon,
-            )
-            losses = coma_update(nets, batch, cfg)
-            updates += 1
-            if updates % cfg.target_update_interval == 0:
-                nets.critic_target.load_state_dict(nets.critic.state_dict())
-    finally:
-        curve_file.close()
-
-    model_path = out_dir / "model.safetensors"
-    save_coma(model_path, nets.actor, {"scenario": env.cfg.name, "reward": REWARD})
-    summary: dict[str, Any] = {
-        "scenario": env.cfg.name,
-        "seed": seed,
-        "env_steps": env_steps,
-        "updates": updates,
-        "episodes": len(episodes),
-        "train_seconds": time.monotonic() - start,
-        "first_100": _mean_episodes(episodes[:100]),
-        "last_100": _mean_episodes(episodes[-100:]),
-        "final_losses": losses,
-        "model": str(model_path),
-        "curve": str(out_dir / "curve.csv"),
-    }
-    if cfg.eval_episodes:
-        rows = run_episodes(
-            coma_policy(nets.actor), env.cfg, cfg.eval_episodes, EVAL_SEED_OFFSET + seed
-        )
-        summary["eval"] = summarize(rows)
-    (out_dir / "summary.json").write_text(json.dumps(summary, indent=2))
-    return summary
-
-
-def _mean_episodes(rows: list[tuple[float, float]]) -> dict[str, float]:
-    if not rows:
-        return {"swarming_return": float("nan"), "success": float("nan")}
-    ret, success = np.asarray(rows, dtype=np.float64).mean(axis=0)
-    return {"swarming_return": float(ret), "success": float(success)}
-
-
-def main(argv: list[str] | None = None) -> None:
-    """``python -m policies.coma``: train once, print the summary as JSON."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0] if __doc__ else None)
-    parser.add_argument("--scenario", default="3u1o")
-    parser.add_argument("--out", type=Path, default=Path("runs/coma"))
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--budget-steps", type=int, default=ComaConfig.budget_steps)
-    parser.add_argument("--n-actions", type=int, default=ComaConfig.n_actions)
-    parser.add_argument("--num-envs", type=int, default=ComaConfig.num_envs)
-    args = parser.parse_args(argv)
-    cfg = ComaConfig(
-        budget_steps=args.budget_steps, n_actions=args.n_actions, num_envs=args.num_envs
-    )
-    summary = train_coma(cfg, args.scenario, args.out, args.seed)
-    print(json.dumps(summary, indent=2))
-
-
-if __name__ == "__main__":
     main()

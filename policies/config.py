@@ -5,9 +5,16 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 
-def _check(ok: bool, name: str, message: str) -> None:
+def check(ok: bool, name: str, message: str) -> None:
+    """Raise ``ValueError("name: message")`` unless ``ok``: the checks of every training config."""
     if not ok:
         raise ValueError(f"{name}: {message}")
+
+
+def check_at_least(obj: object, minimum: int, *names: str) -> None:
+    """`check` that each named field of ``obj`` is >= ``minimum``."""
+    for name in names:
+        check(getattr(obj, name) >= minimum, name, f"must be >= {minimum}")
 
 
 @dataclass(frozen=True)
@@ -58,12 +65,11 @@ class DDPGConfig:
 
     def __post_init__(self) -> None:
         for name in ("actor_lr", "critic_lr", "tau", "grad_clip"):
-            _check(getattr(self, name) > 0, name, "must be > 0")
-        _check(0 < self.gamma < 1, "gamma", "must be in (0, 1)")
-        for name in ("hidden", "batch_size", "buffer_steps", "updates_per_step"):
-            _check(getattr(self, name) >= 1, name, "must be >= 1")
-        _check(self.warmup_steps >= 0, "warmup_steps", "must be >= 0")
-        _check(0 <= self.noise_end <= self.noise_start, "noise_end", "must be in [0, noise_start]")
+            check(getattr(self, name) > 0, name, "must be > 0")
+        check(0 < self.gamma < 1, "gamma", "must be in (0, 1)")
+        check_at_least(self, 1, "hidden", "batch_size", "buffer_steps", "updates_per_step")
+        check_at_least(self, 0, "warmup_steps")
+        check(0 <= self.noise_end <= self.noise_start, "noise_end", "must be in [0, noise_start]")
 
 
 @dataclass(frozen=True)
@@ -97,7 +103,6 @@ class TrainConfig:
     ddpg: DDPGConfig = DDPGConfig()
 
     def __post_init__(self) -> None:
-        for name in ("num_envs", "total_steps", "eval_every", "eval_episodes"):
-            _check(getattr(self, name) >= 1, name, "must be >= 1")
-        _check(self.minutes >= 0, "minutes", "must be >= 0")
-        _check(self.reward in ("remarl", "swarming"), "reward", 'must be "remarl" or "swarming"')
+        check_at_least(self, 1, "num_envs", "total_steps", "eval_every", "eval_episodes")
+        check(self.minutes >= 0, "minutes", "must be >= 0")
+        check(self.reward in ("remarl", "swarming"), "reward", 'must be "remarl" or "swarming"')

@@ -39,14 +39,12 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
+from sim.arrays import FloatArray
 from sim.config import ScenarioConfig
 from sim.contour import external_density_xy
 from sim.field import FieldSources, potential_and_gradient_xy
 from sim.kinematics import arc_points_xy, wrap_angle
 from sim.swarm import SwarmState
-
-FloatArray = NDArray[np.float64]
-
 
 PASSES = 2
 """Planning sweeps over the UAVs of a swarm (the second re-plans against everyone's arcs)."""

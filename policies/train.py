@@ -5,7 +5,9 @@ Run folder layout (``--out``)::
     config.json         the resolved TrainConfig and scenario
     last.safetensors    networks, optimiser moments and counters (resumable)
     best.safetensors    the networks of the best evaluation so far
-    evals.jsonl         one line per evaluation
+    evals.jsonl         one line per evaluation (seeds `sim.evaluation.evaluation_seed`, suite
+                        "training": the same episodes for every run seed)
+    curve.csv           one row per finished training episode (`policies.common.CurveWriter`)
     events.*            TensorBoard scalars (when tensorboard is installed)
 
 Checkpoints are safetensors files (tensors) with JSON metadata: nothing is pickled, so loading
@@ -35,14 +37,12 @@ from numpy.typing import NDArray
 from safetensors.torch import load_file, save_file
 
 from policies.buffer import ReplayBuffer
+from policies.common import CurveWriter
 from policies.config import DDPGConfig, TrainConfig
 from policies.ddpg import DDPGNets, ddpg_update
 from sim.config import ScenarioConfig
 from sim.env import SwarmVectorEnv, make_vector_env
-from sim.evaluation import run_episodes, summarize
-
-EVAL_SEED_OFFSET = 1_000_003
-"""Evaluation episodes use seeds from here on, never used by training (which uses `seed`)."""
+from sim.evaluation import evaluation_seed, run_episodes, summarize
 
 CHECKPOINT_SCHEMA = 1
 """Version of the checkpoint layout."""
@@ -246,7 +246,7 @@ def train(
                         lambda o: policy_actions(nets, o, d.shared),
                         env.cfg,
                         cfg.eval_episodes,
-                        EVAL_SEED_OFFSET + step,
+                        evaluation_seed(suite="training", offset=step),
                     )
                 )
                 record = {
@@ -266,14 +266,12 @@ def train(
                 summary = {"last_eval": record, "best_success": best}
     except KeyboardInterrupt:
         checkpoint(last_path)
-        curve.close()
         raise
     checkpoint(last_path)
     if not best_path.exists():
         checkpoint(best_path)
     if writer is not None:
         writer.close()
-    curve.close()
     summary.update(
         {
             "steps": step,
@@ -283,34 +281,6 @@ def train(
         }
     )
     return summary
-
-
-class CurveWriter:
-    """Appends one CSV row per finished training episode: the learning curve of a run.
-
-    Columns ``env_steps, episode, swarming_return, success``: the same for every method
-    (`remarl-fc compare` reads them), from the simulator's own episode metrics.
-    """
-
-    HEADER = "env_steps,episode,swarming_return,success\n"
-
-    def __init__(self, path: Path, *, resume: bool = False) -> None:
-        self.episode = 0
-        if resume and path.exists():
-            with path.open() as fh:
-                self.episode = max(0, sum(1 for _ in fh) - 1)
-        else:
-            path.write_text(self.HEADER)
-        self._fh = path.open("a")
-
-    def add(self, env_steps: int, swarming_return: float, success: bool) -> None:
-        """One finished episode."""
-        self.episode += 1
-        self._fh.write(f"{env_steps},{self.episode},{swarming_return:.5f},{int(success)}\n")
-
-    def close(self) -> None:
-        """Flush and close."""
-        self._fh.close()
 
 
 def _summary_writer(out_dir: Path) -> Any:

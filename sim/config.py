@@ -48,6 +48,16 @@ def _non_negative(obj: object, *names: str) -> None:
         _require(math.isfinite(value) and value >= 0, name, f"must be >= 0, got {value!r}")
 
 
+def _integer(obj: object, *names: str, minimum: int = 1) -> None:
+    for name in names:
+        value = getattr(obj, name)
+        _require(
+            isinstance(value, int) and value >= minimum,
+            name,
+            f"must be an integer >= {minimum}, got {value!r}",
+        )
+
+
 @dataclass(frozen=True)
 class FieldConfig:
     """Potential field Φ = Φ_s + Σ Φ_o (paper Eq. obstaclefield, swarmfield, environmentfield)."""
@@ -121,16 +131,7 @@ class RewardConfig:
     """Weight of the external term mean(e(S)) ∈ [0, 1] over the window (Eq. fitness, ½|∇Φ|²)."""
 
     def __post_init__(self) -> None:
-        _require(
-            isinstance(self.window_steps, int) and self.window_steps >= 1,
-            "window_steps",
-            f"must be an integer >= 1, got {self.window_steps!r}",
-        )
-        _require(
-            isinstance(self.quadrature_intervals, int) and self.quadrature_intervals >= 1,
-            "quadrature_intervals",
-            f"must be an integer >= 1, got {self.quadrature_intervals!r}",
-        )
+        _integer(self, "window_steps", "quadrature_intervals")
         _require(
             self.external in EXTERNAL_TERMS,
             "external",
@@ -174,13 +175,7 @@ class PSOConfig:
     def __post_init__(self) -> None:
         _positive(self, "threshold_m")
         _non_negative(self, "c1", "c2", "init_noise_m", "init_speed_m")
-        for name in ("particles", "iterations"):
-            value = getattr(self, name)
-            _require(
-                isinstance(value, int) and value >= 1,
-                name,
-                f"must be an integer >= 1, got {value!r}",
-            )
+        _integer(self, "particles", "iterations")
 
     @property
     def evaluations(self) -> int:
@@ -217,11 +212,7 @@ class UAVConfig:
     """x of every UAV's target; the target keeps the UAV's spawn y (a straight pre-planned line)."""
 
     def __post_init__(self) -> None:
-        _require(
-            isinstance(self.count, int) and self.count >= 1,
-            "count",
-            f"must be an integer >= 1, got {self.count!r}",
-        )
+        _integer(self, "count")
         _positive(self, "speed_m_s", "spacing_m")
         _require(
             0 < self.max_turn_rad <= math.pi / 2,
@@ -233,9 +224,7 @@ class UAVConfig:
             "formation",
             f"must be one of {', '.join(FORMATIONS)}, got {self.formation!r}",
         )
-        _require(
-            isinstance(self.rows, int) and self.rows >= 1, "rows", f"must be >= 1, got {self.rows}"
-        )
+        _integer(self, "rows")
         _require(len(self.center_m) == 2, "center_m", "must be [x, y]")
         _require(
             self.target_x_m > self.center_m[0],
@@ -272,11 +261,7 @@ class ObstacleConfig:
     """Half-width of the uniform random perturbation of the heading toward the swarm, rad."""
 
     def __post_init__(self) -> None:
-        _require(
-            isinstance(self.count, int) and self.count >= 0,
-            "count",
-            f"must be an integer >= 0, got {self.count!r}",
-        )
+        _integer(self, "count", minimum=0)
         _non_negative(self, "speed_m_s", "spacing_m", "lateral_jitter_m", "heading_jitter_rad")
         _require(
             self.heading_jitter_rad <= math.pi,
@@ -305,11 +290,7 @@ class SensingConfig:
             "aperture_rad",
             f"must be in (0, 2π], got {self.aperture_rad!r}",
         )
-        _require(
-            isinstance(self.max_obstacles, int) and self.max_obstacles >= 1,
-            "max_obstacles",
-            f"must be an integer >= 1, got {self.max_obstacles!r}",
-        )
+        _integer(self, "max_obstacles")
 
 
 @dataclass(frozen=True)
@@ -351,21 +332,13 @@ class ScenarioConfig:
 
     def __post_init__(self) -> None:
         _positive(self, "arena_length_m", "arena_width_m", "dt_s", "d_col_m")
-        _require(
-            isinstance(self.substeps, int) and self.substeps >= 1,
-            "substeps",
-            f"must be an integer >= 1, got {self.substeps!r}",
-        )
+        _integer(self, "substeps")
         _require(
             self.substeps % self.reward.quadrature_intervals == 0,
             "reward.quadrature_intervals",
             f"must divide substeps ({self.substeps}), got {self.reward.quadrature_intervals}",
         )
-        _require(
-            isinstance(self.max_steps, int) and self.max_steps >= 1,
-            "max_steps",
-            f"must be an integer >= 1, got {self.max_steps!r}",
-        )
+        _integer(self, "max_steps")
         _require(
             self.uav.target_x_m <= self.arena_length_m,
             "uav.target_x_m",

@@ -30,11 +30,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from sim.arrays import BoolArray, FloatArray
 from sim.config import FieldConfig, RewardConfig
 from sim.field import FieldSources, peak_gradient, potential_and_gradient_xy
-
-FloatArray = NDArray[np.float64]
-BoolArray = NDArray[np.bool_]
 
 GRADIENT_FLOOR = 1e-12
 """|∇Φ| below this, in 1/(m²·s), counts as a flat field: no level-set edge there."""
@@ -157,15 +155,7 @@ def external_density(
     field_cfg: FieldConfig,
     reward_cfg: RewardConfig,
 ) -> FloatArray:
-    """Edge density e(q) ∈ [0, 1] at points (B, *P, 2) for the configured external term.
-
-    Args:
-        points_m: (B, *P, 2).
-        levels: φ_i broadcastable to (B, *P), required by "level-edge".
-
-    Returns:
-        (B, *P) densities.
-    """
+    """`external_density_xy` at points given as one array ``points_m`` (B, *P, 2)."""
     return external_density_xy(
         points_m[..., 0], points_m[..., 1], levels, src, field_cfg, reward_cfg
     )

@@ -4,13 +4,16 @@ A policy here is any function from flat observations (B, N, D) to normalised act
 the DDPG actors, the numpy inference of an exported policy file, a baseline or a heuristic.
 A planner that needs the whole simulator state (the E2Coop meta-heuristic) sets the attribute
 ``uses_state = True`` and is called as ``act(obs, state)``.
+
+Held-out episodes come from `evaluation_seed`, the one place that says which seeds an
+evaluation uses.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -19,6 +22,46 @@ from sim.config import ScenarioConfig
 from sim.env import make_vector_env
 
 ActFn = Callable[[NDArray[np.float32]], NDArray[np.float32]]
+
+EvaluationSuite = Literal["run", "training", "zoo", "ablation"]
+
+EVALUATION_SEED_BASES: Mapping[EvaluationSuite, int] = {
+    "training": 1_000_003,
+    "run": 2_000_000,
+    "zoo": 5_000_000,
+    "ablation": 7_000_000,
+}
+"""First evaluation seed of each suite of evaluations (see `evaluation_seed`)."""
+
+RUN_SEED_STRIDE = 1_000
+"""Evaluation seeds of runs whose seeds differ by one lie this far apart."""
+
+
+def evaluation_seed(run_seed: int = 0, *, suite: EvaluationSuite = "run", offset: int = 0) -> int:
+    """The seed of an evaluation's episodes: the suite's base + 1000·run_seed + offset.
+
+    `run_episodes` draws every episode of an evaluation from one generator seeded with this
+    number. Training seeds its environments with the run seed (plus the step count on a resumed
+    run): small integers, so a run's evaluation episodes are never episodes it trained on. Each
+    suite starts its own range, so its published figures never share episodes with another's:
+
+    * ``"run"``: the evaluation of a finished run — `remarl-fc eval` (run seed 0),
+      `remarl-fc compare` and every method's final evaluation (the run's own seed);
+    * ``"training"``: the evaluations during DDPG training that choose ``best.safetensors``
+      (``offset``: the vectorised step; the same episodes whatever the run seed);
+    * ``"zoo"``: the zoo's published ``.eval.json`` (`tools/train_zoo.py`);
+    * ``"ablation"``: `tools/ablation.py`.
+
+    >>> evaluation_seed()  # remarl-fc eval
+    2000000
+    >>> evaluation_seed(2)  # a compare cell with seed 2
+    2002000
+    >>> evaluation_seed(suite="training", offset=4_000)
+    1004003
+    >>> evaluation_seed(suite="zoo")
+    5000000
+    """
+    return EVALUATION_SEED_BASES[suite] + RUN_SEED_STRIDE * run_seed + offset
 
 
 def run_episodes(

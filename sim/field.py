@@ -24,12 +24,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import NDArray
 
+from sim.arrays import BoolArray, FloatArray
 from sim.config import FieldConfig
-
-FloatArray = NDArray[np.float64]
-BoolArray = NDArray[np.bool_]
 
 GRADIENT_EXPONENT = 2.0
 """Exponent of the inverse-square law of Eq. obstaclefield/swarmfield (|∇(1/d²)| = 2/d³)."""

@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-FloatArray = NDArray[np.float64]
+from sim.arrays import FloatArray
 
 SINC_SERIES_BELOW = 1e-3
 """|x| below which sin(x)/x is evaluated as 1 − x²/6 (error < 1e-13)."""
@@ -29,6 +29,19 @@ def scale_action(action: FloatArray, max_turn_rad: float) -> FloatArray:
     [-0.7854, 0.3927]
     """
     return np.clip(action, -1.0, 1.0) * max_turn_rad
+
+
+def heading_velocity(heading_rad: NDArray[Any], speed_m_s: float | NDArray[Any]) -> FloatArray:
+    """Velocity (..., 2) of flight at ``speed_m_s`` along ``heading_rad`` (...), m/s.
+
+    The velocity every UAV and obstacle has in the simulator, and the one the flight runtime
+    gives the observation builder.
+
+    >>> heading_velocity(np.array([0.0, np.pi / 2]), 10.0).round(6).tolist()
+    [[10.0, 0.0], [0.0, 10.0]]
+    """
+    velocity: FloatArray = speed_m_s * np.stack([np.cos(heading_rad), np.sin(heading_rad)], axis=-1)
+    return velocity
 
 
 def wrap_angle(angle_rad: FloatArray) -> FloatArray:

@@ -17,8 +17,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-FloatArray = NDArray[np.float64]
-BoolArray = NDArray[np.bool_]
+from sim.arrays import BoolArray, FloatArray
 
 SUBSTEPS = 8
 """Default T, sub-intervals per step of the swept distance checks (chord error ≤ L·|a|/(8T²));

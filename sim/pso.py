@@ -31,12 +31,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import NDArray
 
+from sim.arrays import BoolArray, FloatArray
 from sim.config import PSOConfig
-
-FloatArray = NDArray[np.float64]
-BoolArray = NDArray[np.bool_]
 
 INFEASIBLE_COST = 1e9
 """Cost offset of a particle that violates d̄_U2U, metres; larger than any feasible cost."""

@@ -1,5 +1,10 @@
 """Pictures of a simulator state: the field's contours, UAVs, obstacles, targets and trails.
 
+`draw_state` draws one environment of a `SwarmState` (the ``rgb_array`` frames of `sim.env`,
+`remarl-fc rollout`, `remarl-fc eval --plot`); the ``draw_*`` helpers it is made of are the
+one drawing code of every scenario picture (`remarl-fc field` draws with them too), each
+taking its style as keyword arguments passed on to matplotlib.
+
 matplotlib is imported when a picture is drawn, not when this module is imported, and only its
 object-oriented API is used (no pyplot global state), with the Agg canvas.
 """
@@ -11,12 +16,149 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from sim.arrays import BoolArray, FloatArray
 from sim.config import ScenarioConfig
 from sim.field import FieldSources, potential
-from sim.swarm import SwarmState
+from sim.state import SwarmState
 
 RASTER_POINTS = 120
 """Field raster resolution (points per side) of a rendered frame."""
+
+OBSTACLE_COLOUR = "tab:red"
+"""Colour of the obstacles, their velocity arrows and collision circles."""
+
+
+def uav_colours(n: int) -> FloatArray:
+    """(N, 4) RGBA colours of N UAVs (matplotlib's tab10 cycle), the same in every picture."""
+    from matplotlib import colormaps
+
+    return np.asarray(colormaps["tab10"](np.arange(n) % 10))
+
+
+def draw_log_image(
+    ax: Any,
+    values: FloatArray,
+    extent: tuple[float, float, float, float],
+    *,
+    cmap: str,
+    low_percentile: float,
+    **style: Any,
+) -> Any:
+    """A field raster (Y, X) on a log colour scale, blank where it is not positive.
+
+    The scale runs from the ``low_percentile`` of the positive values to their maximum.
+
+    Returns:
+        The image (for a colour bar), or None when no value is positive (nothing drawn).
+    """
+    from matplotlib.colors import LogNorm
+
+    positive = values[values > 0]
+    if not positive.size:
+        return None
+    return ax.imshow(
+        np.where(values > 0, values, np.nan),
+        origin="lower",
+        extent=extent,
+        cmap=cmap,
+        norm=LogNorm(
+            vmin=float(np.percentile(positive, low_percentile)), vmax=float(positive.max())
+        ),
+        **style,
+    )
+
+
+def draw_contours(
+    ax: Any,
+    xs_m: FloatArray,
+    ys_m: FloatArray,
+    phi: FloatArray,
+    levels: FloatArray,
+    colours: FloatArray,
+    **style: Any,
+) -> None:
+    """Each UAV's own contour Φ = φ_i of the raster ``phi`` (Y, X), in the given order.
+
+    Levels that are not positive (no contour) are skipped.
+    """
+    for level, colour in zip(levels, colours, strict=True):
+        if level > 0:
+            ax.contour(xs_m, ys_m, phi, levels=[level], colors=[colour], **style)
+
+
+def draw_targets(ax: Any, targets_m: FloatArray, *, colour: str, size: float, **style: Any) -> None:
+    """The UAVs' targets (N, 2) as crosses."""
+    ax.scatter(targets_m[:, 0], targets_m[:, 1], marker="x", color=colour, s=size, **style)
+
+
+def draw_uavs(
+    ax: Any, pos_m: FloatArray, colours: FloatArray, *, marker: str, size: float, **style: Any
+) -> None:
+    """UAVs (N, 2) as markers in their colours, edged in black."""
+    ax.scatter(
+        pos_m[:, 0], pos_m[:, 1], marker=marker, c=colours, s=size, edgecolors="black", **style
+    )
+
+
+def draw_headings(
+    ax: Any,
+    pos_m: FloatArray,
+    heading_rad: FloatArray,
+    colours: FloatArray,
+    *,
+    scale: float,
+    width: float,
+    **style: Any,
+) -> None:
+    """A unit arrow along each UAV's heading (N,) from its position (N, 2)."""
+    ax.quiver(
+        pos_m[:, 0],
+        pos_m[:, 1],
+        np.cos(heading_rad),
+        np.sin(heading_rad),
+        color=colours,
+        scale=scale,
+        width=width,
+        **style,
+    )
+
+
+def draw_obstacles(ax: Any, pos_m: FloatArray, *, size: float, **style: Any) -> None:
+    """Obstacles (M, 2) as red squares."""
+    ax.scatter(
+        pos_m[:, 0], pos_m[:, 1], marker="s", color=OBSTACLE_COLOUR, s=size, zorder=5, **style
+    )
+
+
+def draw_velocities(
+    ax: Any, pos_m: FloatArray, vel_m_s: FloatArray, *, scale: float, width: float
+) -> None:
+    """The obstacles' velocity arrows (M, 2) from their positions (M, 2)."""
+    ax.quiver(
+        pos_m[:, 0],
+        pos_m[:, 1],
+        vel_m_s[:, 0],
+        vel_m_s[:, 1],
+        color=OBSTACLE_COLOUR,
+        scale=scale,
+        width=width,
+    )
+
+
+def draw_centre(
+    ax: Any, centre_m: FloatArray, *, colour: str, size: float, lw: float, **style: Any
+) -> None:
+    """The virtual centre p* (2,) as an open circle."""
+    ax.scatter(
+        *centre_m,
+        marker="o",
+        facecolors="none",
+        edgecolors=colour,
+        s=size,
+        lw=lw,
+        zorder=5,
+        **style,
+    )
 
 
 def draw_state(
@@ -27,8 +169,6 @@ def draw_state(
     Args:
         trail_m: (T, N, 2) past UAV positions, oldest first (may be empty).
     """
-    from matplotlib.colors import LogNorm
-
     xs = np.linspace(0.0, cfg.arena_length_m, RASTER_POINTS)
     ys = np.linspace(0.0, cfg.arena_width_m, RASTER_POINTS)
     grid = np.stack(np.meshgrid(xs, ys), axis=-1)[None]
@@ -39,71 +179,28 @@ def draw_state(
         cfg.uav.speed_m_s,
     )
     phi = potential(grid, src, cfg.field)[0]
-    positive = phi[phi > 0]
-    if positive.size:
-        ax.imshow(
-            np.where(phi > 0, phi, np.nan),
-            origin="lower",
-            extent=(0, cfg.arena_length_m, 0, cfg.arena_width_m),
-            cmap="Blues",
-            norm=LogNorm(vmin=float(np.percentile(positive, 2)), vmax=float(positive.max())),
-            alpha=0.75,
-        )
+    extent = (0.0, cfg.arena_length_m, 0.0, cfg.arena_width_m)
+    draw_log_image(ax, phi, extent, cmap="Blues", low_percentile=2, alpha=0.75)
     n = state.pos_m.shape[1]
-    colours = _colours(n)
-    levels = state.levels[env]
-    for k in np.argsort(levels):
-        if levels[k] > 0:
-            ax.contour(
-                xs,
-                ys,
-                phi,
-                levels=[levels[k]],
-                colors=[colours[k]],
-                linewidths=0.8,
-                linestyles="--",
-            )
+    colours = uav_colours(n)
+    order = np.argsort(state.levels[env])
+    draw_contours(
+        ax, xs, ys, phi, state.levels[env][order], colours[order], linewidths=0.8, linestyles="--"
+    )
     if len(trail_m) > 1:
         for k in range(n):
             ax.plot(trail_m[:, k, 0], trail_m[:, k, 1], color=colours[k], lw=1.6)
-    target = state.target_m[env]
-    ax.scatter(target[:, 0], target[:, 1], marker="x", color="0.4", s=25)
+    draw_targets(ax, state.target_m[env], colour="0.4", size=25)
     pos, head = state.pos_m[env], state.heading_rad[env]
-    alive = state.active[env] | ~state.reached[env]
-    ax.scatter(
-        pos[alive, 0],
-        pos[alive, 1],
-        marker="o",
-        c=colours[alive],
-        s=30,
-        zorder=5,
-        edgecolors="black",
-        linewidths=0.6,
-    )
-    ax.quiver(
-        pos[:, 0],
-        pos[:, 1],
-        np.cos(head),
-        np.sin(head),
-        color=colours,
-        scale=30,
-        width=0.005,
-        zorder=6,
-    )
+    alive: BoolArray = state.active[env] | ~state.reached[env]
+    draw_uavs(ax, pos[alive], colours[alive], marker="o", size=30, zorder=5, linewidths=0.6)
+    draw_headings(ax, pos, head, colours, scale=30, width=0.005, zorder=6)
     for ob, vel in zip(state.obstacle_pos_m[env], state.obstacle_vel_m_s[env], strict=True):
-        ax.add_patch(_circle(ob, cfg.d_col_m, "tab:red"))
-        ax.scatter(*ob, marker="s", color="tab:red", s=35, zorder=5)
+        ax.add_patch(_circle(ob, cfg.d_col_m, OBSTACLE_COLOUR))
+        draw_obstacles(ax, ob[None], size=35)
         if np.any(vel):
-            ax.quiver(*ob, *vel, color="tab:red", scale=30, width=0.005)
-    ax.scatter(
-        *state.centre_m[env],
-        marker="o",
-        facecolors="none",
-        edgecolors="tab:purple",
-        s=60,
-        lw=1.4,
-        zorder=5,
-    )
+            draw_velocities(ax, ob[None], vel[None], scale=30, width=0.005)
+    draw_centre(ax, state.centre_m[env], colour="tab:purple", size=60, lw=1.4)
     ax.set_xlim(0, cfg.arena_length_m)
     ax.set_ylim(0, cfg.arena_width_m)
     ax.set_aspect("equal")
@@ -125,12 +222,6 @@ def render_frame(
     canvas.draw()  # type: ignore[no-untyped-call]
     rgba = np.asarray(canvas.buffer_rgba())  # type: ignore[no-untyped-call]
     return rgba[..., :3].copy()
-
-
-def _colours(n: int) -> NDArray[np.float64]:
-    from matplotlib import colormaps
-
-    return np.asarray(colormaps["tab10"](np.arange(n) % 10))
 
 
 def _circle(centre: NDArray[np.float64], radius: float, colour: str) -> Any:

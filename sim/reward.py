@@ -15,15 +15,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import NDArray
 
+from sim.arrays import BoolArray, FloatArray
 from sim.config import FieldConfig, PSOConfig, RewardConfig
 from sim.contour import ArcWindow, window_terms
 from sim.field import FieldSources, potential
 from sim.pso import PSOResult, pso_separate
-
-FloatArray = NDArray[np.float64]
-BoolArray = NDArray[np.bool_]
 
 
 @dataclass(frozen=True)

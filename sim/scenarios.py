@@ -30,28 +30,17 @@ from typing import Any, get_args, get_origin, get_type_hints
 
 import numpy as np
 
-from sim.config import (
-    FieldConfig,
-    FieldValueError,
-    ObstacleConfig,
-    PSOConfig,
-    RewardConfig,
-    ScenarioConfig,
-    SensingConfig,
-    UAVConfig,
-)
+from sim.config import FieldValueError, ScenarioConfig
 from sim.errors import ScenarioError
 from sim.spawn import SPAWN_SPACING_FACTOR, min_pairwise_distance, swarm_layout
 
 SECTIONS: dict[str, type[Any]] = {
-    "uav": UAVConfig,
-    "obstacles": ObstacleConfig,
-    "sensing": SensingConfig,
-    "field": FieldConfig,
-    "reward": RewardConfig,
-    "pso": PSOConfig,
+    name: hint
+    for name, hint in get_type_hints(ScenarioConfig).items()
+    if isinstance(hint, type) and dataclasses.is_dataclass(hint)
 }
-"""Scenario file sections and the dataclass each one fills."""
+"""Scenario file sections and the dataclass each one fills: the dataclass fields of
+`ScenarioConfig` (``uav``, ``obstacles``, ``sensing``, ``field``, ``reward``, ``pso``)."""
 
 _RAD, _DEG = "_rad", "_deg"
 

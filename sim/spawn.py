@@ -10,12 +10,11 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import NDArray
 
+from sim.arrays import FloatArray
 from sim.config import ObstacleConfig, ScenarioConfig, UAVConfig
 from sim.field import FieldSources
-
-FloatArray = NDArray[np.float64]
+from sim.kinematics import heading_velocity
 
 SPAWN_SPACING_FACTOR = 1.5
 """Minimum spawn distance between two UAVs, in units of d_col (SPEC §3)."""
@@ -160,8 +159,7 @@ def spawn_obstacles(
     to_swarm = aim - pos  # (B, M, 2)
     heading = np.arctan2(to_swarm[..., 1], to_swarm[..., 0])
     heading += rng.uniform(-o.heading_jitter_rad, o.heading_jitter_rad, size=heading.shape)
-    vel = o.speed_m_s * np.stack([np.cos(heading), np.sin(heading)], axis=-1)  # (B, M, 2)
-    return pos, vel
+    return pos, heading_velocity(heading, o.speed_m_s)  # (B, M, 2) each
 
 
 def initial_sources(

@@ -2,9 +2,11 @@
 
 import math
 
+import numpy as np
 import pytest
 
 from sim.config import PSOConfig, RewardConfig
+from sim.contour import ArcWindow
 from sim.scenarios import load_scenario, scenario_names
 
 PAPER = ["2u1o", "3u1o", "5u1o", "7u1o", "10u1o", "3u2o", "5u2o", "7u2o"]
@@ -38,5 +40,11 @@ def test_pso_threshold_and_budget():
 
 def test_reward_window_includes_the_new_arc_and_default_external_term():
     reward = RewardConfig()
-    assert reward.window_steps >= 2
+    assert reward.window_steps == 3  # K = 3 decision steps, 60 m (docs/MODEL.md)
+    assert reward.window_steps * load_scenario("3u2o").step_length_m == 60.0
+    # the window of a step holds the arc of the action just taken, newest last
+    window = ArcWindow.empty(1, 1, reward.window_steps)
+    window = window.push(np.array([[0.3]]), np.array([[0.5]]), np.array([[True]]))
+    np.testing.assert_array_equal(window.turn_rad[0, 0], [0.0, 0.0, 0.3])
+    np.testing.assert_array_equal(window.valid[0, 0], [False, False, True])
     assert reward.external == "level-edge"

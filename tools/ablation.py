@@ -17,8 +17,9 @@ from pathlib import Path
 from policies.config import TrainConfig
 from policies.train import train
 from remarl_fc.offline.evaluate import evaluate_policy
+from sim.evaluation import evaluation_seed
 
-EVAL_SEED = 7_000_000
+EVAL_SEED = evaluation_seed(suite="ablation")
 
 
 def main() -> None:

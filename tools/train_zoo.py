@@ -19,10 +19,11 @@ from policies.config import DDPGConfig, TrainConfig
 from policies.export import export_policy
 from policies.train import train
 from remarl_fc.offline.evaluate import evaluate_policy
+from sim.evaluation import evaluation_seed
 
 ZOO = Path(__file__).resolve().parents[1] / "policies" / "zoo"
 PAPER = ["2u1o", "3u1o", "5u1o", "7u1o", "10u1o", "3u2o", "5u2o", "7u2o"]
-EVAL_SEED = 5_000_000
+EVAL_SEED = evaluation_seed(suite="zoo")
 
 
 def main() -> None:

@@ -24,6 +24,7 @@ from remarl_fc.cli.common import (
     progress_bar,
 )
 from remarl_fc.errors import ConfigError
+from sim.evaluation import evaluation_seed
 
 
 def add_train(sub: Any) -> None:
@@ -54,7 +55,7 @@ def add_eval(sub: Any) -> None:
     p.add_argument("--policy", required=True, help="zoo name (e.g. 3u2o) or .safetensors path")
     p.add_argument("--scenario", default=None, help="default: the policy's own scenario")
     p.add_argument("--episodes", type=positive_int, default=1000)
-    add_seed(p, default=2_000_000, help="first evaluation seed")
+    add_seed(p, default=evaluation_seed(), help="first evaluation seed")
     p.add_argument("--plot", default=None, help="also draw one episode and its Q-values here")
     finish(p, cmd_eval)
 

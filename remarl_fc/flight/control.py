@@ -21,6 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from remarl_fc.frames import heading_to_yaw, ne_to_sim, sim_to_ne
+from sim.kinematics import heading_velocity
 from sim.observation import ObservationLayout, build_observations
 from sim.spawn import virtual_centre_and_velocity
 
@@ -153,7 +154,7 @@ class SwarmController:
         heading = self.heading_at(now)
         pos = ne_to_sim(np.asarray(positions_ne_m, dtype=np.float64))
         pos = np.where(np.isfinite(pos), pos, 0.0)
-        vel = self.spec.speed_m_s * np.stack([np.cos(heading), np.sin(heading)], axis=-1)
+        vel = heading_velocity(heading, self.spec.speed_m_s)
         obs_xy = ne_to_sim(np.asarray(obstacles_ne_m, dtype=np.float64).reshape(-1, 2))
         obs_v = ne_to_sim(np.asarray(obstacle_vel_ne_m_s, dtype=np.float64).reshape(-1, 2))
         built = build_observations(

@@ -11,14 +11,23 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
+from sim.arrays import FloatArray
 from sim.config import ScenarioConfig
 from sim.field import potential_and_gradient
+from sim.render import (
+    draw_centre,
+    draw_contours,
+    draw_headings,
+    draw_log_image,
+    draw_obstacles,
+    draw_targets,
+    draw_uavs,
+    draw_velocities,
+    uav_colours,
+)
 from sim.reward import assign_contour_levels
 from sim.spawn import initial_sources, swarm_layout
-
-FloatArray = NDArray[np.float64]
 
 GRID_STEP_M = 1.5
 """Resolution of the field raster, metres."""
@@ -85,7 +94,6 @@ def draw_field(cfg: ScenarioConfig, out: Path, seed: int = 0) -> FieldSnapshot:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from matplotlib.colors import LogNorm
 
     snap = field_snapshot(cfg, seed)
     fig, axes = plt.subplots(1, 2, figsize=(13, 5.6), constrained_layout=True)
@@ -94,19 +102,11 @@ def draw_field(cfg: ScenarioConfig, out: Path, seed: int = 0) -> FieldSnapshot:
         (axes[0], snap.phi, "Φ  [1/(m·s)]", "potential field Φ and the UAVs' contours"),
         (axes[1], snap.grad_norm, "|∇Φ|  [1/(m²·s)]", "field gradient |∇Φ| (edges)"),
     ]
-    colours = plt.get_cmap("tab10")(np.arange(len(snap.uav_m)) % 10)
+    colours = uav_colours(len(snap.uav_m))
     for ax, img, label, title in panels:
-        positive = img[img > 0]
-        lo = float(np.percentile(positive, 1)) if positive.size else 1e-9
-        shown = np.where(img > 0, img, np.nan)
-        mesh = ax.imshow(
-            shown,
-            origin="lower",
-            extent=extent,
-            cmap="viridis",
-            norm=LogNorm(vmin=lo, vmax=float(np.nanmax(shown)) if positive.size else 1.0),
-        )
-        fig.colorbar(mesh, ax=ax, label=label, shrink=0.85)
+        mesh = draw_log_image(ax, img, extent, cmap="viridis", low_percentile=1)
+        if mesh is not None:
+            fig.colorbar(mesh, ax=ax, label=label, shrink=0.85)
         _draw_agents(ax, snap, colours, with_contours=ax is axes[0])
         ax.set_title(f"{cfg.name}: {title}")
         ax.set_xlabel("x  [m]  (direction of flight)")
@@ -125,45 +125,13 @@ def draw_field(cfg: ScenarioConfig, out: Path, seed: int = 0) -> FieldSnapshot:
 
 def _draw_agents(ax: Any, snap: FieldSnapshot, colours: FloatArray, *, with_contours: bool) -> None:
     if with_contours:
-        for level, colour in zip(snap.levels, colours, strict=True):
-            if level > 0:
-                ax.contour(
-                    snap.xs_m, snap.ys_m, snap.phi, levels=[level], colors=[colour], linewidths=1.4
-                )
+        draw_contours(ax, snap.xs_m, snap.ys_m, snap.phi, snap.levels, colours, linewidths=1.4)
     for (x0, y0), (x1, y1) in zip(snap.uav_m, snap.targets_m, strict=True):
         ax.plot([x0, x1], [y0, y1], ls=":", color="0.85", lw=0.8)
-    ax.scatter(*snap.targets_m.T, marker="x", color="0.85", s=30, label="targets")
-    ax.scatter(
-        *snap.uav_m.T, marker="^", c=colours, edgecolors="black", s=80, zorder=6, label="UAVs"
-    )
-    ax.quiver(
-        *snap.uav_m.T,
-        np.cos(snap.headings_rad),
-        np.sin(snap.headings_rad),
-        color=colours,
-        scale=25,
-        width=0.004,
-    )
-    ax.scatter(
-        *snap.obstacle_m.T,
-        marker="s",
-        color="tab:red",
-        edgecolors="white",
-        s=70,
-        zorder=5,
-        label="obstacles",
-    )
+    draw_targets(ax, snap.targets_m, colour="0.85", size=30, label="targets")
+    draw_uavs(ax, snap.uav_m, colours, marker="^", size=80, zorder=6, label="UAVs")
+    draw_headings(ax, snap.uav_m, snap.headings_rad, colours, scale=25, width=0.004)
+    draw_obstacles(ax, snap.obstacle_m, size=70, edgecolors="white", label="obstacles")
     if len(snap.obstacle_m):
-        ax.quiver(
-            *snap.obstacle_m.T, *snap.obstacle_vel_m_s.T, color="tab:red", scale=25, width=0.004
-        )
-    ax.scatter(
-        *snap.centre_m,
-        marker="o",
-        facecolors="none",
-        edgecolors="white",
-        s=90,
-        lw=1.5,
-        zorder=5,
-        label="virtual centre p*",
-    )
+        draw_velocities(ax, snap.obstacle_m, snap.obstacle_vel_m_s, scale=25, width=0.004)
+    draw_centre(ax, snap.centre_m, colour="white", size=90, lw=1.5, label="virtual centre p*")

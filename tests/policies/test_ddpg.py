@@ -1,10 +1,11 @@
 import numpy as np
 import pytest
-import torch
 
-from policies.buffer import ReplayBuffer
-from policies.config import DDPGConfig, TrainConfig
-from policies.ddpg import Actor, Critic, DDPGNets, ddpg_update, soft_update
+torch = pytest.importorskip("torch", reason="needs the train extra: pip install 'remarl-fc[train]'")
+
+from policies.buffer import ReplayBuffer  # noqa: E402 - after the skip
+from policies.config import DDPGConfig, TrainConfig  # noqa: E402
+from policies.ddpg import Actor, Critic, DDPGNets, ddpg_update, soft_update  # noqa: E402
 
 
 def test_networks_are_the_papers_and_agents_are_independent():

@@ -5,6 +5,8 @@ import json
 import numpy as np
 import pytest
 
+pytest.importorskip("torch", reason="needs the train extra: pip install 'remarl-fc[train]'")
+
 from policies.config import DDPGConfig, TrainConfig
 from policies.export import export_policy
 from policies.train import policy_actions
@@ -44,6 +46,7 @@ def trained(tmp_path_factory, static_2u1o):
     return out, summary
 
 
+@pytest.mark.slow  # the module's `trained` run: about 40 s on one core
 def test_learning_happens(trained, static_2u1o):
     out, summary = trained
     evals = [json.loads(line) for line in (out / "evals.jsonl").read_text().splitlines()]
@@ -56,6 +59,7 @@ def test_learning_happens(trained, static_2u1o):
     assert summary["best_success"] > before["success_rate"] + 0.5
 
 
+@pytest.mark.slow  # the module's `trained` run: about 40 s on one core
 def test_export_load_and_numpy_matches_torch(trained, tmp_path, static_2u1o):
     import torch
 
@@ -85,6 +89,7 @@ def test_export_load_and_numpy_matches_torch(trained, tmp_path, static_2u1o):
     np.testing.assert_allclose(policy.q_values(obs, torch_actions), q_torch, atol=1e-4)
 
 
+@pytest.mark.slow  # the module's `trained` run: about 40 s on one core
 def test_resume_continues_from_the_checkpoint(trained, tmp_path, static_2u1o):
     import shutil
 
@@ -100,6 +105,7 @@ def test_resume_continues_from_the_checkpoint(trained, tmp_path, static_2u1o):
     assert resumed["steps"] == 950  # started from step 900, not from 0
 
 
+@pytest.mark.slow  # the module's `trained` run: about 40 s on one core
 def test_bad_policy_files_are_clear_errors(tmp_path, trained):
     with pytest.raises(PolicyError, match="no such policy file"):
         load_policy(tmp_path / "absent.safetensors")

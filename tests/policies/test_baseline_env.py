@@ -9,15 +9,10 @@ import numpy as np
 import pytest
 from gymnasium import spaces
 
-from policies.benchmarl_task import (
-    INSTALL_HINT,
-    BaselinesNotInstalledError,
-    EpisodeLog,
-    SwarmBaselineEnv,
-    heading_actions,
-    train_benchmarl,
-)
-from sim.env import agent_spaces, make_vector_env
+from policies.baseline_env import EpisodeLog, SwarmBaselineEnv
+from policies.benchmarl_train import INSTALL_HINT, BaselinesNotInstalledError, train_benchmarl
+from policies.common import heading_actions
+from sim.env import SwarmParallelEnv, agent_spaces, make_vector_env
 from sim.errors import ConfigError
 from sim.observation import CLIP
 from sim.scenarios import load_scenario
@@ -34,26 +29,11 @@ def fly_straight(env):
     return steps
 
 
-def test_heading_sets():
-    eleven = heading_actions()
-    assert len(eleven) == 11
-    assert eleven[0] == -1.0
-    assert eleven[-1] == 1.0
-    assert 0.0 in eleven
-    ten = heading_actions(10)
-    assert len(ten) == 10
-    assert 0.0 not in ten
-    assert np.allclose(np.diff(ten) * 45.0, 10.0)  # the paper's literal grid: 10° apart
-    for bad in (1, 0, 2.5, True):
-        with pytest.raises(ConfigError, match="n_actions"):
-            heading_actions(bad)
-
-
-def test_heading_set_is_comas():
-    from policies.coma import heading_actions as coma_headings
-
-    for n in (10, 11):
-        np.testing.assert_array_equal(heading_actions(n), coma_headings(n))
+def test_is_the_parallel_env_with_discrete_headings_and_the_swarming_reward():
+    env = SwarmBaselineEnv("3u1o")
+    assert isinstance(env, SwarmParallelEnv)
+    assert env._vec.reward_mode == "swarming"
+    np.testing.assert_array_equal(env.headings, heading_actions(11))
 
 
 def test_spaces():
@@ -218,12 +198,19 @@ def test_bad_arguments_are_config_errors(tmp_path):
         train_benchmarl("iql", "3u1o", 100, 0, tmp_path, n_actions=1)
 
 
-def test_module_imports_without_benchmarl():
+def test_modules_import_without_benchmarl_and_the_task_says_what_is_missing():
     code = (
         "import sys\n"
         "sys.modules['benchmarl'] = None\n"
         "sys.modules['torchrl'] = None\n"
-        "import policies.benchmarl_task\n"
+        "import policies.baseline_env, policies.benchmarl_train, policies.compare\n"
         "assert 'tensordict' not in sys.modules\n"
+        "from policies.benchmarl_train import BaselinesNotInstalledError\n"
+        "try:\n"
+        "    import policies.benchmarl_task\n"
+        "except BaselinesNotInstalledError as exc:\n"
+        "    assert 'remarl-fc[baselines]' in str(exc), exc\n"
+        "else:\n"
+        "    raise SystemExit('policies.benchmarl_task imported without BenchMARL')\n"
     )
     subprocess.run([sys.executable, "-c", code], check=True)

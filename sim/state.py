@@ -1,0 +1,158 @@
+"""The simulator's state and what one step produces: typed dataclasses of arrays, batch first.
+
+`SwarmState` holds everything the simulator knows about B environments; `StepResult` what one
+step of `sim.swarm.SwarmSim` produced; `EpisodeStats` the per-episode accumulators behind the
+metrics. All are frozen: a step returns new ones (`dataclasses.replace`), and `merge_where`
+replaces the environments a partial reset restarts.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import TypeVar
+
+import numpy as np
+
+from sim.arrays import BoolArray, FloatArray, IntArray
+from sim.contour import ArcWindow
+from sim.field import FieldSources
+from sim.observation import Observations
+from sim.reward import RewardTerms
+
+T = TypeVar("T")
+
+
+@dataclass(frozen=True)
+class EpisodeStats:
+    """Per-episode accumulators behind the metrics (SPEC §9), reset with the episode.
+
+    Attributes:
+        energy_rad: (B, N) Σ|a| flown so far (E = ∫|S''| dρ on arcs).
+        flown_m: (B, N) distance flown so far.
+        min_u2o_m: (B,) smallest swept UAV–obstacle distance so far (+inf if none).
+        min_u2u_m: (B,) smallest swept UAV–UAV distance so far (+inf if none).
+        swarming_return: (B, N) Σ of the Swarming part of the reward.
+        total_return: (B, N) Σ of the full reMARL reward.
+    """
+
+    energy_rad: FloatArray
+    flown_m: FloatArray
+    min_u2o_m: FloatArray
+    min_u2u_m: FloatArray
+    swarming_return: FloatArray
+    total_return: FloatArray
+
+    @classmethod
+    def fresh(cls, b: int, n: int) -> EpisodeStats:
+        """Accumulators of B new episodes of N UAVs (nothing flown, no approach yet)."""
+        return cls(
+            energy_rad=np.zeros((b, n)),
+            flown_m=np.zeros((b, n)),
+            min_u2o_m=np.full(b, np.inf),
+            min_u2u_m=np.full(b, np.inf),
+            swarming_return=np.zeros((b, n)),
+            total_return=np.zeros((b, n)),
+        )
+
+
+@dataclass(frozen=True)
+class SwarmState:
+    """Everything the simulator knows about B environments, batch first.
+
+    Attributes:
+        pos_m: (B, N, 2) UAV positions.  heading_rad: (B, N).
+        active: (B, N) UAVs still flying (not arrived; the episode is not over).
+        reached: (B, N) UAVs that arrived at their target.
+        start_m: (B, N, 2) spawn positions.  target_m: (B, N, 2).
+        obstacle_pos_m, obstacle_vel_m_s: (B, M, 2).  obstacle_speed_m_s: (B, M).
+        centre_m: (B, 2) virtual centre p*.  swarm_vel_m_s: (B, 2) its constant velocity.
+        levels: (B, N) contour levels φ_i.
+        avoiding: (B,) whether avoidance has begun (levels were reassigned for it).
+        window: the contour windows (B, N, K).
+        steps: (B,) decision steps taken in the current episode.
+        stats: the episode accumulators.
+    """
+
+    pos_m: FloatArray
+    heading_rad: FloatArray
+    active: BoolArray
+    reached: BoolArray
+    start_m: FloatArray
+    target_m: FloatArray
+    obstacle_pos_m: FloatArray
+    obstacle_vel_m_s: FloatArray
+    obstacle_speed_m_s: FloatArray
+    centre_m: FloatArray
+    swarm_vel_m_s: FloatArray
+    levels: FloatArray
+    avoiding: BoolArray
+    window: ArcWindow
+    steps: IntArray
+    stats: EpisodeStats
+
+    @property
+    def num_envs(self) -> int:
+        """B."""
+        return int(self.pos_m.shape[0])
+
+    def sources(self, swarm_speed_m_s: float, dt_s: float = 0.0) -> FieldSources:
+        """Field sources, optionally advanced by ``dt_s`` (obstacles and p* move straight)."""
+        return FieldSources(
+            obstacle_pos_m=self.obstacle_pos_m + dt_s * self.obstacle_vel_m_s,
+            obstacle_speed_m_s=self.obstacle_speed_m_s,
+            centre_m=self.centre_m + dt_s * self.swarm_vel_m_s,
+            swarm_speed_m_s=swarm_speed_m_s,
+        )
+
+
+@dataclass(frozen=True)
+class StepResult:
+    """What one step produced, batch first.
+
+    Attributes:
+        obs: observations after the step (for the next decision).
+        reward: every reward term, (B, N); zero for UAVs that did not fly this step.
+        acted: (B, N) UAVs that flew this step.
+        turn_rad: (B, N) the heading change flown.
+        collided_u2o, collided_u2u: (B, N) collisions during the step, by kind.
+        arrived: (B, N) UAVs that reached their target during this step.
+        min_u2o_m, min_u2u_m: (B, N) swept closest approach this step (+inf if none).
+        terminated: (B,) collision, or every UAV arrived.
+        truncated: (B,) step limit reached without termination.
+        success: (B,) every UAV arrived and nothing collided.
+        levels_assigned: (B,) contour levels were reassigned this step (avoidance began).
+    """
+
+    obs: Observations
+    reward: RewardTerms
+    acted: BoolArray
+    turn_rad: FloatArray
+    collided_u2o: BoolArray
+    collided_u2u: BoolArray
+    arrived: BoolArray
+    min_u2o_m: FloatArray
+    min_u2u_m: FloatArray
+    terminated: BoolArray
+    truncated: BoolArray
+    success: BoolArray
+    levels_assigned: BoolArray
+
+
+def merge_where(old: T, new: T, mask: BoolArray) -> T:
+    """``old`` with the environments selected by ``mask`` (B,) taken from ``new`` (count first).
+
+    Recursive over dataclasses of arrays (a `SwarmState`, its window and stats); anything else
+    is kept from ``old``.
+    """
+    if dataclasses.is_dataclass(old) and not isinstance(old, type):
+        fields = {
+            f.name: merge_where(getattr(old, f.name), getattr(new, f.name), mask)
+            for f in dataclasses.fields(old)
+        }
+        return dataclasses.replace(old, **fields)
+    if isinstance(old, np.ndarray):
+        out = old.copy()
+        out[mask] = new
+        return out
+    return old

@@ -1,0 +1,311 @@
+"""One transition of the swarm simulator, as pure batched functions (`sim.swarm.SwarmSim.step`).
+
+Each function is one stage of the step described in `sim.swarm`: `fly` (1: arcs and straight
+lines at the sub-step instants), `closest_approaches` (2: swept distances), `outcome` (3:
+collisions, arrivals, the end of episodes), `score` and `accumulate` (4: the contour windows,
+the reward and the episode accumulators), `begin_avoidance` (5: contour levels by PSO). None
+keeps state or loops over agents; arrays are batch first, sub-step samples time first.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Any, cast
+
+import numpy as np
+from numpy.typing import NDArray
+
+from sim.arrays import BoolArray, Float32Array, FloatArray, IntArray
+from sim.config import ScenarioConfig
+from sim.contour import ArcWindow, arc_external_xy
+from sim.field import FieldSources
+from sim.kinematics import sinc_series, wrap_angle
+from sim.metrics import swept_min_distance_xy
+from sim.observation import Observations
+from sim.reward import RewardTerms, assign_contour_levels, reward
+from sim.state import EpisodeStats, SwarmState
+
+
+def difference_operator(n: int, m: int) -> Float32Array:
+    """The difference operator of the swept checks, (N + M, N·M + P + N).
+
+    It maps [UAV, obstacle] coordinates to UAV i − obstacle k, UAV i − UAV j (i < j) and
+    UAV i itself (its target is subtracted afterwards).
+    """
+    i, j = np.triu_indices(n, k=1)
+    op = np.zeros((n + m, n * m + len(i) + n), dtype=np.float32)
+    col = np.arange(n * m)
+    op[col // m, col] = 1.0  # UAV of the UAV–obstacle pair
+    op[n + col % m, col] = -1.0  # obstacle of the pair
+    pairs = n * m + np.arange(len(i))
+    op[i, pairs], op[j, pairs] = 1.0, -1.0
+    own = n * m + len(i) + np.arange(n)
+    op[np.arange(n), own] = 1.0
+    return op
+
+
+@dataclass(frozen=True)
+class Flight:
+    """Where everything is during one step (step 1 of the module docstring).
+
+    Attributes:
+        uav_x, uav_y: (T + 1, B, N) UAV coordinates at the sub-step instants, float32, time
+            first (the grid of the swept checks and of the reward's quadrature).
+        obstacle_x, obstacle_y: (T + 1, B, M) obstacle coordinates at the same instants.
+        pos_m: (B, N, 2) UAV positions at the end of the step (float64).
+        heading_rad: (B, N) UAV headings at the end of the step.
+    """
+
+    uav_x: Float32Array
+    uav_y: Float32Array
+    obstacle_x: Float32Array
+    obstacle_y: Float32Array
+    pos_m: FloatArray
+    heading_rad: FloatArray
+
+
+def fly(
+    state: SwarmState,
+    turn: FloatArray,
+    acted: BoolArray,
+    fractions: FloatArray,
+    length_m: float,
+    dt_s: float,
+) -> Flight:
+    """Fly one step (step 1): the UAVs' arcs, the obstacles' straight lines.
+
+    Every UAV that ``acted`` (B, N) flies the arc of heading change ``turn`` (B, N), sampled at
+    the sub-step ``fractions`` (T + 1,) of the step; the others stay put (zero length).
+    The sub-step grid is float32 (millimetres at kilometre range, for the collision checks and
+    the reward quadrature); the state itself advances in float64.
+    """
+    f32 = np.float32
+    u = fractions.astype(f32)[:, None, None]  # time first: (T + 1, B, N) slices are contiguous
+    half = (f32(0.5) * u) * turn.astype(f32)
+    chord = (f32(length_m) * u) * acted * sinc_series(half)  # |half| ≤ a_max/2 ≤ π/4
+    direction = state.heading_rad.astype(f32) + half
+    px = state.pos_m[..., 0].astype(f32) + chord * np.cos(direction)  # (T + 1, B, N)
+    py = state.pos_m[..., 1].astype(f32) + chord * np.sin(direction)
+    end_half = 0.5 * turn
+    end_chord = length_m * acted * sinc_series(end_half)
+    end_dir = state.heading_rad + end_half
+    new_pos = state.pos_m + end_chord[..., None] * np.stack(
+        [np.cos(end_dir), np.sin(end_dir)], axis=-1
+    )
+    new_heading = np.where(acted, wrap_angle(state.heading_rad + turn), state.heading_rad)
+    tdt = (dt_s * fractions).astype(f32)[:, None, None]
+    obs_pos, obs_vel = state.obstacle_pos_m.astype(f32), state.obstacle_vel_m_s.astype(f32)
+    ox = obs_pos[..., 0] + tdt * obs_vel[..., 0]  # (T + 1, B, M)
+    oy = obs_pos[..., 1] + tdt * obs_vel[..., 1]
+    return Flight(px, py, ox, oy, new_pos, new_heading)
+
+
+@dataclass(frozen=True)
+class Approaches:
+    """Swept closest approaches during one step (+inf where there is no such pair).
+
+    Attributes:
+        min_u2o_m: (B, N) each UAV's closest approach to any obstacle.
+        min_u2u_m: (B, N) each UAV's closest approach to any other UAV (both flying).
+        target_m: (B, N) each UAV's closest approach to its own target.
+    """
+
+    min_u2o_m: FloatArray
+    min_u2u_m: FloatArray
+    target_m: FloatArray
+
+
+def closest_approaches(
+    flight: Flight,
+    target_m: FloatArray,
+    acted: BoolArray,
+    pairs: tuple[IntArray, IntArray],
+    difference_op: Float32Array,
+) -> Approaches:
+    """Every kind of closest approach of a step in one float32 call (step 2).
+
+    UAV–obstacle (N·M), UAV–UAV pairs (P, ``pairs`` i < j), UAV–own target (N): the relative
+    positions of all of them come from one matrix product with ``difference_op``
+    (`difference_operator`).
+    """
+    i, j = pairs
+    steps, b, n = flight.uav_x.shape
+    m = flight.obstacle_x.shape[-1]
+    k_uo, k_uu = n * m, len(i)
+    rel = []
+    for p, o, t in (
+        (flight.uav_x, flight.obstacle_x, target_m[..., 0]),
+        (flight.uav_y, flight.obstacle_y, target_m[..., 1]),
+    ):
+        movers = np.concatenate([p, o], axis=-1).reshape(steps * b, n + m)
+        r = (movers @ difference_op).reshape(steps, b, -1)  # (T + 1, B, K)
+        r[..., k_uo + k_uu :] -= t.astype(np.float32)
+        rel.append(r)
+    swept = swept_min_distance_xy(*rel).astype(np.float64)  # (B, N·M + P + N)
+    d_uo = swept[:, :k_uo].reshape(b, n, m)
+    d_pair = np.where(acted[:, i] & acted[:, j], swept[:, k_uo : k_uo + k_uu], np.inf)
+    d_uu = np.full((b, n, n), np.inf)
+    d_uu[:, i, j] = d_pair
+    d_uu[:, j, i] = d_pair
+    return Approaches(
+        min_u2o_m=np.where(acted, d_uo.min(axis=-1, initial=np.inf), np.inf),
+        min_u2u_m=d_uu.min(axis=-1),
+        target_m=swept[:, k_uo + k_uu :],
+    )
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """What the approaches of a step decide (step 3); (B, N) per UAV, (B,) per environment.
+
+    Attributes:
+        collided_u2o, collided_u2u: UAVs that came closer than d_col, by kind.
+        arrived: UAVs that reached their target this step (without colliding).
+        reached: UAVs that have reached their target so far.
+        active: UAVs that fly the next step.
+        steps: decision steps of each episode, this one included.
+        terminated: a collision, or every UAV arrived.  truncated: the step limit.
+        success: every UAV arrived and nothing collided.
+    """
+
+    collided_u2o: BoolArray
+    collided_u2u: BoolArray
+    arrived: BoolArray
+    reached: BoolArray
+    active: BoolArray
+    steps: IntArray
+    terminated: BoolArray
+    truncated: BoolArray
+    success: BoolArray
+
+    @property
+    def collided(self) -> BoolArray:
+        """(B, N) UAVs that collided, either kind."""
+        both: BoolArray = self.collided_u2o | self.collided_u2u
+        return both
+
+    @property
+    def over(self) -> BoolArray:
+        """(B,) environments whose episode ended this step."""
+        ended: BoolArray = self.terminated | self.truncated
+        return ended
+
+
+def outcome(
+    state: SwarmState, acted: BoolArray, near: Approaches, d_col_m: float, max_steps: int
+) -> Outcome:
+    """Collisions, arrivals and the end of episodes (step 3 of the module docstring)."""
+    collided_u2o = acted & (near.min_u2o_m < d_col_m)
+    collided_u2u = acted & (near.min_u2u_m < d_col_m)
+    collided = collided_u2o | collided_u2u
+    arrived = acted & ~collided & (near.target_m <= d_col_m)
+    any_collision = cast(BoolArray, collided.any(axis=-1))
+    reached = state.reached | arrived
+    all_reached = cast(BoolArray, reached.all(axis=-1))
+    running = cast(BoolArray, acted.any(axis=-1))
+    terminated = running & (any_collision | all_reached)
+    steps = state.steps + running
+    truncated = running & ~terminated & (steps >= max_steps)
+    over = terminated | truncated
+    return Outcome(
+        collided_u2o=collided_u2o,
+        collided_u2u=collided_u2u,
+        arrived=arrived,
+        reached=reached,
+        active=acted & ~arrived & ~over[:, None],
+        steps=steps,
+        terminated=terminated,
+        truncated=truncated,
+        success=terminated & all_reached & ~any_collision,
+    )
+
+
+def score(
+    state: SwarmState,
+    flight: Flight,
+    turn: FloatArray,
+    acted: BoolArray,
+    collided: BoolArray,
+    cfg: ScenarioConfig,
+) -> tuple[ArcWindow, RewardTerms]:
+    """Score the new arcs on the mid-step field, push them into the windows, reward (step 4).
+
+    Returns:
+        The contour windows with this step's arcs, and every reward term (B, N), zero for the
+        UAVs that did not fly.
+    """
+    mid = state.sources(cfg.uav.speed_m_s, 0.5 * cfg.dt_s)
+    stride = cfg.substeps // cfg.reward.quadrature_intervals
+    qx = flight.uav_x[::stride].transpose(1, 2, 0)  # (B, N, Q + 1)
+    qy = flight.uav_y[::stride].transpose(1, 2, 0)
+    ext = arc_external_xy(
+        np.ascontiguousarray(qx),
+        np.ascontiguousarray(qy),
+        state.levels.astype(np.float32),
+        mid,
+        cfg.field,
+        cfg.reward,
+    ).astype(np.float64)
+    window = state.window.push(turn, ext, acted)
+    terms = reward(
+        window,
+        flight.heading_rad,
+        flight.pos_m,
+        state.target_m,
+        collided,
+        cfg.uav.max_turn_rad,
+        cfg.reward,
+    )
+    return window, RewardTerms(*(np.where(acted, t, 0.0) for t in dataclasses.astuple(terms)))
+
+
+def accumulate(
+    stats: EpisodeStats,
+    turn: FloatArray,
+    flown_m: NDArray[Any],
+    near: Approaches,
+    terms: RewardTerms,
+) -> EpisodeStats:
+    """The episode accumulators after one step (``flown_m`` (B, N): distance flown in it)."""
+    return EpisodeStats(
+        energy_rad=stats.energy_rad + np.abs(turn),
+        flown_m=stats.flown_m + flown_m,
+        min_u2o_m=np.minimum(stats.min_u2o_m, near.min_u2o_m.min(axis=-1)),
+        min_u2u_m=np.minimum(stats.min_u2u_m, near.min_u2u_m.min(axis=-1)),
+        swarming_return=stats.swarming_return + terms.swarming,
+        total_return=stats.total_return + terms.total,
+    )
+
+
+def begin_avoidance(
+    state: SwarmState,
+    obs: Observations,
+    over: BoolArray,
+    cfg: ScenarioConfig,
+    rng: np.random.Generator,
+) -> tuple[SwarmState, BoolArray]:
+    """Reassign the contour levels where avoidance begins (step 5).
+
+    Avoidance begins in an environment whose episode goes on, on the first step on which a
+    flying UAV senses an obstacle in ``obs``.
+
+    Returns:
+        The state with the new levels, and (B,) where they were assigned.
+    """
+    active = state.active
+    begin = ~state.avoiding & ~over & (obs.sensed & active[..., None]).any(axis=(1, 2))
+    if not begin.any():
+        return state, begin
+    sub = FieldSources(
+        state.obstacle_pos_m[begin],
+        state.obstacle_speed_m_s[begin],
+        state.centre_m[begin],
+        cfg.uav.speed_m_s,
+    )
+    levels, _ = assign_contour_levels(
+        state.pos_m[begin], sub, cfg.field, cfg.pso, rng, active[begin]
+    )
+    new_levels = state.levels.copy()
+    new_levels[begin] = levels
+    return dataclasses.replace(state, levels=new_levels, avoiding=state.avoiding | begin), begin
