@@ -11,18 +11,23 @@ from __future__ import annotations
 
 import asyncio
 import dataclasses
+import math
 import socket
 from collections.abc import Callable, Coroutine
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from remarl_fc.flight.config import FlyConfig
 from remarl_fc.flight.control import ControlSpec
 from remarl_fc.flight.mission import Geofence, Mission
 from remarl_fc.flight.runtime import SwarmRuntime
+from remarl_fc.flight.status import Status
 from remarl_fc.mavlink.codec import SigningConfig
 from remarl_fc.policy_io import load_policy
+from remarl_fc.sitl.attacker import Attacker
 from remarl_fc.sitl.config import DEFAULT_HOME, Flavour, SitlConfig
 from remarl_fc.sitl.faults import Faults
 from remarl_fc.sitl.fleet import SitlFleet
@@ -38,6 +43,42 @@ class MockFlight:
 
     runtime: dict[str, Any]
     ground_truth: dict[str, Any]
+
+
+def attacker_for(runtime: SwarmRuntime, victim: int = 2, seed: int = 0) -> Attacker:
+    """A hostile sender (`remarl_fc.sitl.attacker`) against ``runtime``'s first link.
+
+    It watches ``victim``'s true track (here: the runtime's own, before any forged fix could
+    touch it) and starts its in-flight attacks once every vehicle is under control.
+    """
+    address = runtime.links[0].local_address
+    if address is None:
+        raise ValueError("the runtime's first link is not a UDP listener (udpin:)")
+    track = runtime.by_sysid[victim].track
+
+    def locate() -> tuple[tuple[float, float, float], tuple[float, float]] | None:
+        if not math.isfinite(track.t_position):
+            return None
+        n, e = (float(x) for x in track.ne_m)
+        vn, ve = (float(x) for x in track.vel_ned_m_s[:2])
+        return (n, e, float(track.height_m)), (vn, ve)
+
+    def centre() -> tuple[float, float] | None:
+        known = [m.track.ne_m for m in runtime.members if math.isfinite(m.track.t_position)]
+        if not known:
+            return None
+        n, e = np.mean(known, axis=0)
+        return float(n), float(e)
+
+    return Attacker(
+        target=address,
+        victim=victim,
+        origin=runtime.cfg.mission.origin,
+        locate=locate,
+        centre=centre,
+        armed=lambda: all(s == Status.CONTROLLED for s in runtime.statuses()),
+        seed=seed,
+    )
 
 
 def free_udp_port(host: str = "127.0.0.1") -> int:

@@ -11,7 +11,8 @@ converted where they enter (``raise X from exc``), so callers need to know only 
      │    └── PolicySpecMismatch             ... for this scenario or vehicle set
      ├── LinkError                           a MAVLink link that cannot be used
      │    ├── LinkTimeout                    an awaited message did not come in time
-     │    └── LinkLost                       the socket failed or the peer went silent
+     │    ├── LinkLost                       the socket failed or the peer went silent
+     │    └── SpoofingDetected               two sources speak for one vehicle before take-off
      ├── CommandRejected                     an autopilot answered a command with a refusal
      └── UnsafeParameters                    a vehicle's failsafe parameters would defeat `fly`
 
@@ -33,6 +34,7 @@ __all__ = [
     "RemarlError",
     "ScenarioError",
     "SigningKeyError",
+    "SpoofingDetected",
     "UnsafeParameters",
 ]
 
@@ -107,6 +109,25 @@ class LinkTimeout(LinkError):
 
 class LinkLost(LinkError):
     """The link failed: the socket closed or errored, or the peer stopped talking."""
+
+
+class SpoofingDetected(LinkError):
+    """Before take-off, a second source claimed a vehicle that another source had bound.
+
+    Without signing nothing tells which one is the vehicle, so `fly` flies none of them.
+
+    Attributes:
+        system_id: the vehicle; sources: what each source was (link, address, component).
+    """
+
+    def __init__(self, *, link: str, system_id: int, sources: tuple[str, ...]) -> None:
+        super().__init__(
+            f"vehicle {system_id} is claimed by more than one source ({'; '.join(sources)}): "
+            "a spoofer or a routing loop on the network. Nothing was armed. Sign the link "
+            "(--signing-key, docs/FLYING.md security) or remove the other sender",
+            link=link,
+        )
+        self.system_id, self.sources = system_id, sources
 
 
 class CommandRejected(RemarlError):

@@ -19,6 +19,10 @@ EXIT_TIMED_OUT = 3
 EXIT_NOT_ALL_REACHED = 4
 """Exit status of ``fly`` and ``demo`` when the flight ended with a vehicle short of its target."""
 
+EXIT_LINK_ANOMALY = 5
+"""Exit status of ``fly`` when every vehicle reached its target but an anomaly of the link
+touched what we believed (rejected or untrusted telemetry): read the summary's ``anomalies``."""
+
 EXIT_INTERRUPTED = 130
 """Exit status of ``train`` and ``compare`` stopped by Ctrl-C (what a shell reports for SIGINT)."""
 

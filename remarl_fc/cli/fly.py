@@ -14,7 +14,13 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-from remarl_fc.cli.common import EXIT_NOT_ALL_REACHED, FLAVOURS, add_choice, finish
+from remarl_fc.cli.common import (
+    EXIT_LINK_ANOMALY,
+    EXIT_NOT_ALL_REACHED,
+    FLAVOURS,
+    add_choice,
+    finish,
+)
 
 
 def add_parsers(sub: Any) -> None:
@@ -54,6 +60,19 @@ def add_parsers(sub: Any) -> None:
     )
     p.add_argument("--log", default=None, metavar="DIR", help="write flight.tlog + decisions")
     p.add_argument("--signing-key", default=None, help="MAVLink 2 signing key file")
+    p.add_argument(
+        "--require-signing",
+        action="store_true",
+        help="refuse to fly without --signing-key (an unsigned link believes any sender "
+        "at the vehicle's address)",
+    )
+    p.add_argument(
+        "--lost-timeout",
+        type=float,
+        default=30.0,
+        metavar="S",
+        help="once every other vehicle is done, wait this long for a lost one (default 30)",
+    )
     add_choice(
         p,
         "--hold",
@@ -145,6 +164,13 @@ def cmd_fly(args: argparse.Namespace) -> int:
     from remarl_fc.mavlink.codec import SigningConfig, load_signing_key
     from remarl_fc.policy_io import load_policy
 
+    if not args.signing_key and not args.require_signing:
+        print(
+            "warning: the MAVLink link is not signed: any sender at a vehicle's address can "
+            "speak for it (--signing-key FILE; --require-signing refuses to fly unsigned; "
+            "docs/FLYING.md, security)",
+            file=sys.stderr,
+        )
     policy = load_policy(args.policy)
     mission = load_mission(args.mission)
     spec = ControlSpec.from_policy_meta(policy.meta)
@@ -161,6 +187,8 @@ def cmd_fly(args: argparse.Namespace) -> int:
             check_params=not args.no_param_check,
             log_dir=Path(args.log) if args.log else None,
             signing=signing,
+            require_signing=args.require_signing,
+            lost_timeout_s=args.lost_timeout,
             setpoint_hz=args.setpoint_hz,
             hold=args.hold,
             system_id=args.system_id,
@@ -190,8 +218,22 @@ def cmd_fly(args: argparse.Namespace) -> int:
         print("interrupted: every controlled vehicle was told to hold", file=sys.stderr)
     summary = runtime.summary()
     print(json.dumps(summary) if args.json else _fly_text(summary))
-    reached = all(v["status"] == "reached" for v in summary["vehicles"] if v["local"])
-    return 0 if reached else EXIT_NOT_ALL_REACHED
+    return fly_exit_status(summary)
+
+
+def fly_exit_status(summary: dict[str, Any]) -> int:
+    """The exit status of ``fly`` for its summary.
+
+    0 when every vehicle of this process reached its target on trusted telemetry and no
+    anomaly touched what we believed; `EXIT_NOT_ALL_REACHED` when one did not reach it on
+    trusted telemetry; else `EXIT_LINK_ANOMALY`.
+    """
+    mine = [v for v in summary["vehicles"] if v["local"]]
+    if not all(v["system_id"] in summary["reached"] for v in mine):
+        return EXIT_NOT_ALL_REACHED
+    if any(a["affected"] for a in summary["anomalies"]):
+        return EXIT_LINK_ANOMALY
+    return 0
 
 
 def _make_bus(args: argparse.Namespace, cfg: Any) -> Any:
@@ -217,7 +259,14 @@ def _fly_text(summary: dict[str, Any]) -> str:
     lines = [f"{summary['decisions']} decisions"]
     for v in summary["vehicles"]:
         last = v["events"][-1][1] if v["events"] else ""
-        lines.append(f"vehicle {v['system_id']}: {v['status']} ({last})")
+        trust = "" if v["trusted"] else f", telemetry untrusted: {v['untrusted']}"
+        lines.append(f"vehicle {v['system_id']}: {v['status']} ({last}{trust})")
+    for a in summary["anomalies"]:
+        who = f"vehicle {a['system_id']}: " if a["system_id"] is not None else ""
+        effect = "touched what we believed" if a["affected"] else "contained"
+        lines.append(f"link anomaly ({a['kind']}, {effect}): {who}{a['text']}")
+    if not summary["link"]["signed"]:
+        lines.append("the link was not signed")
     return "\n".join(lines)
 
 

@@ -111,6 +111,11 @@ class FlyConfig:
     """Topic prefix on the bus."""
     peer_timeout_s: float = 1.5
     """A peer silent on the bus this long is treated as lost (an obstacle at its last track)."""
+    lost_timeout_s: float = 30.0
+    """Once no vehicle of this process is under control, a lost one is waited for this long
+    (it may come back and must then be told to hold); then the flight ends, not reached."""
+    require_signing: bool = False
+    """Refuse to fly without a signing key (`signing`)."""
     check_params: bool = True
     """Read and judge every vehicle's failsafe parameters before arming
     (`remarl_fc.flight.paramcheck`); an error finding stops the flight."""
@@ -124,6 +129,19 @@ class FlyConfig:
             raise ValueError(f"setpoint_hz must be ≥ 10 Hz, not {self.setpoint_hz}")
         if self.takeoff_m is not None and not self.takeoff_m > 0:
             raise ValueError(f"takeoff height must be > 0 m, not {self.takeoff_m}")
+        ceiling = self.mission.geofence.max_alt_m if self.mission.geofence else None
+        if self.takeoff_m is not None and ceiling is not None and self.takeoff_m > ceiling:
+            raise ValueError(
+                f"take-off height {self.takeoff_m:g} m is above the mission's geofence ceiling "
+                f"max_alt_m {ceiling:g} m"
+            )
+        if self.require_signing and self.signing is None:
+            raise ValueError(
+                "--require-signing: give the link's key with --signing-key FILE "
+                "(docs/FLYING.md, signing)"
+            )
+        if not self.lost_timeout_s > 0:
+            raise ValueError(f"lost timeout must be > 0 s, not {self.lost_timeout_s}")
 
 
 @dataclass

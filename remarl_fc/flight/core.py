@@ -18,10 +18,14 @@ Per vehicle and tick, in this order (the first that applies wins):
 2. ``lost`` whose telemetry is fresh again → ``held`` (hold, never resumed);
 3. anything but ``controlled`` → nothing;
 4. telemetry older than `Rules.stale_s` → ``lost`` (an obstacle at its last track);
-5. a mode the pilot chose → ``pilot`` (released, never fought; not in a dry run);
-6. at its target → ``reached`` (hold);
-7. the next setpoint would leave the geofence within one decision step → ``held`` (hold);
-8. otherwise: the policy's setpoint.
+5. telemetry that contradicts itself (`Telemetry.untrusted`) → ``held`` (hold): a vehicle we
+   cannot locate is not steered;
+6. a mode the pilot chose, confirmed by consecutive HEARTBEATs → ``pilot`` (released, never
+   fought; not in a dry run);
+7. at its target → ``reached`` (hold);
+8. a setpoint that is not a finite number (a broken policy) → ``held`` (hold);
+9. the next setpoint would leave the geofence within one decision step → ``held`` (hold);
+10. otherwise: the policy's setpoint.
 
 Status changes go through `transition`, which allows only what `remarl_fc.flight.status`
 allows, logs an `Event` for every change that has a reason to tell, and a `Hold` for every
@@ -62,9 +66,12 @@ class Telemetry:
     position_age_s: float
     """Age of the latest position, s (inf before the first)."""
     external_mode: bool
-    """In GUIDED (ArduPilot) / OFFBOARD (PX4): the mode we fly it in."""
+    """Still in GUIDED (ArduPilot) / OFFBOARD (PX4), the mode we fly it in: False only once
+    consecutive HEARTBEATs confirm another mode (`VehicleTrack.takeover_confirmed`)."""
     custom_mode: int
     """HEARTBEAT.custom_mode as last heard (for the event text)."""
+    untrusted: str | None = None
+    """Why the vehicle's telemetry is not believed (`VehicleTrack.untrusted`), or None."""
 
     @classmethod
     def of(cls, track: VehicleTrack, now: float) -> Telemetry:
@@ -74,8 +81,9 @@ class Telemetry:
             height_m=float(track.height_m),
             yaw_rad=float(track.yaw_rad),
             position_age_s=float(track.position_age_s(now)),
-            external_mode=track.in_external_control_mode(),
+            external_mode=not track.takeover_confirmed(),
             custom_mode=int(track.custom_mode),
+            untrusted=track.untrusted,
         )
 
 
@@ -91,6 +99,8 @@ class Vehicle:
     switching to it, and leaves it after 1 s without one)."""
     climb_target_m: float | None = None
     """PX4 take-off in OFFBOARD: climb to this height."""
+    lost_since: float | None = None
+    """When it became ``lost`` (flight clock, s)."""
 
 
 @dataclass(frozen=True)
@@ -176,9 +186,12 @@ def next_action(
     if v.status != Status.CONTROLLED:
         return v, ()
     if not fresh:
-        return transition(
+        lost, out = transition(
             v, Status.LOST, f"telemetry stale for {tel.position_age_s:.1f} s: an obstacle now"
         )
+        return replace(lost, lost_since=now), out
+    if tel.untrusted is not None:
+        return transition(v, Status.HELD, f"telemetry untrusted ({tel.untrusted}): hold")
     if not rules.dry_run and not tel.external_mode:
         return transition(
             v, Status.PILOT, f"mode changed to {tel.custom_mode} by someone else: released"
@@ -187,6 +200,12 @@ def next_action(
     if guidance.reached(v.slot, ne):
         return transition(v, Status.REACHED, "target reached: hold and release")
     vn, ve, yaw = guidance.setpoint(v.slot, now)
+    if not all(math.isfinite(x) for x in (vn, ve, yaw)):
+        return transition(
+            v,
+            Status.HELD,
+            f"the policy gave a setpoint that is not a number ({vn}, {ve}, {yaw}): hold",
+        )
     fence = rules.geofence
     if fence is not None and not fence.inside(ne + np.array([vn, ve]) * rules.dt_s, tel.height_m):
         return transition(v, Status.HELD, "geofence breach ahead: hold")
@@ -211,6 +230,23 @@ def next_actions(
         new[sysid], out = next_action(vehicles[sysid], tel, now, rules, guidance)
         commands.extend(out)
     return new, commands
+
+
+def flight_goes_on(
+    vehicles: Mapping[int, Vehicle], mine: frozenset[int], now: float, lost_timeout_s: float
+) -> bool:
+    """Whether the decision loop goes on.
+
+    It does while a vehicle of ``mine`` is ``controlled``, or ``lost`` for less than
+    ``lost_timeout_s`` (it may come back and must then be held).
+    """
+    for sysid in mine:
+        v = vehicles[sysid]
+        if v.status == Status.CONTROLLED:
+            return True
+        if v.status == Status.LOST and now - (v.lost_since or now) < lost_timeout_s:
+            return True
+    return False
 
 
 def hold_all(

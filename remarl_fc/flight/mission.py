@@ -14,13 +14,17 @@ A mission is a TOML file::
     radius_m = 600.0          # around the origin (and/or polygon_ne_m = [[n, e], ...])
     max_alt_m = 60.0          # above the origin
 
+    [traffic]                 # optional: ADS-B receivers trusted beside the vehicles' own
+    adsb_sources = ["200:156"]   # "SYSTEM_ID:COMPONENT_ID" of each
+
     [[vehicle]]
     system_id = 1
     slot = 0                  # the policy agent that flies it
     target = { north_m = 150.0, east_m = 270.0 }   # or { lat_deg = ..., lon_deg = ... }
     alt_m = 20.0              # cruise height above the origin
 
-Every error names the file and the key and says what is expected.
+Every error names the file and the key and says what is expected. A mission must be
+consistent with itself: every target inside its own geofence, every ``alt_m`` under its ceiling.
 """
 
 from __future__ import annotations
@@ -43,6 +47,12 @@ FloatArray = NDArray[np.float64]
 
 DEFAULT_ALT_M = 20.0
 """Cruise height above the origin when a vehicle gives none, metres."""
+
+MAX_FILE_BYTES = 1_000_000
+"""A mission file larger than this is refused unread (a mission is a few kilobytes)."""
+
+MAX_NESTING = 8
+"""Tables and arrays nested deeper than this are refused (a mission nests three deep)."""
 
 
 class MissionError(ConfigError):
@@ -109,6 +119,8 @@ class Mission:
     dt_s: float | None = None
     geofence: Geofence | None = None
     source: str = "<mission>"
+    adsb_sources: frozenset[tuple[int, int]] = frozenset()
+    """(system id, component id) of ADS-B receivers trusted beside the vehicles' own."""
 
     def by_slot(self) -> list[VehiclePlan]:
         """The vehicles ordered by policy slot."""
@@ -170,12 +182,32 @@ def load_mission(path: str | Path) -> Mission:
     p = Path(path)
     src = str(p)
     try:
-        data = tomllib.loads(p.read_text(encoding="utf-8"))
+        if p.stat().st_size > MAX_FILE_BYTES:
+            raise MissionError(
+                f"larger than {MAX_FILE_BYTES:,} bytes: not a mission file", source=src
+            )
+        text = p.read_bytes().decode("utf-8")
+        data = tomllib.loads(text)
     except OSError as exc:
         raise MissionError(f"cannot read the file ({exc.strerror})", source=src) from exc
-    except tomllib.TOMLDecodeError as exc:
+    except UnicodeDecodeError as exc:
+        raise MissionError(
+            f"not UTF-8 text (byte {exc.start}): save it as UTF-8", source=src
+        ) from exc
+    except (tomllib.TOMLDecodeError, RecursionError) as exc:
         raise MissionError(f"not valid TOML ({exc})", source=src) from exc
+    _check_nesting(data, src)
     return mission_from_dict(data, source=src)
+
+
+def _check_nesting(value: Any, src: str, depth: int = 0) -> None:
+    if depth > MAX_NESTING:
+        raise MissionError(f"nested deeper than {MAX_NESTING} levels: not a mission", source=src)
+    children = (
+        value.values() if isinstance(value, dict) else value if isinstance(value, list) else ()
+    )
+    for child in children:
+        _check_nesting(child, src, depth + 1)
 
 
 def _number(
@@ -209,7 +241,9 @@ def _table(data: dict[str, Any], key: str, src: str) -> dict[str, Any]:
 
 def mission_from_dict(data: dict[str, Any], *, source: str) -> Mission:
     """Validate parsed TOML into a `Mission` (see the module docstring)."""
-    known = {"speed_m_s", "dt_s", "origin", "geofence", "vehicle", "policy", "description"}
+    known = {
+        "speed_m_s", "dt_s", "origin", "geofence", "vehicle", "policy", "description", "traffic"
+    }  # fmt: skip
     for key in data:
         if key not in known:
             raise MissionError(
@@ -237,7 +271,45 @@ def mission_from_dict(data: dict[str, Any], *, source: str) -> Mission:
     if len(set(ids)) != len(ids):
         raise MissionError(f"system ids repeat: {ids}", source=source, key="vehicle.system_id")
     fence = _geofence(data["geofence"], source) if "geofence" in data else None
-    return Mission(origin, speed, tuple(plans), dt, fence, source)
+    if fence is not None:
+        for k, plan in enumerate(plans):
+            if not fence.inside(np.array(plan.target_ne_m)):
+                raise MissionError(
+                    f"target {plan.target_ne_m} m (north, east) is outside the mission's own "
+                    "geofence",
+                    source=source,
+                    key=f"vehicle[{k}].target",
+                )
+            if fence.max_alt_m is not None and plan.alt_m > fence.max_alt_m:
+                raise MissionError(
+                    f"{plan.alt_m:g} m is above the geofence ceiling max_alt_m "
+                    f"{fence.max_alt_m:g} m",
+                    source=source,
+                    key=f"vehicle[{k}].alt_m",
+                )
+    adsb = _adsb_sources(data["traffic"], source) if "traffic" in data else frozenset()
+    return Mission(origin, speed, tuple(plans), dt, fence, source, adsb)
+
+
+def _adsb_sources(t: Any, src: str) -> frozenset[tuple[int, int]]:
+    if not isinstance(t, dict):
+        raise MissionError("must be a table", source=src, key="traffic")
+    _only(t, {"adsb_sources"}, src, "traffic.")
+    raw = t.get("adsb_sources", [])
+    out: set[tuple[int, int]] = set()
+    bad = MissionError(
+        'must be a list of "SYSTEM_ID:COMPONENT_ID" strings, e.g. ["200:156"] (1..255 each)',
+        source=src,
+        key="traffic.adsb_sources",
+    )
+    if not isinstance(raw, list):
+        raise bad
+    for item in raw:
+        parts = item.split(":") if isinstance(item, str) else []
+        if len(parts) != 2 or not all(p.isdigit() and 1 <= int(p) <= 255 for p in parts):
+            raise bad
+        out.add((int(parts[0]), int(parts[1])))
+    return frozenset(out)
 
 
 def _vehicle(v: Any, k: int, origin: GeoPoint, src: str) -> VehiclePlan:

@@ -22,7 +22,7 @@ import numpy as np
 
 from remarl_fc.bus.core import SwarmBus
 from remarl_fc.bus.schema import STATUSES, Detection, Detections, VehicleState
-from remarl_fc.flight.traffic import Intruder, TrafficPicture
+from remarl_fc.flight.traffic import TrafficPicture
 
 if TYPE_CHECKING:
     from remarl_fc.flight.config import Member
@@ -71,6 +71,7 @@ class Peers:
         self.peer_timeout_s = peer_timeout_s
         self.status_of = status_of
         self._seq = 0
+        self._merged: dict[int, tuple[int, float]] = {}  # sender → (seq, t_mono) merged last
 
     # -- out ----------------------------------------------------------------------------
 
@@ -93,6 +94,7 @@ class Peers:
         )
 
     def _detections(self, m: Member, now: float) -> Detections:
+        """Our own fresh tracks, not shared ones; nearest first (the codec keeps the first 64)."""
         items = tuple(
             Detection(
                 icao,
@@ -100,8 +102,7 @@ class Peers:
                 None if math.isnan(x.height_m) else float(x.height_m),
                 (float(x.vel_ne_m_s[0]), float(x.vel_ne_m_s[1])),
             )
-            for icao, x in self.traffic.tracks.items()
-            if not x.shared and now - x.t <= self.traffic.max_age_s
+            for icao, x in self.traffic.own_tracks(now)
         )
         return Detections(m.system_id, self._seq, time.time(), items)
 
@@ -144,19 +145,17 @@ class Peers:
             m.remote_status = s.status if s.status in STATUSES else None
             if now - t.t_position > self.peer_timeout_s * self.clock.speedup:
                 m.remote_status = "lost"
-        for got in core.detections.values():
+        for sender, got in core.detections.items():
             batch = got.value
             assert isinstance(batch, Detections)
+            mark = (batch.seq, got.t_mono)
+            if self._merged.get(sender) == mark:
+                continue  # merged on an earlier call: counted once, not at every tick
+            self._merged[sender] = mark
             t_local = self.clock.at(got.t_mono)
-            for d in batch.items:
-                old = self.traffic.tracks.get(d.icao)
-                if old is not None and old.t >= t_local:
-                    continue
-                if old is not None and not old.shared and now - old.t <= self.traffic.max_age_s:
-                    continue  # our own ADS-B sees it: keep ours
-                height = math.nan if d.height_m is None else d.height_m
-                self.traffic.tracks[d.icao] = Intruder(
-                    np.array(d.ne_m), height, np.array(d.vel_ne_m_s), t_local, shared=True
+            for d in batch.items:  # checked, capped; our own fresh report of an ICAO wins
+                self.traffic.merge_shared(
+                    sender, d.icao, d.ne_m, d.height_m, d.vel_ne_m_s, t_local, now
                 )
 
     def start_plan(self) -> tuple[np.ndarray, float] | None:

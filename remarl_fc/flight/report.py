@@ -1,5 +1,9 @@
 """What a flight tells: the console's status lines, the decision log's rows, the summary.
 
+The summary never claims more than trusted telemetry shows: a vehicle counts as reached only
+when its status is ``reached`` and its telemetry was never found untrusted, and every anomaly
+of the link is listed (`anomalies`), each saying whether it touched what we believed.
+
 Pure functions of the vehicles' rows and statuses; the runtime calls them.
 """
 
@@ -15,6 +19,7 @@ from numpy.typing import NDArray
 from remarl_fc.flight.config import Member
 from remarl_fc.flight.control import Decision, SwarmController
 from remarl_fc.flight.status import Status
+from remarl_fc.flight.tracking import NO_FIX
 
 Rows = Sequence[tuple[Member, Status]]
 """Every vehicle of the flight with its status, in slot order."""
@@ -76,7 +81,55 @@ def vehicle_summaries(rows: Rows) -> list[dict[str, Any]]:
             "status": status.value,
             "setpoints_sent": m.sent,
             "telemetry_rejected": dict(m.track.rejected),
+            "trusted": m.track.untrusted is None,
+            "untrusted": m.track.untrusted,
             "events": [[round(t, 2), e] for t, e in m.events],
         }
         for m, status in rows
     ]
+
+
+def reached_on_trusted_telemetry(vehicle: dict[str, Any]) -> bool:
+    """A vehicle of `vehicle_summaries` reached its target and its telemetry is believed."""
+    return bool(vehicle["status"] == "reached" and vehicle["trusted"])
+
+
+def anomalies(rows: Rows, link: dict[str, Any], traffic: dict[str, Any]) -> list[dict[str, Any]]:
+    """Every anomaly of the flight's link.
+
+    Each says whether it ``affected`` what we believed (False: contained — the frames were
+    dropped and nothing they said was used).
+    """
+    out: list[dict[str, Any]] = []
+
+    def add(kind: str, text: str, affected: bool, system_id: int | None = None) -> None:
+        out.append({"kind": kind, "system_id": system_id, "text": text, "affected": affected})
+
+    for alarm in link["alarms"]:
+        same_source = "autopilot type" in alarm["what"]
+        add("spoofing alarm", f"{alarm['what']} ({alarm['source']})", same_source,
+            alarm["system_id"])  # fmt: skip
+    if link["alarms_not_kept"]:
+        add("spoofing alarm", f"{link['alarms_not_kept']} more foreign sources", False)
+    for sysid, n in link["foreign_frames"].items():
+        add("foreign frames", f"{n} frames with its id from other sources dropped", False,
+            int(sysid))  # fmt: skip
+    for reason, n in link["dropped"].items():
+        if not reason.startswith("spoofing"):
+            add("dropped frames", f"{n} frames dropped: {reason}", False)
+    for m, _ in rows:
+        if not m.local:
+            continue
+        if m.track.untrusted is not None:
+            add("untrusted telemetry", m.track.untrusted, True, m.system_id)
+        odd = {k: v for k, v in m.track.rejected.items() if k != NO_FIX}
+        rejected = sum(odd.values())
+        if rejected:
+            reasons = ", ".join(f"{k} {v}" for k, v in sorted(odd.items()))
+            add("rejected telemetry", f"{rejected} messages rejected ({reasons})", True,
+                m.system_id)  # fmt: skip
+    rejected_adsb = traffic.get("rejected", {})
+    if rejected_adsb:
+        reasons = ", ".join(f"{k} {v}" for k, v in sorted(rejected_adsb.items()))
+        add("rejected ADS-B", f"reports from trusted sources rejected ({reasons})", True)
+    return out

@@ -41,7 +41,7 @@ import numpy as np
 
 from remarl_fc.bus.core import SwarmBus
 from remarl_fc.bus.memory import MemoryBroker, MemoryBus
-from remarl_fc.errors import ConfigError, RemarlError
+from remarl_fc.errors import ConfigError, RemarlError, SpoofingDetected
 from remarl_fc.flight.commands import Commander
 from remarl_fc.flight.config import Clock, FlyConfig, Member, bus_core
 from remarl_fc.flight.control import ControlSpec, PolicyLike, SwarmController
@@ -53,6 +53,7 @@ from remarl_fc.flight.core import (
     Setpoint,
     Telemetry,
     Vehicle,
+    flight_goes_on,
     hold_all,
     next_actions,
     transition,
@@ -61,14 +62,23 @@ from remarl_fc.flight.flightlog import DecisionLog, mission_header
 from remarl_fc.flight.paramcheck import ParamReader
 from remarl_fc.flight.peers import Peers
 from remarl_fc.flight.prepare import Preparation
-from remarl_fc.flight.report import decision_rows, status_lines, vehicle_summaries
-from remarl_fc.flight.status import IN_FLIGHT, OBSTACLE, Status
+from remarl_fc.flight.report import (
+    anomalies,
+    decision_rows,
+    reached_on_trusted_telemetry,
+    status_lines,
+    vehicle_summaries,
+)
+from remarl_fc.flight.status import BEFORE_CONTROL, OBSTACLE, Status
 from remarl_fc.flight.tracking import VehicleTrack
 from remarl_fc.flight.traffic import TrafficPicture
+from remarl_fc.flight.trust import SourceGate, Verdict
 from remarl_fc.mavlink.codec import Codec
 from remarl_fc.mavlink.consts import (
     TYPE_MASK_VELOCITY_YAW,
+    LandedState,
     MavAutopilot,
+    MavCmd,
     MavComponent,
     MavFrame,
     MavState,
@@ -136,6 +146,11 @@ class SwarmRuntime(Resource):
             stale_s=cfg.stale_s, dt_s=spec.dt_s, dry_run=cfg.dry_run, geofence=mission.geofence
         )
         self.codec = Codec(cfg.system_id, cfg.component_id, signing=cfg.signing)
+        self.gate = SourceGate(
+            frozenset(self.by_sysid),
+            (cfg.system_id, cfg.component_id),
+            adsb_sources=mission.adsb_sources,
+        )
         self.links: list[MavlinkLink] = []
         self.commands = Commander(cfg, self.codec, self.clock, self.links)
         self.params = ParamReader(
@@ -157,6 +172,8 @@ class SwarmRuntime(Resource):
         self.tick_s: list[float] = []
         """Wall time of each setpoint tick (checks + setpoints for every vehicle), s."""
         self._to_hold: asyncio.Queue[Member] = asyncio.Queue()
+        self._spoofed = asyncio.Event()
+        self._spoof_error: SpoofingDetected | None = None
 
     # -- lifetime -----------------------------------------------------------------------
 
@@ -203,27 +220,56 @@ class SwarmRuntime(Resource):
 
     # -- receiving ----------------------------------------------------------------------
 
-    def _receiver(self, k: int) -> Callable[[Any, float], None]:
-        def on_message(msg: Any, t_mono: float) -> None:
-            self._on_message(k, msg, self.clock.at(t_mono))
+    def _receiver(self, k: int) -> Callable[[Any, float, Any], bool]:
+        def on_message(msg: Any, t_mono: float, address: Any) -> bool:
+            return self._on_message(k, msg, self.clock.at(t_mono), address)
 
         return on_message
 
-    def _on_message(self, k: int, msg: Any, now: float) -> None:
-        mid = msg.get_msgId()
-        if mid == MsgId.ADSB_VEHICLE:
-            self.traffic.update(msg, now)
-            return
-        member = self.by_sysid.get(msg.get_srcSystem())
-        if member is None or not member.local or msg.get_srcComponent() != MavComponent.AUTOPILOT1:
-            return
-        if member.link is None:
+    def _on_message(self, k: int, msg: Any, now: float, address: Any) -> bool:
+        """One frame from link ``k``: through the source gate, then to its track."""
+        got = self.gate.admit(k, address, msg)
+        member = self.by_sysid.get(got.system_id)
+        if got.alarm is not None and member is not None:
+            self._event(member, got.alarm)
+        if got.identity_claim and self.vehicles[got.system_id].status in BEFORE_CONTROL:
+            self._identity_conflict(got.system_id)
+        if got.verdict == Verdict.DROP:
+            return False
+        if got.verdict == Verdict.TRAFFIC:
+            self.traffic.update(msg, now, source=(msg.get_srcSystem(), msg.get_srcComponent()))
+            return True
+        assert member is not None  # the gate passes only the mission's vehicles
+        if got.bound:
             member.link = self.links[k]
+            member.link.bind(member.system_id, address)
+            self._event(member, f"bound to {self.gate.bound[member.system_id]}")
+        if not member.local:
+            return True  # another process flies it: its state comes over the bus
         member.track.update(msg, now)
+        mid = msg.get_msgId()
         if mid == MsgId.COMMAND_ACK:
             self.commands.on_ack(member.system_id, msg)
         elif mid == MsgId.PARAM_VALUE:
             self.params.on_value(member.system_id, msg, bytewise=member.track.is_px4)
+        return True
+
+    def _identity_conflict(self, system_id: int) -> None:
+        if self._spoofed.is_set():
+            return
+        sources = (str(self.gate.bound[system_id]), *(
+            str(a.source) for a in self.gate.alarms if a.system_id == system_id
+        ))  # fmt: skip
+        self._spoof_error = SpoofingDetected(
+            link=", ".join(self.cfg.connections), system_id=system_id, sources=sources
+        )
+        self._spoofed.set()
+
+    async def _refuse_spoofed_start(self) -> None:
+        """Raise `SpoofingDetected` once a second source claims a vehicle before take-off."""
+        await self._spoofed.wait()
+        assert self._spoof_error is not None
+        raise self._spoof_error
 
     # -- the flight ---------------------------------------------------------------------
 
@@ -261,7 +307,10 @@ class SwarmRuntime(Resource):
 
     async def _mission(self) -> None:
         try:
-            await self._prepare()
+            async with asyncio.TaskGroup() as tg:
+                watch = tg.create_task(self._refuse_spoofed_start(), name="remarl.spoof_watch")
+                await self._prepare()
+                watch.cancel()
             await self._fly()
             with contextlib.suppress(TimeoutError):  # let the last holds be confirmed
                 async with self.clock.timeout(HOLD_CONFIRM_S):
@@ -313,7 +362,8 @@ class SwarmRuntime(Resource):
         dt = self.spec.dt_s
         t_next = self.clock.now()
         end = t_next + self.cfg.max_flight_s
-        while any(self.vehicles[m.system_id].status in IN_FLIGHT for m in self.local_members()):
+        mine = frozenset(m.system_id for m in self.local_members())
+        while flight_goes_on(self.vehicles, mine, self.clock.now(), self.cfg.lost_timeout_s):
             now = self.clock.now()
             if now > end:
                 await self.hold_all(reason="max flight time")
@@ -321,10 +371,19 @@ class SwarmRuntime(Resource):
             self._decide(now)
             t_next += dt
             await self.clock.sleep(t_next - self.clock.now())
+        for sysid in sorted(mine):
+            if self.vehicles[sysid].status == Status.LOST:
+                self._event(
+                    self.by_sysid[sysid],
+                    f"still lost after the lost timeout ({self.cfg.lost_timeout_s:g} s) with "
+                    "every other vehicle done: given up",
+                )
 
     def _obstacles(self, now: float, height_m: float) -> tuple[np.ndarray, np.ndarray]:
         pos, vel = [], []
-        for intr in self.traffic.current(now, height_m, self.cfg.adsb_band_m):
+        known = [m.track.ne_m for m in self.members if math.isfinite(m.track.t_position)]
+        centre = np.mean(known, axis=0) if known else None
+        for intr in self.traffic.current(now, height_m, self.cfg.adsb_band_m, near_ne_m=centre):
             pos.append(intr.predicted_ne_m(now))
             vel.append(intr.vel_ne_m_s)
         for m in self.members:
@@ -428,7 +487,15 @@ class SwarmRuntime(Resource):
                 self._to_hold.task_done()
 
     async def _hold(self, m: Member) -> None:
+        """The hold mode; an armed vehicle still on the ground is disarmed instead."""
+        t = m.track
         try:
+            if t.armed and t.landed_state == LandedState.ON_GROUND:
+                await self.commands.command(
+                    m, MavCmd.COMPONENT_ARM_DISARM, 0, done=lambda: not t.armed
+                )
+                self._event(m, "on the ground: disarmed")
+                return
             await self.commands.set_mode(m, "hold")
             self._event(m, "holding")
         except RemarlError as exc:
@@ -476,12 +543,24 @@ class SwarmRuntime(Resource):
             self.on_status(f"t={now:6.1f}s vehicle {m.system_id}: {text}")
 
     def summary(self) -> dict[str, Any]:
-        """What happened to each vehicle."""
+        """What happened to each vehicle, and to the link (see `remarl_fc.flight.report`)."""
+        rows = self._report_rows()
+        link = {
+            "signed": self.cfg.signing is not None,
+            **self.gate.summary(),
+            "refused_not_logged": sum(link.refused_not_logged for link in self.links),
+        }
+        traffic = self.traffic.stats()
+        vehicles = vehicle_summaries(rows)
         return {
             "decisions": self.decisions,
             "setpoint_deadline_misses": self.setpoint_deadline_misses,
             "bus": self.bus.core.stats.as_dict(),
-            "vehicles": vehicle_summaries(self._report_rows()),
+            "link": link,
+            "traffic": traffic,
+            "anomalies": anomalies(rows, link, traffic),
+            "vehicles": vehicles,
+            "reached": [v["system_id"] for v in vehicles if reached_on_trusted_telemetry(v)],
         }
 
 

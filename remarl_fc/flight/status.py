@@ -47,8 +47,8 @@ FLOWN = frozenset({Status.WAITING, Status.TAKING_OFF, Status.READY, Status.CONTR
 HOLD_ON_ENTRY = frozenset({Status.HELD, Status.REACHED})
 """Entering these sends the hold mode (``pilot`` never does: the pilot is never fought)."""
 
-IN_FLIGHT = frozenset({Status.CONTROLLED, Status.LOST})
-"""The flight goes on while a vehicle of this process is in one of these."""
+BEFORE_CONTROL = frozenset({Status.WAITING, Status.TAKING_OFF, Status.READY})
+"""Being prepared: not yet flown by the policy."""
 
 OBSTACLE = frozenset({Status.LOST, Status.PILOT, Status.HELD})
 """Vehicles in these statuses are no longer flown by the policy: obstacles for the others."""

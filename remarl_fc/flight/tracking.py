@@ -19,6 +19,7 @@ from numpy.typing import NDArray
 
 from remarl_fc.frames import GeoPoint, cdeg_to_yaw, from_deg_e7, geodetic_to_ned
 from remarl_fc.mavlink.consts import (
+    CopterMode,
     EkfFlag,
     MavAutopilot,
     MavModeFlag,
@@ -38,6 +39,43 @@ EKF_POSITION_OK = EkfFlag.VELOCITY_HORIZ | EkfFlag.POS_HORIZ_ABS
 STATUSTEXT_KEPT = 20
 """Recent STATUSTEXTs kept per vehicle (refusal reasons)."""
 
+STATUSTEXT_MAX_CHARS = 50
+"""STATUSTEXT.text is 50 characters on the wire (chunked texts are not reassembled)."""
+
+TAKEOVER_CONFIRM_HEARTBEATS = 2
+"""Consecutive HEARTBEATs in a mode that is not ours before a pilot takeover is believed (one
+forged or corrupted HEARTBEAT must not release a vehicle)."""
+
+DEAD_RECKONING_TAU_S = 10.0
+"""Time constant with which the dead-reckoned position (integrated reported velocity) is pulled
+toward the reported fixes, s: a position stream drifting at r m/s against its own velocity
+shows a disagreement of about r·τ."""
+
+DISAGREEMENT_UNTRUSTED_M = 15.0
+"""A fix this far from the dead-reckoned position makes the vehicle's telemetry untrusted, m
+(a real autopilot's position and velocity come from one estimator and agree to about 1 m)."""
+
+REJECTIONS_UNTRUSTED = 10
+"""This many positions rejected within `REJECTIONS_WINDOW_S` make the telemetry untrusted
+(two streams interleaved on one source: each rejects the other's fixes)."""
+
+REJECTIONS_WINDOW_S = 3.0
+"""Window for `REJECTIONS_UNTRUSTED`, s."""
+
+
+NO_FIX = "no fix (lat = lon = 0)"
+"""The rejection of a position sent before the GPS has a fix: normal while booting, not an
+anomaly of the link."""
+
+
+def printable(text: str) -> str:
+    r"""``text`` safe to print: control and other non-printable characters become ``?``.
+
+    >>> printable("PreArm: \x1b[2Jok")
+    'PreArm: ?[2Jok'
+    """
+    return "".join(c if c.isprintable() else "?" for c in text[:STATUSTEXT_MAX_CHARS])
+
 
 @dataclass
 class VehicleTrack:
@@ -54,7 +92,11 @@ class VehicleTrack:
         landed_state: EXTENDED_SYS_STATE.landed_state, or None.
         rejected: counts of telemetry dropped as impossible, by reason.
         seen: counts of messages received, by type name.
-        texts: recent (time, severity, text) STATUSTEXTs.
+        texts: recent (time, severity, text) STATUSTEXTs, made printable.
+        other_mode_heartbeats: consecutive HEARTBEATs in a mode that is not the external one.
+        dr_ne_m: the dead-reckoned position (reported velocity integrated, pulled toward the
+            fixes with `DEAD_RECKONING_TAU_S`); disagreement_m: the last fix's distance from it.
+        untrusted: why the telemetry is no longer believed (sticky), or None.
     """
 
     system_id: int
@@ -77,6 +119,13 @@ class VehicleTrack:
     texts: deque[tuple[float, int, str]] = field(
         default_factory=lambda: deque(maxlen=STATUSTEXT_KEPT)
     )
+    other_mode_heartbeats: int = 0
+    dr_ne_m: FloatArray = field(default_factory=lambda: np.full(2, np.nan))
+    disagreement_m: float = 0.0
+    untrusted: str | None = None
+    _rejections: deque[float] = field(
+        default_factory=lambda: deque(maxlen=REJECTIONS_UNTRUSTED), repr=False
+    )
 
     # -- derived ------------------------------------------------------------------------
 
@@ -94,7 +143,11 @@ class VehicleTrack:
         """GUIDED (ArduPilot) or OFFBOARD (PX4), per the last HEARTBEAT."""
         if self.is_px4:
             return px4_mode_parts(self.custom_mode)[0] == Px4MainMode.OFFBOARD
-        return self.custom_mode == 4  # COPTER_MODE_GUIDED
+        return self.custom_mode == CopterMode.GUIDED
+
+    def takeover_confirmed(self) -> bool:
+        """`TAKEOVER_CONFIRM_HEARTBEATS` HEARTBEATs in a row say the mode is not ours."""
+        return self.other_mode_heartbeats >= TAKEOVER_CONFIRM_HEARTBEATS
 
     def position_age_s(self, now: float) -> float:
         """Seconds since the last accepted position."""
@@ -134,6 +187,8 @@ class VehicleTrack:
             self.autopilot = msg.autopilot
             self.custom_mode, self.base_mode = msg.custom_mode, msg.base_mode
             self.system_status, self.t_heartbeat = msg.system_status, now
+            ours = self.in_external_control_mode()
+            self.other_mode_heartbeats = 0 if ours else self.other_mode_heartbeats + 1
         elif mid == MsgId.GLOBAL_POSITION_INT:
             self._position(msg, now)
         elif mid == MsgId.ATTITUDE:
@@ -146,11 +201,38 @@ class VehicleTrack:
         elif mid == MsgId.EXTENDED_SYS_STATE:
             self.landed_state = int(msg.landed_state)
         elif mid == MsgId.STATUSTEXT:
-            self.texts.append((now, int(msg.severity), str(msg.text)))
+            self.texts.append((now, int(msg.severity), printable(str(msg.text))))
+
+    def _reject(self, reason: str, now: float) -> None:
+        self.rejected[reason] += 1
+        self._rejections.append(now)
+        if (
+            self.untrusted is None
+            and len(self._rejections) == REJECTIONS_UNTRUSTED
+            and now - self._rejections[0] <= REJECTIONS_WINDOW_S
+        ):
+            self.untrusted = (
+                f"{REJECTIONS_UNTRUSTED} positions rejected within {REJECTIONS_WINDOW_S:g} s"
+            )
+
+    def _dead_reckon(self, ne: FloatArray, vel: FloatArray, now: float) -> None:
+        """Compare the fix with the integrated velocity history; flag a disagreement."""
+        if not math.isfinite(self.t_position) or not np.isfinite(self.dr_ne_m).all():
+            self.dr_ne_m = ne.copy()
+            return
+        dt = max(0.0, now - self.t_position)
+        predicted = self.dr_ne_m + 0.5 * (self.vel_ned_m_s[:2] + vel[:2]) * dt
+        self.disagreement_m = float(np.linalg.norm(ne - predicted))
+        pull = 1.0 - math.exp(-dt / DEAD_RECKONING_TAU_S)
+        self.dr_ne_m = predicted + pull * (ne - predicted)
+        if self.untrusted is None and self.disagreement_m > DISAGREEMENT_UNTRUSTED_M:
+            self.untrusted = (
+                f"position disagrees with its own velocity by {self.disagreement_m:.0f} m"
+            )
 
     def _position(self, msg: Any, now: float) -> None:
         if msg.lat == 0 and msg.lon == 0:
-            self.rejected["no fix (lat = lon = 0)"] += 1
+            self.rejected[NO_FIX] += 1
             return
         vel = np.array([msg.vx, msg.vy, msg.vz], dtype=np.float64) / 100.0
         if np.linalg.norm(vel) > MAX_SPEED_M_S or not (-90e7 <= msg.lat <= 90e7):
@@ -163,8 +245,9 @@ class VehicleTrack:
         if math.isfinite(self.t_position) and now > self.t_position:
             jump = float(np.linalg.norm(ne - self.ne_m))
             if jump > MAX_SPEED_M_S * (now - self.t_position) + 5.0:
-                self.rejected["position jump"] += 1
+                self._reject("position jump", now)
                 return
+        self._dead_reckon(ne, vel, now)
         self.ne_m, self.height_m, self.vel_ned_m_s = ne, -float(d), vel
         self.t_position = now
         if msg.hdg != 65535 and not math.isfinite(self.t_yaw):

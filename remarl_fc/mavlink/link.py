@@ -9,10 +9,14 @@ URLs take pymavlink's forms:
 * ``serial:DEVICE[:BAUD]``, ``/dev/ttyX[,BAUD]``: a serial port (default 57600 baud).
 
 Several vehicles may share one link: messages are dispatched by their source system id, and
-`MavlinkLink.send` addresses a vehicle by its system id (on UDP, to the address that system was
-last heard from). Everything is callback-driven in the event loop — the datagram protocol, a
+`MavlinkLink.send` addresses a vehicle by its system id. On UDP a system is sent to the address
+it is bound to (`MavlinkLink.bind`, done by the runtime once the vehicle answered the
+handshake); an address heard later never moves it. Before binding, a system is sent to where it
+was last heard. Everything is callback-driven in the event loop — the datagram protocol, a
 stream protocol for TCP, a file-descriptor reader for serial — so the link owns no task and
-nothing blocks. Every frame in and out can be written to a ``.tlog`` (`TlogWriter`).
+nothing blocks. Every frame in and out can be written to a ``.tlog`` (`TlogWriter`): frames the
+receiver refused (foreign sources) at most `REFUSED_TLOG_PER_S` a second, so that a flood cannot
+fill the disk; the log is flushed at least every `TLOG_FLUSH_S`.
 """
 
 from __future__ import annotations
@@ -32,8 +36,15 @@ from remarl_fc.mavlink.codec import Codec, Message
 from remarl_fc.mavlink.udp import Address, UdpEndpoint, parse_host_port
 from remarl_fc.resource import Resource
 
-MessageHandler = Callable[[Message, float], None]
-"""Called with (message, monotonic receive time s) for every valid message."""
+MessageHandler = Callable[[Message, float, Any], bool]
+"""Called with (message, monotonic receive time s, source address) for every valid message;
+returns whether the message was accepted (False: refused, e.g. from a foreign source)."""
+
+REFUSED_TLOG_PER_S = 20
+"""Refused frames written to the tlog per second at most (the rest are only counted)."""
+
+TLOG_FLUSH_S = 1.0
+"""The tlog is handed to the OS at least this often, s: a crash loses at most this much."""
 
 DEFAULT_BAUD = 57600
 """Serial baud rate when the URL gives none (the usual telemetry radio rate)."""
@@ -110,6 +121,7 @@ class TlogWriter:
     def __init__(self, path: str | Path) -> None:
         self.path = Path(path)
         self._fh: IO[bytes] | None = None
+        self._flushed = time.monotonic()
 
     def open(self) -> None:
         """Open for appending (creating folders)."""
@@ -117,9 +129,13 @@ class TlogWriter:
         self._fh = self.path.open("ab")
 
     def write(self, frame: bytes) -> None:
-        """Log one frame now."""
+        """Log one frame now (flushed when the last flush is `TLOG_FLUSH_S` old)."""
         if self._fh is not None:
             self._fh.write(struct.pack(">Q", int(time.time() * 1e6)) + frame)
+            now = time.monotonic()
+            if now - self._flushed >= TLOG_FLUSH_S:
+                self._fh.flush()
+                self._flushed = now
 
     def close(self) -> None:
         """Flush and close (idempotent)."""
@@ -159,7 +175,11 @@ class MavlinkLink(Resource):
     ) -> None:
         self.url, self.codec, self.on_message, self.tlog = url, codec, on_message, tlog
         self.address = LinkAddress.parse(url)
-        self.where: dict[int, Any] = {}  # system id → address it was heard from
+        self.where: dict[int, Any] = {}  # system id → address to send to
+        self.bound: set[int] = set()  # systems whose address is fixed (`bind`)
+        self.refused = 0  # frames the receiver refused
+        self.refused_not_logged = 0  # of those, not written to the tlog (rate limit)
+        self._refused_window = (0.0, 0)  # (start of the current second, refused logged in it)
         self.failure: BaseException | None = None
         self._udp: UdpEndpoint | None = None
         self._transport: asyncio.Transport | None = None
@@ -273,14 +293,33 @@ class MavlinkLink(Resource):
             return True
         raise LinkLost("the connection is closed", link=self.url)
 
+    def bind(self, system_id: int, address: Any) -> None:
+        """Send to ``system_id`` only at ``address`` from now on (it answered the handshake)."""
+        self.where[system_id] = address
+        self.bound.add(system_id)
+
     def _received(self, data: bytes, addr: Any) -> None:
         now = time.monotonic()
         datagram = self._udp is not None
         for msg in self.codec.decode(data, addr, datagram=datagram):
-            if self.tlog is not None:
+            sysid = msg.get_srcSystem()
+            accepted = self.on_message(msg, now, addr)
+            if accepted and sysid not in self.bound:
+                self.where[sysid] = addr
+            if not accepted:
+                self.refused += 1
+            if self.tlog is not None and (accepted or self._log_refused(now)):
                 self.tlog.write(msg.get_msgbuf())
-            self.where[msg.get_srcSystem()] = addr
-            self.on_message(msg, now)
+
+    def _log_refused(self, now: float) -> bool:
+        start, n = self._refused_window
+        if now - start >= 1.0:
+            start, n = now, 0
+        if n >= REFUSED_TLOG_PER_S:
+            self.refused_not_logged += 1
+            return False
+        self._refused_window = (start, n + 1)
+        return True
 
     def _flush_serial(self) -> None:
         assert self._fd is not None

@@ -108,7 +108,11 @@ async def test_a_mode_the_pilot_takes_is_never_fought():
         await until_controlled(runtime)
         await flown_for(fleet, runtime, 3.0)
         fleet.faults.switch_mode(0, fleet.now_s(), "LOITER")
-        await flown_for(fleet, runtime, 2.0)
+        # released once two HEARTBEATs in a row say LOITER (one could be forged)
+        await runtime.commands.wait_until(
+            "the takeover", lambda: runtime.status(1).value == "pilot", 30
+        )
+        await flown_for(fleet, runtime, 0.5)  # a setpoint already in flight has landed
         marks["sent"] = fleet.vehicles[0].counters.setpoints_received
         marks["modes"] = fleet.vehicles[0].counters.commands["DO_SET_MODE"]
 

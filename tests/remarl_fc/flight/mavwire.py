@@ -103,3 +103,35 @@ def adsb(
             0,
         )
     )
+
+
+def adsb_raw(
+    icao: int,
+    lat: int,
+    lon: int,
+    altitude_mm: int,
+    *,
+    heading_cdeg: int = 0,
+    speed_cm_s: int = 0,
+    ver_velocity_cm_s: int = 0,
+    flags: int = ADSB_ALL,
+    tslc: int = 0,
+) -> Any:
+    """An ADSB_VEHICLE with the wire fields as given (degE7, mm): for out-of-range reports."""
+    return wire(
+        F.adsb_vehicle_encode(
+            icao,
+            lat,
+            lon,
+            1,  # ADSB_ALTITUDE_TYPE_GEOMETRIC
+            altitude_mm,
+            heading_cdeg,
+            speed_cm_s,
+            ver_velocity_cm_s,
+            b"INTRUDER",
+            14,  # UAV
+            tslc,
+            flags,
+            0,
+        )
+    )

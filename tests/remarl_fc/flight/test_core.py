@@ -18,6 +18,7 @@ from remarl_fc.flight.core import (
     Setpoint,
     Telemetry,
     Vehicle,
+    flight_goes_on,
     hold_all,
     next_action,
     next_actions,
@@ -85,6 +86,39 @@ def test_lost_then_fresh_is_held_never_resumed():
     assert out == (Event(1, "telemetry back: told to hold, not resumed"), Hold(1))
     again, out = next_action(back, tel(), 3.2, RULES, FakeGuidance())
     assert (again.status, out) == (Status.HELD, ())
+
+
+def test_untrusted_telemetry_holds_the_vehicle_instead_of_steering_it():
+    t = replace(tel(), untrusted="position disagrees with its own velocity by 40 m")
+    v, out = next_action(controlled(), t, 3.0, RULES, FakeGuidance())
+    assert v.status == Status.HELD
+    assert out == (
+        Event(1, "telemetry untrusted (position disagrees with its own velocity by 40 m): hold"),
+        Hold(1),
+    )
+
+
+class BrokenGuidance(FakeGuidance):
+    def setpoint(self, slot, now):
+        return math.nan, 0.0, math.inf
+
+
+def test_a_setpoint_that_is_not_a_number_holds_the_vehicle():
+    v, out = next_action(controlled(), tel(), 3.0, RULES, BrokenGuidance())
+    assert v.status == Status.HELD
+    assert "not a number" in out[0].text and out[1] == Hold(1)
+
+
+def test_a_lost_vehicle_is_waited_for_until_the_lost_timeout():
+    lost, _ = next_action(controlled(2), tel(age=2.0), 10.0, RULES, FakeGuidance())
+    assert lost.lost_since == 10.0
+    done = {1: Vehicle(1, 0, status=Status.REACHED), 2: lost}
+    mine = frozenset({1, 2})
+    assert flight_goes_on(done, mine, 39.9, lost_timeout_s=30.0)
+    assert not flight_goes_on(done, mine, 40.0, lost_timeout_s=30.0)
+    flying = {**done, 1: controlled(1)}
+    assert flight_goes_on(flying, mine, 100.0, lost_timeout_s=30.0)
+    assert not flight_goes_on(flying, frozenset({2}), 100.0, lost_timeout_s=30.0)
 
 
 def test_a_mode_the_pilot_chose_releases_it_without_a_hold():

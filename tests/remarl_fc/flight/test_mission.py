@@ -208,7 +208,9 @@ def test_lat_lon_target_outside_the_globe_is_refused(tmp_path):
 def test_unknown_top_level_key_lists_the_known_ones(tmp_path):
     err = load_error(tmp_path, "speeed_m_s = 10.0\n" + VALID)
     assert err.key == "speeed_m_s"
-    assert "known: description, dt_s, geofence, origin, policy, speed_m_s, vehicle" in str(err)
+    assert "known: description, dt_s, geofence, origin, policy, speed_m_s, traffic, vehicle" in str(
+        err
+    )
 
 
 @pytest.mark.parametrize("vehicles", ["", "vehicle = []\n", "vehicle = 3\n"])
@@ -274,6 +276,48 @@ def test_missing_file(tmp_path):
 def test_a_folder_is_not_a_mission(tmp_path):
     with pytest.raises(MissionError, match="cannot read the file"):
         load_mission(tmp_path)
+
+
+def test_a_target_outside_the_missions_own_fence_is_refused(tmp_path):
+    text = replace("north_m = 150.0, east_m = 270.0", "north_m = 650.0, east_m = 0.0")
+    error = load_error(tmp_path, text)
+    assert error.key == "vehicle[0].target" and "outside the mission's own geofence" in str(error)
+
+
+def test_a_cruise_height_above_the_ceiling_is_refused(tmp_path):
+    error = load_error(tmp_path, replace("alt_m = 25.0", "alt_m = 500.0"))
+    assert error.key == "vehicle[0].alt_m"
+    assert "above the geofence ceiling max_alt_m 60 m" in str(error)
+
+
+def test_a_file_that_is_not_utf8_is_one_clear_error(tmp_path):
+    path = tmp_path / "mission.toml"
+    path.write_bytes(VALID.encode() + b"\n# caf\xe9\n")
+    with pytest.raises(MissionError, match=r"not UTF-8 text \(byte \d+\): save it as UTF-8"):
+        load_mission(path)
+
+
+def test_absurd_nesting_is_refused(tmp_path):
+    deep = "x = " + "[" * 200 + "]" * 200 + "\n"
+    error = load_error(tmp_path, deep + VALID)
+    assert "nested deeper than" in str(error) or "not valid TOML" in str(error)
+    deeper = "x = " + "[" * 5000 + "]" * 5000 + "\n"
+    load_error(tmp_path, deeper + VALID)  # the TOML parser's recursion limit: still one error
+
+
+def test_a_huge_file_is_refused_unread(tmp_path):
+    path = tmp_path / "mission.toml"
+    path.write_text(VALID + "#" * 2_000_000, encoding="utf-8")
+    with pytest.raises(MissionError, match="not a mission file"):
+        load_mission(path)
+
+
+def test_trusted_adsb_sources(tmp_path):
+    path = write(tmp_path, VALID + '\n[traffic]\nadsb_sources = ["200:156", "201:1"]\n')
+    assert load_mission(path).adsb_sources == frozenset({(200, 156), (201, 1)})
+    for bad in ('["200"]', '["0:156"]', '["a:b"]', "200", '["200:156:1"]'):
+        error = load_error(tmp_path, VALID + f"\n[traffic]\nadsb_sources = {bad}\n")
+        assert error.key == "traffic.adsb_sources"
 
 
 def test_mission_error_is_a_value_error():

@@ -339,3 +339,57 @@ def test_predicted_position_at_constant_velocity():
     # never extrapolated backwards
     np.testing.assert_allclose(t.predicted_ne_m(9.0), t.ne_m)
     assert np.isnan(track().predicted_ne_m(1.0)).all()  # nothing known, nothing predicted
+
+
+# -- trust ----------------------------------------------------------------------------------
+
+
+def test_a_takeover_is_believed_after_two_heartbeats_in_a_row():
+    t = track()
+    guided = heartbeat(custom_mode=CopterMode.GUIDED)
+    loiter = heartbeat(custom_mode=CopterMode.LOITER)
+    t.update(guided, 0.0)
+    t.update(loiter, 1.0)  # one forged or corrupted heartbeat
+    assert not t.in_external_control_mode() and not t.takeover_confirmed()
+    t.update(guided, 2.0)
+    t.update(loiter, 3.0)
+    assert not t.takeover_confirmed()
+    t.update(loiter, 4.0)
+    assert t.takeover_confirmed()
+
+
+def test_a_position_stream_drifting_from_its_own_velocity_makes_the_track_untrusted():
+    t = track()
+    for k in range(100):  # 10 s at 10 Hz, flying north at 10 m/s, all consistent
+        t.update(position(10.0 * k / 10, 0.0, 20.0, (10.0, 0.0, 0.0)), k / 10)
+    assert t.untrusted is None and t.disagreement_m < 1.0
+    for k in range(100, 300):  # the position drifts east at 2 m/s; the velocity says north
+        drift = 2.0 * (k - 100) / 10
+        t.update(position(10.0 * k / 10, drift, 20.0, (10.0, 0.0, 0.0)), k / 10)
+    assert t.untrusted is not None and "disagrees with its own velocity" in t.untrusted
+    assert not t.rejected  # nothing rejected: every fix was plausible on its own
+
+
+def test_two_interleaved_streams_make_the_track_untrusted_by_rejections():
+    t = track()
+    t.update(position(0.0, 0.0, 20.0), 0.0)
+    for k in range(1, 30):
+        north = 0.0 if k % 2 else 200.0  # every other fix 200 m away
+        t.update(position(north, 0.0, 20.0), k * 0.05)
+    assert t.rejected["position jump"] >= 10
+    assert t.untrusted is not None and "positions rejected" in t.untrusted
+
+
+def test_a_short_glitch_is_rejected_but_not_distrusted():
+    t = track()
+    for k in range(20):
+        north = 40.0 if 10 <= k < 13 else 0.0
+        t.update(position(north, 0.0, 20.0), k / 10)
+    assert t.rejected["position jump"] == 3
+    assert t.untrusted is None
+
+
+def test_statustext_is_made_printable():
+    t = track()
+    t.update(statustext("PreArm: \x1b[2J\x07bad"), 1.0)
+    assert t.last_text(0.0) == "PreArm: ?[2J?bad"

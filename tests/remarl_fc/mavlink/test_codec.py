@@ -6,7 +6,7 @@ import base64
 import os
 
 import pytest
-from hypothesis import given
+from hypothesis import given, settings
 from hypothesis import strategies as st
 from pymavlink.dialects.v20 import ardupilotmega as dialect
 
@@ -116,3 +116,48 @@ def test_a_stray_start_byte_in_a_datagram_does_not_swallow_the_next_ones():
     assert b.decode(heartbeat(a) + b"\xfd", "u", datagram=True)  # the frame, then junk
     assert [m.get_type() for m in b.decode(heartbeat(a), "u", datagram=True)] == ["HEARTBEAT"]
     assert b.stats.bad_frames == 1
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    chunks=st.lists(
+        st.one_of(
+            st.binary(max_size=80),  # garbage, including stray start bytes
+            st.integers(0, 40).map(lambda cut: ("truncated", cut)),
+            st.just(("whole", 0)),
+        ),
+        max_size=12,
+    )
+)
+def test_random_and_truncated_frames_on_a_stream_never_raise_nor_hide_later_frames(chunks):
+    """Garbage and cut frames may cost the frames they touch, never a frame that follows
+    after a clean gap: a whole frame after 280 bytes of nothing-like-a-start is decoded."""
+    a, b = Codec(3, 1), Codec(255, 190)
+    for chunk in chunks:
+        if isinstance(chunk, tuple):
+            kind, cut = chunk
+            frame = heartbeat(a)
+            data = frame if kind == "whole" else frame[: min(cut, len(frame) - 1)]
+        else:
+            data = chunk
+        for msg in b.decode(data, "stream"):
+            assert msg.get_type() != "BAD_DATA"
+    # a clean gap longer than any frame flushes whatever the parser holds
+    b.decode(b"\x00" * 280, "stream")
+    (m,) = b.decode(heartbeat(a), "stream")
+    assert m.get_type() == "HEARTBEAT" and m.get_srcSystem() == 3
+
+
+@settings(max_examples=200, deadline=None)
+@given(data=st.binary(max_size=600), cut=st.integers(0, 600))
+def test_datagrams_of_random_bytes_with_a_frame_inside(data, cut):
+    """A datagram holds whole frames: garbage around one never raises, and never yields a
+    message that was not sent."""
+    a, b = Codec(3, 1), Codec(255, 190)
+    frame = heartbeat(a)
+    datagram = data[:cut] + frame + data[cut:]
+    for msg in b.decode(datagram, "peer", datagram=True):
+        assert msg.get_type() != "BAD_DATA"
+    # the next datagram from the same peer is decoded as if nothing had happened
+    (m,) = b.decode(heartbeat(a), "peer", datagram=True)
+    assert m.get_type() == "HEARTBEAT"

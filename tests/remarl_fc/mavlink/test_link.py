@@ -13,6 +13,8 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from remarl_fc.errors import LinkLost
 from remarl_fc.mavlink.codec import Codec
@@ -36,13 +38,14 @@ async def until(pred: Callable[[], bool], what: str, limit_s: float = WAIT_S) ->
 
 
 class Inbox:
-    """A link's `on_message`: records (message, receive time)."""
+    """A link's `on_message`: records (message, receive time), accepts everything."""
 
     def __init__(self) -> None:
         self.got: list[tuple[Any, float]] = []
 
-    def __call__(self, msg: Any, now: float) -> None:
+    def __call__(self, msg: Any, now: float, address: Any = None) -> bool:
         self.got.append((msg, now))
+        return True
 
     def types(self) -> list[str]:
         return [m.get_type() for m, _ in self.got]
@@ -218,6 +221,69 @@ async def test_udpin_replies_to_where_a_system_was_last_heard():
         await until(lambda: len(in_new.got) == 1, "the reply")
         await asyncio.sleep(0.05)
         assert in_old.got == []
+
+
+@pytest.mark.asyncio
+@pytest.mark.network
+async def test_a_bound_system_is_sent_to_its_bound_address_only():
+    async with udp_pair(3, 3) as (gcs, gcs_inbox, vehicles):
+        (real, in_real, c_real), (forger, in_forger, c_forger) = vehicles
+        real.send(heartbeat(c_real))
+        await until(lambda: len(gcs_inbox.got) == 1, "the vehicle's heartbeat")
+        gcs.bind(3, gcs.where[3])
+        forger.send(heartbeat(c_forger))  # system 3's id from another port
+        await until(lambda: len(gcs_inbox.got) == 2, "the forger's heartbeat")
+        assert gcs.where[3][1] == real.local_address[1]  # did not move
+        assert gcs.send(statustext(gcs.codec, b"to the real one"), 3)
+        await until(lambda: len(in_real.got) == 1, "the reply")
+        assert gcs.send(statustext(gcs.codec, b"again"), 3)
+        await until(lambda: len(in_real.got) == 2, "the second reply")
+        assert in_forger.got == []  # both went to the bound address, in order
+
+
+class Refuser(Inbox):
+    """Accepts only system 1."""
+
+    def __call__(self, msg: Any, now: float, address: Any = None) -> bool:
+        super().__call__(msg, now, address)
+        return bool(msg.get_srcSystem() == 1)
+
+
+@pytest.mark.asyncio
+@pytest.mark.network
+async def test_refused_frames_are_rate_limited_in_the_tlog(tmp_path, monkeypatch):
+    from remarl_fc.mavlink.link import REFUSED_TLOG_PER_S
+
+    tlog = TlogWriter(tmp_path / "flight.tlog")
+    inbox = Refuser()
+    async with MavlinkLink("udpin:127.0.0.1:0", Codec(255, 190), inbox, tlog=tlog) as gcs:
+        stranger, friend = Codec(9, 1), Codec(1, 1)
+        flood = b"".join(stranger.encode(heartbeat(stranger)) for _ in range(500))
+        gcs._received(flood, ("10.0.0.9", 5))  # 500 refused frames within one second
+        gcs._received(friend.encode(heartbeat(friend)), ("10.0.0.1", 5))
+        assert gcs.refused == 500
+        assert gcs.refused_not_logged == 500 - REFUSED_TLOG_PER_S
+    logged = read_tlog(tmp_path / "flight.tlog", monkeypatch)
+    assert len(logged) == REFUSED_TLOG_PER_S + 1
+    assert logged[-1].get_srcSystem() == 1  # what was accepted is always logged
+
+
+def test_the_tlog_is_flushed_at_least_every_second(tmp_path, monkeypatch):
+    import remarl_fc.mavlink.link as link_module
+
+    clock = [100.0]
+    monkeypatch.setattr(link_module.time, "monotonic", lambda: clock[0])
+    tlog = TlogWriter(tmp_path / "flight.tlog")
+    tlog.open()
+    codec = Codec(1, 1)
+    frame = codec.encode(heartbeat(codec))
+    tlog.write(frame)
+    size = (tmp_path / "flight.tlog").stat().st_size
+    assert size == 0  # buffered
+    clock[0] += link_module.TLOG_FLUSH_S
+    tlog.write(frame)
+    assert (tmp_path / "flight.tlog").stat().st_size == 2 * (8 + len(frame))  # on disk
+    tlog.close()
 
 
 @pytest.mark.asyncio
@@ -542,3 +608,15 @@ async def test_link_logs_every_frame_in_and_out(tmp_path, monkeypatch):
     # the logged frames are the ones on the wire
     assert msgs[0].get_msgbuf() == gcs_inbox.got[0][0].get_msgbuf()
     assert msgs[2].get_msgbuf() == in1.got[0][0].get_msgbuf()
+
+
+@settings(max_examples=150, deadline=None)
+@given(data=st.lists(st.binary(max_size=300), max_size=8))
+def test_random_datagrams_into_a_link_never_raise_and_deliver_only_valid_messages(data):
+    inbox = Inbox()
+    link = MavlinkLink("udpin:127.0.0.1:0", Codec(255, 190), inbox)
+    link._udp = object()  # type: ignore[assignment]  # as if open: datagram rules apply
+    for k, datagram in enumerate(data):
+        link._received(datagram, ("10.0.0.1", 1000 + k % 3))
+    assert all(m.get_type() != "BAD_DATA" for m, _ in inbox.got)
+    assert set(link.where) <= {m.get_srcSystem() for m, _ in inbox.got}
