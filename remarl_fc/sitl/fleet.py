@@ -8,8 +8,9 @@
 One task (``sitl.physics``, owned by the fleet's TaskGroup) runs the simulated clock: each
 physics tick steps every airframe at once, records the ground truth, runs the autopilot timers
 and sends whatever HEARTBEAT, telemetry and ADS-B is due. Datagrams are handled as they arrive
-(``datagram_received`` or, over TCP, ``data_received`` → codec → autopilot), stamped with the
-simulated time; the faults act on frames the same way on both transports. The simulated
+(`remarl_fc.sitl.links`: ``datagram_received`` or, over TCP, ``data_received`` → codec →
+autopilot), stamped with the simulated time; the faults act on frames the same way on both
+transports. The simulated
 clock is the tick count × tick length, paced to ``speedup`` × wall time; when the host cannot
 keep up the simulation slows down rather than skipping physics (``summary()["achieved_speedup"]``
 says by how much).
@@ -28,16 +29,17 @@ from typing import Any, Self
 import numpy as np
 from numpy.typing import NDArray
 
-from remarl_fc.errors import LinkLost
 from remarl_fc.frames import GeoPoint, heading_to_yaw, ned_to_geodetic, sim_to_ne
 from remarl_fc.mavlink.codec import Codec, SigningConfig
-from remarl_fc.mavlink.consts import MavComponent, MsgId
-from remarl_fc.mavlink.udp import Address, UdpEndpoint
+from remarl_fc.mavlink.consts import MavComponent
+from remarl_fc.mavlink.udp import Address
 from remarl_fc.sitl.ardupilot import ArduCopterLogic
-from remarl_fc.sitl.autopilot import TICK_HZ, Autopilot, Emit
-from remarl_fc.sitl.config import SitlConfig
+from remarl_fc.sitl.autopilot import TICK_HZ, Autopilot
+from remarl_fc.sitl.channel import Emit
+from remarl_fc.sitl.config import Flavour, SitlConfig
 from remarl_fc.sitl.faults import Faults
 from remarl_fc.sitl.groundtruth import GroundTruth
+from remarl_fc.sitl.links import FleetLinks
 from remarl_fc.sitl.px4 import Px4Logic
 from remarl_fc.sitl.telemetry import TelemetryBuilder, heartbeat
 from remarl_fc.sitl.traffic import Traffic
@@ -50,44 +52,19 @@ FloatArray = NDArray[np.float64]
 DEFAULT_D_COL_M = float(ScenarioConfig.__dataclass_fields__["d_col_m"].default)  # type: ignore[arg-type]
 """Collision distance of a fleet without a scenario: the scenario default (d_col, 20 m)."""
 
-UNSIGNED_ALLOWED = {
-    "ardupilot": frozenset({MsgId.RADIO_STATUS, MsgId.RADIO}),
-    "px4": frozenset({MsgId.HEARTBEAT, MsgId.RADIO_STATUS, MsgId.ADSB_VEHICLE, MsgId.COLLISION}),
-}
-"""Messages each autopilot accepts unsigned once signing is on (GCS_Signing.cpp; PX4 docs)."""
-
 MAX_LAG_S = 0.5
 """Wall seconds the physics loop may fall behind before it stops trying to catch up."""
 
 
-class _TcpVehicle(asyncio.Protocol):
-    """One TCP connection to vehicle ``index``: bytes in go to the fleet as a stream."""
-
-    def __init__(self, fleet: SitlFleet, index: int) -> None:
-        self.fleet, self.index = fleet, index
-        self.transport: asyncio.Transport | None = None
-        self.peer: Address = ("", 0)
-
-    def connection_made(self, transport: asyncio.BaseTransport) -> None:
-        assert isinstance(transport, asyncio.Transport)
-        self.transport = transport
-        host, port = transport.get_extra_info("peername")[:2]
-        self.peer = (str(host), int(port))
-        self.fleet._tcp_connected(self.index, self)
-
-    def data_received(self, data: bytes) -> None:
-        self.fleet._on_datagram(self.index, data, self.peer, stream=True)
-
-    def connection_lost(self, exc: Exception | None) -> None:
-        self.fleet._tcp_disconnected(self.index, self)
+FLAVOURS: dict[Flavour, type[Autopilot[Any]]] = {"ardupilot": ArduCopterLogic, "px4": Px4Logic}
+"""The autopilot logic of each flavour."""
 
 
 def make_autopilot(
     index: int, cfg: SitlConfig, frames: Airframes, origin: GeoPoint, factory: Any, emit: Emit
-) -> Autopilot:
+) -> Autopilot[Any]:
     """The flavour's logic for vehicle ``index``."""
-    cls: type[Autopilot] = ArduCopterLogic if cfg.flavour == "ardupilot" else Px4Logic
-    return cls(index, cfg, frames, origin, factory, emit)
+    return FLAVOURS[cfg.flavour](index, cfg, frames, origin, factory, emit)
 
 
 def grid_layout(n: int, spacing_m: float) -> FloatArray:
@@ -124,7 +101,6 @@ class SitlFleet:
     ) -> None:
         self.cfg = cfg
         self.scenario = scenario
-        self.faults = faults or Faults()
         self.rng = np.random.default_rng(cfg.seed)
         n = scenario.uav.count if scenario is not None else cfg.vehicles
         self.n = n
@@ -153,16 +129,21 @@ class SitlFleet:
         self.truth = GroundTruth(n, m, d_col, targets)
         signing = None
         if signing_key is not None:
-            signing = SigningConfig(signing_key, allow_unsigned=UNSIGNED_ALLOWED[cfg.flavour])
-        self.codecs = [Codec(i + 1, MavComponent.AUTOPILOT1, signing=signing) for i in range(n)]
-        self.vehicles: list[Autopilot] = [
+            unsigned = FLAVOURS[cfg.flavour].spec.unsigned_allowed
+            signing = SigningConfig(signing_key, allow_unsigned=unsigned)
+        self._ticks = 0
+        self._dt = 1.0 / cfg.physics_hz
+        self.links = FleetLinks(
+            cfg, n, faults or Faults(), self.rng, self.now_s, self._on_message, signing
+        )
+        self.vehicles: list[Autopilot[Any]] = [
             make_autopilot(
                 i,
                 cfg,
                 self.frames,
                 cfg.home,
                 self.codecs[i].factory,
-                functools.partial(self._send, i),
+                functools.partial(self.links.send, i),
             )
             for i in range(n)
         ]
@@ -171,23 +152,9 @@ class SitlFleet:
             self.frames,
             cfg.home,
             self.homes,
-            cfg.flavour,
             cfg.model.gps_noise_m,
             self.rng,
         )
-        self.peers: list[Address | None] = [None] * n
-        self.outs = [cfg.out_address(i) for i in range(n)]
-        self.link_stats = [
-            {"datagrams_in": 0, "datagrams_out": 0, "dropped_in": 0, "dropped_out": 0}
-            for _ in range(n)
-        ]
-        self.endpoints: list[UdpEndpoint] = []
-        self.tcp_clients: list[_TcpVehicle | None] = [None] * n
-        """The client connected to each vehicle (TCP transport)."""
-        self._ports: list[int] = []
-        self._ticks = 0
-        self._dt = 1.0 / cfg.physics_hz
-        self._failure: BaseException | None = None
         self._done = asyncio.Event()
         self._stack: contextlib.AsyncExitStack | None = None
         self._task: asyncio.Task[None] | None = None
@@ -206,19 +173,9 @@ class SitlFleet:
         stack = contextlib.AsyncExitStack()
         await stack.__aenter__()
         try:
-            for i in range(self.n):
-                if self.cfg.transport == "tcp":
-                    self._ports.append(await self._serve_tcp(i, stack))
-                    continue
-                ep = UdpEndpoint(
-                    (self.cfg.host, self.cfg.port(i)),
-                    on_datagram=functools.partial(self._on_datagram, i),
-                    name=f"sitl vehicle {i + 1} udp:{self.cfg.host}:{self.cfg.port(i)}",
-                )
-                self.endpoints.append(await stack.enter_async_context(ep))
-                self._ports.append(ep.local_address[1])
+            await self.links.open(stack)
             group = await stack.enter_async_context(asyncio.TaskGroup())
-            self._loop = asyncio.get_running_loop()
+            self._loop = self.links.loop = asyncio.get_running_loop()
             self._wall_start = self._loop.time()
             self._task = group.create_task(self._physics(), name="sitl.physics")
         except BaseException:
@@ -245,45 +202,29 @@ class SitlFleet:
         else:  # the caller's own error propagates as it is, not wrapped in a group
             await stack.aclose()
 
-    async def _serve_tcp(self, i: int, stack: contextlib.AsyncExitStack) -> int:
-        """Listen for vehicle ``i``'s TCP client; returns the port."""
-        loop = asyncio.get_running_loop()
-        host, port = self.cfg.host, self.cfg.port(i)
-        try:
-            server = await loop.create_server(lambda: _TcpVehicle(self, i), host, port)
-        except OSError as exc:
-            raise LinkLost(
-                f"cannot listen ({exc.strerror or exc}); is another program using the port?",
-                link=f"sitl vehicle {i + 1} tcp:{host}:{port}",
-            ) from exc
+    @property
+    def faults(self) -> Faults:
+        """The faults acting on the fleet (mutate or replace them while it runs)."""
+        return self.links.faults
 
-        async def close() -> None:
-            server.close()
-            client = self.tcp_clients[i]
-            if client is not None and client.transport is not None:
-                client.transport.close()
-            await server.wait_closed()
+    @faults.setter
+    def faults(self, faults: Faults) -> None:
+        self.links.faults = faults
 
-        stack.push_async_callback(close)
-        bound: int = server.sockets[0].getsockname()[1]
-        return bound
+    @property
+    def codecs(self) -> list[Codec]:
+        """Each vehicle's MAVLink codec (its signing counters among its stats)."""
+        return self.links.codecs
 
-    def _tcp_connected(self, i: int, client: _TcpVehicle) -> None:
-        old = self.tcp_clients[i]
-        if old is not None and old.transport is not None:
-            old.transport.close()  # one client at a time, as a serial port over TCP
-        self.tcp_clients[i] = client
-        self.peers[i] = client.peer
-
-    def _tcp_disconnected(self, i: int, client: _TcpVehicle) -> None:
-        if self.tcp_clients[i] is client:
-            self.tcp_clients[i] = None
-            self.peers[i] = None
+    @property
+    def link_stats(self) -> list[dict[str, int]]:
+        """Each vehicle's datagram counters: in, out, dropped either way."""
+        return self.links.stats
 
     @property
     def addresses(self) -> list[Address]:
         """(host, port) each vehicle listens on, by vehicle index."""
-        return [(self.cfg.host, port) for port in self._ports]
+        return [(self.cfg.host, port) for port in self.links.ports]
 
     def now_s(self) -> float:
         """Simulated seconds since start."""
@@ -325,8 +266,8 @@ class SitlFleet:
                 if delay < -MAX_LAG_S:  # cannot keep up: stop owing time, run slower
                     start -= delay + MAX_LAG_S
                 await asyncio.sleep(0)
-            if self._failure is not None:
-                raise self._failure
+            if self.links.failure is not None:
+                raise self.links.failure
             self._ticks += 1
             k = self._ticks
             self._tick(
@@ -353,21 +294,21 @@ class SitlFleet:
         for i, ap in enumerate(self.vehicles):
             if autopilot:
                 ap.tick(now)
-            if self.peers[i] is None and self.outs[i] is None:
-                ap.due_streams(now)  # nobody listens: keep the schedule, build nothing
+            if not self.links.listening(i):
+                ap.streams.due(now)  # nobody listens: keep the schedule, build nothing
                 continue
+            send = self.links.send
             # each vehicle beats at its own phase, as independent autopilots do (no bursts)
             beat = beat_phase == (i * beat_every) // self.n
             if beat and not self.faults.heartbeat_muted(i, now):
-                self._send(i, heartbeat(ap.factory, ap))
-            for mid in ap.due_streams(now) + ap.requested:
+                send(i, heartbeat(ap.factory, ap))
+            for mid in ap.streams.due(now) + ap.streams.take_requested():
                 msg = self.telemetry.build(mid, i, ap, now)
                 if msg is not None:
-                    self._send(i, msg)
-            ap.requested.clear()
+                    send(i, msg)
             if adsb and self.traffic is not None and self.traffic.count:
                 for report in self.traffic.reports(ap.factory, self.cfg.home, now):
-                    self._send(i, report, component=MavComponent.ADSB)
+                    send(i, report, component=MavComponent.ADSB)
 
     def _apply_faults(self, now: float) -> None:
         for k, sw in enumerate(self.faults.pilot_switches):
@@ -386,58 +327,11 @@ class SitlFleet:
                 state.glitching = off is not None
                 state.offset_ne_m = (off or 0.0, 0.0)
 
-    # -- datagrams ----------------------------------------------------------------------
-
-    def _send(self, i: int, msg: Any, *, component: int | None = None) -> None:
-        frame = self.codecs[i].encode(msg, source_component=component)
-        now = self.now_s()
-        dests = {d for d in (self.peers[i], self.outs[i]) if d is not None}
-        for dest in dests:
-            if self.faults.link_down(i, now) or self.faults.drop(self.rng):
-                self.link_stats[i]["dropped_out"] += 1
-                continue
-            self.link_stats[i]["datagrams_out"] += 1
-            delay = self.faults.delay_s(self.rng) / self.cfg.speedup
-            if delay > 0 and self._loop is not None:
-                self._loop.call_later(delay, self._raw_send, i, frame, dest)
-            else:
-                self._raw_send(i, frame, dest)
-
-    def _raw_send(self, i: int, frame: bytes, dest: Address) -> None:
-        if self.cfg.transport == "tcp":
-            client = self.tcp_clients[i]
-            transport = client.transport if client is not None and client.peer == dest else None
-            if transport is not None and not transport.is_closing():
-                transport.write(frame)
-            return
-        ep = self.endpoints[i] if i < len(self.endpoints) else None
-        if ep is not None and ep.is_open:
-            ep.send(frame, dest)
-
-    def _on_datagram(self, i: int, data: bytes, addr: Address, *, stream: bool = False) -> None:
-        now = self.now_s()
-        if self.faults.link_down(i, now) or self.faults.drop(self.rng):
-            self.link_stats[i]["dropped_in"] += 1  # over TCP: a cut frame, as on a noisy serial
-            return
-        delay = self.faults.delay_s(self.rng) / self.cfg.speedup
-        if delay > 0 and self._loop is not None:
-            self._loop.call_later(delay, self._deliver, i, data, addr, stream)
-        else:
-            self._deliver(i, data, addr, stream)
-
-    def _deliver(self, i: int, data: bytes, addr: Address, stream: bool = False) -> None:
-        self.link_stats[i]["datagrams_in"] += 1
+    def _on_message(self, i: int, msg: Any) -> None:
+        """A message for vehicle ``i`` (its own echoes are not)."""
         ap = self.vehicles[i]
-        try:
-            msgs = self.codecs[i].decode(data, addr, datagram=not stream)
-            if msgs:
-                self.peers[i] = addr
-            now = self.now_s()
-            for msg in msgs:
-                if msg.get_srcSystem() != ap.system_id:
-                    ap.handle(msg, now)
-        except Exception as exc:  # a bug in the mock: stop the fleet loudly, not in a log
-            self._failure = exc
+        if msg.get_srcSystem() != ap.system_id:
+            ap.handle(msg, self.now_s())
 
     # -- results ------------------------------------------------------------------------
 
@@ -452,7 +346,7 @@ class SitlFleet:
             codec = self.codecs[i].stats
             entry: dict[str, Any] = {
                 "system_id": ap.system_id,
-                "port": self._ports[i] if i < len(self._ports) else self.cfg.port(i),
+                "port": self.links.ports[i] if i < len(self.links.ports) else self.cfg.port(i),
                 "home": dataclasses.asdict(self.homes[i]),
                 "armed": ap.armed,
                 "custom_mode": ap.custom_mode,
@@ -460,7 +354,7 @@ class SitlFleet:
                 "landed": ap.landed,
                 **self.truth.vehicle_summary(i),
                 **ap.counters.as_dict(),
-                "params": ap.param_table.snapshot(ap.params()),
+                "params": ap.param_snapshot(),
                 "link": {
                     **self.link_stats[i],
                     "bad_frames": codec.bad_frames,

@@ -9,6 +9,9 @@ Integer parameters travel in PARAM_VALUE's float field the way each autopilot pu
 (`remarl_fc.mavlink.params`): ArduPilot converts the number, PX4 copies its bytes. Only the
 parameters that change the mock's behaviour are served; the others a ground station asks for
 get no answer, as on a vehicle without them.
+
+`ParamTable` is a flavour's served parameters; `ParamServer` is one vehicle's end of the
+protocol.
 """
 
 from __future__ import annotations
@@ -17,10 +20,11 @@ import dataclasses
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any, TypeVar
+from typing import Any, Generic, TypeVar
 
-from remarl_fc.mavlink.consts import MavParamType
-from remarl_fc.mavlink.params import INT_FORMATS, PARAM_ID_LEN, from_wire, to_wire
+from remarl_fc.mavlink.consts import MavParamType, MsgId, Severity
+from remarl_fc.mavlink.params import INT_FORMATS, PARAM_ID_LEN, from_wire, param_name, to_wire
+from remarl_fc.sitl.channel import Channel
 
 P = TypeVar("P")
 
@@ -128,6 +132,50 @@ class ParamTable:
             want = MavParamType(spec.ptype).name
             raise ParamRejected(f"{spec.name}: type {sent_type} sent, parameter is {want}")
         return spec.write(values, from_wire(raw, spec.ptype, bytewise=self.bytewise))
+
+
+class ParamServer(Generic[P]):
+    """One vehicle's end of the parameter protocol.
+
+    Args:
+        table: the flavour's served parameters.
+        channel: how the vehicle answers; it counts parameters set, refused and asked for
+            in vain.
+    """
+
+    def __init__(self, table: ParamTable, channel: Channel) -> None:
+        self.table, self.channel = table, channel
+
+    def handle(self, msg: Any, values: P) -> P:
+        """Answer PARAM_REQUEST_LIST, PARAM_REQUEST_READ or PARAM_SET; returns the new values.
+
+        PARAM_REQUEST_LIST → every parameter; PARAM_REQUEST_READ → one; PARAM_SET → set it and
+        send its value (the unchanged one, and a STATUSTEXT saying why, if refused). A name the
+        flavour does not serve gets no PARAM_VALUE, as on a real vehicle; a PARAM_SET of one
+        also gets a STATUSTEXT, so that nobody takes the silence for success.
+        """
+        table, ch, mid = self.table, self.channel, msg.get_msgId()
+        if mid == MsgId.PARAM_REQUEST_LIST:
+            for each in range(len(table)):
+                ch.emit(table.value_message(ch.factory, values, each))
+            return values
+        name = param_name(msg.param_id)
+        index = int(msg.param_index) if mid == MsgId.PARAM_REQUEST_READ else -1
+        k = table.find(name, index)
+        if k is None:
+            ch.counters.params_unknown[name or f"#{index}"] += 1
+            if mid == MsgId.PARAM_SET:
+                ch.say(Severity.WARNING, f"Unknown parameter {name}")
+            return values
+        if mid == MsgId.PARAM_SET:
+            try:
+                values = table.set(values, k, float(msg.param_value), int(msg.param_type))
+                ch.counters.params_set[name] += 1
+            except ParamRejected as exc:
+                ch.counters.params_refused[name] += 1
+                ch.say(Severity.WARNING, str(exc))
+        ch.emit(table.value_message(ch.factory, values, k))
+        return values
 
 
 CM = 100.0

@@ -4,13 +4,16 @@ Each builder reads the batched airframe state and the vehicle's autopilot logic 
 pymavlink message, or None where the real autopilot sends nothing yet (ArduPilot sends no
 LOCAL_POSITION_NED before its EKF origin is set). Reported positions carry the GPS faults and
 noise; the ground truth never does.
+
+The builders see the autopilot logic only through `VehicleState`, the little of it they read:
+this module does not depend on `remarl_fc.sitl.autopilot`.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -38,10 +41,8 @@ from remarl_fc.mavlink.consts import (
     MavType,
     MsgId,
 )
+from remarl_fc.sitl.flavour import FlavourSpec
 from remarl_fc.sitl.vehicle import Airframes
-
-if TYPE_CHECKING:
-    from remarl_fc.sitl.autopilot import Autopilot
 
 SENSORS_PRESENT = 0x0020_002F
 """MAV_SYS_STATUS_SENSOR bits reported present/enabled/healthy: 3-D gyro (1), accel (2),
@@ -64,8 +65,49 @@ GPS_EPV_CM = 120
 GPS_SATELLITES = 14
 """GPS_RAW_INT.satellites_visible."""
 
-FLIGHT_SW_VERSION = {"ardupilot": (4 << 24) | (6 << 16) | (0 << 8) | 255, "px4": 0x010F00FF}
-"""AUTOPILOT_VERSION.flight_sw_version: ArduCopter 4.6.0 / PX4 1.15.0, release type 255."""
+
+class VehicleState(Protocol):
+    """What the telemetry builders read from a vehicle's autopilot logic.
+
+    `remarl_fc.sitl.autopilot.Autopilot` is one; the builders need nothing else of it.
+    """
+
+    @property
+    def spec(self) -> FlavourSpec[Any]:
+        """The flavour's values (autopilot id, software version, parameter encoding)."""
+
+    @property
+    def system_id(self) -> int:
+        """MAVLink system id."""
+
+    @property
+    def armed(self) -> bool:
+        """Whether the motors are armed."""
+
+    @property
+    def custom_mode(self) -> int:
+        """HEARTBEAT.custom_mode."""
+
+    def position_ok(self, now_s: float) -> bool:
+        """Whether the vehicle has an absolute position estimate."""
+
+    def booting(self, now_s: float) -> bool:
+        """Whether the vehicle is still in MAV_STATE_BOOT."""
+
+    def time_boot_ms(self, now_s: float) -> int:
+        """time_boot_ms of the simulated clock."""
+
+    def active_target(self) -> tuple[int, np.ndarray, np.ndarray, float, float] | None:
+        """(type_mask, position, velocity, yaw, yaw rate) of the external target, or None."""
+
+    def landed_state(self) -> int:
+        """MAV_LANDED_STATE."""
+
+    def base_mode(self) -> int:
+        """HEARTBEAT.base_mode."""
+
+    def system_status(self) -> int:
+        """HEARTBEAT.system_status."""
 
 
 @dataclass
@@ -84,7 +126,6 @@ class TelemetryBuilder:
         frames: the fleet's airframes.
         origin: the arena origin (NED (0, 0, 0)).
         homes: each vehicle's home.
-        flavour: "ardupilot" or "px4".
         gps_noise_m: standard deviation of the horizontal noise on reported positions.
         rng: the mock's random generator.
     """
@@ -95,14 +136,13 @@ class TelemetryBuilder:
         frames: Airframes,
         origin: GeoPoint,
         homes: list[GeoPoint],
-        flavour: str,
         gps_noise_m: float,
         rng: np.random.Generator,
     ) -> None:
         self.factory, self.frames, self.origin, self.homes = factory, frames, origin, homes
-        self.flavour, self.gps_noise_m, self.rng = flavour, gps_noise_m, rng
+        self.gps_noise_m, self.rng = gps_noise_m, rng
         self.gps = [GpsState() for _ in homes]
-        self.builders: dict[int, Callable[[int, Autopilot, float], Any]] = {
+        self.builders: dict[int, Callable[[int, VehicleState, float], Any]] = {
             MsgId.SYS_STATUS: self.sys_status,
             MsgId.GPS_RAW_INT: self.gps_raw_int,
             MsgId.ATTITUDE: self.attitude,
@@ -119,7 +159,7 @@ class TelemetryBuilder:
         """Whether this mock can send message ``msg_id``."""
         return msg_id in self.builders
 
-    def build(self, msg_id: int, i: int, ap: Autopilot, now_s: float) -> Any:
+    def build(self, msg_id: int, i: int, ap: VehicleState, now_s: float) -> Any:
         """Message ``msg_id`` of vehicle ``i`` now, or None if it has nothing to send."""
         return self.builders[msg_id](i, ap, now_s)
 
@@ -142,7 +182,7 @@ class TelemetryBuilder:
 
     # -- builders -----------------------------------------------------------------------
 
-    def sys_status(self, i: int, ap: Autopilot, now_s: float) -> Any:
+    def sys_status(self, i: int, ap: VehicleState, now_s: float) -> Any:
         """SYS_STATUS (1): sensors, load d%, battery mV / cA / %, comm drop rate c%."""
         ready = ap.position_ok(now_s) and not ap.booting(now_s)
         health = SENSORS_PRESENT if ap.position_ok(now_s) else SENSORS_PRESENT & ~0x20
@@ -164,7 +204,7 @@ class TelemetryBuilder:
             0,
         )
 
-    def gps_raw_int(self, i: int, ap: Autopilot, now_s: float) -> Any:
+    def gps_raw_int(self, i: int, ap: VehicleState, now_s: float) -> Any:
         """GPS_RAW_INT (24): time µs, fix, lat/lon degE7, alt mm, eph/epv, vel cm/s, cog cdeg."""
         vel = self.frames.vel_ned_m_s[i]
         course, speed = course_and_speed(vel[0], vel[1])
@@ -186,7 +226,7 @@ class TelemetryBuilder:
             GPS_SATELLITES,
         )
 
-    def attitude(self, i: int, ap: Autopilot, now_s: float) -> Any:
+    def attitude(self, i: int, ap: VehicleState, now_s: float) -> Any:
         """ATTITUDE (30): roll/pitch/yaw rad, rates rad/s (level flight: roll = pitch = 0)."""
         f = self.frames
         return self.factory.attitude_encode(
@@ -199,7 +239,7 @@ class TelemetryBuilder:
             float(f.yaw_rate_rad_s[i]),
         )
 
-    def local_position_ned(self, i: int, ap: Autopilot, now_s: float) -> Any:
+    def local_position_ned(self, i: int, ap: VehicleState, now_s: float) -> Any:
         """LOCAL_POSITION_NED (32): m and m/s from the vehicle's EKF origin (its home)."""
         if not ap.position_ok(now_s):
             return None
@@ -209,7 +249,7 @@ class TelemetryBuilder:
             ap.time_boot_ms(now_s), *(float(v) for v in pos), *(float(v) for v in vel)
         )
 
-    def global_position_int(self, i: int, ap: Autopilot, now_s: float) -> Any:
+    def global_position_int(self, i: int, ap: VehicleState, now_s: float) -> Any:
         """GLOBAL_POSITION_INT (33): degE7, alt and relative_alt mm, vx/vy/vz cm/s, hdg cdeg.
 
         Before the position estimate is valid, lat/lon/alt are 0 (as a real autopilot sends).
@@ -227,7 +267,7 @@ class TelemetryBuilder:
             ap.time_boot_ms(now_s), lat, lon, alt, rel, int(vel[0]), int(vel[1]), int(vel[2]), hdg
         )
 
-    def position_target_local_ned(self, i: int, ap: Autopilot, now_s: float) -> Any:
+    def position_target_local_ned(self, i: int, ap: VehicleState, now_s: float) -> Any:
         """POSITION_TARGET_LOCAL_NED (85): the active target while under external control."""
         target = ap.active_target()
         if target is None:
@@ -247,7 +287,7 @@ class TelemetryBuilder:
             yaw_rate,
         )
 
-    def ekf_status_report(self, i: int, ap: Autopilot, now_s: float) -> Any:
+    def ekf_status_report(self, i: int, ap: VehicleState, now_s: float) -> Any:
         """EKF_STATUS_REPORT (193): flags and variances (ArduPilot)."""
         if ap.position_ok(now_s):
             flags = int(EKF_GOOD)
@@ -259,7 +299,7 @@ class TelemetryBuilder:
             var = 1.0
         return self.factory.ekf_status_report_encode(flags, var, var, var, 0.01, 0.0, 0.0)
 
-    def home_position(self, i: int, ap: Autopilot, now_s: float) -> Any:
+    def home_position(self, i: int, ap: VehicleState, now_s: float) -> Any:
         """HOME_POSITION (242): degE7, mm AMSL; local x/y/z of home = 0 (the EKF origin)."""
         if not ap.position_ok(now_s):
             return None
@@ -278,11 +318,11 @@ class TelemetryBuilder:
             int(now_s * 1e6),
         )
 
-    def extended_sys_state(self, i: int, ap: Autopilot, now_s: float) -> Any:
+    def extended_sys_state(self, i: int, ap: VehicleState, now_s: float) -> Any:
         """EXTENDED_SYS_STATE (245): VTOL state (undefined) and MAV_LANDED_STATE."""
         return self.factory.extended_sys_state_encode(0, ap.landed_state())
 
-    def autopilot_version(self, i: int, ap: Autopilot, now_s: float) -> Any:
+    def autopilot_version(self, i: int, ap: VehicleState, now_s: float) -> Any:
         """AUTOPILOT_VERSION (148): capabilities, software version, uid = system id."""
         caps = (
             MAV_PROTOCOL_CAPABILITY_MAVLINK2
@@ -292,13 +332,13 @@ class TelemetryBuilder:
             | MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_GLOBAL_INT
             | MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT
         )
-        if ap.param_table.bytewise:  # PX4
+        if ap.spec.param_table.bytewise:  # PX4
             caps |= MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE
         else:  # ArduPilot
             caps |= MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST
         return self.factory.autopilot_version_encode(
             caps,
-            FLIGHT_SW_VERSION[self.flavour],
+            ap.spec.flight_sw_version,
             0,
             0,
             0,
@@ -311,13 +351,13 @@ class TelemetryBuilder:
         )
 
 
-def heartbeat(factory: Any, ap: Autopilot) -> Any:
+def heartbeat(factory: Any, ap: VehicleState) -> Any:
     """HEARTBEAT (0): quadrotor, the flavour's autopilot id, base_mode, custom_mode, status."""
     return factory.heartbeat_encode(
-        MavType.QUADROTOR, ap.autopilot_id, ap.base_mode(), ap.custom_mode, ap.system_status(), 3
+        MavType.QUADROTOR,
+        ap.spec.autopilot_id,
+        ap.base_mode(),
+        ap.custom_mode,
+        ap.system_status(),
+        3,
     )
-
-
-def statustext(factory: Any, severity: int, text: str) -> Any:
-    """STATUSTEXT (253): at most 50 characters, as the autopilots send single chunks."""
-    return factory.statustext_encode(severity, text[:50].encode("ascii", "replace"))

@@ -6,7 +6,9 @@ waits for its health, arms, takes off, streams VelocityNedYaw setpoints in offbo
 and stops offboard. The assertions read the mock's ground truth, not MAVSDK's telemetry: the
 height reached, the velocity and heading flown, the mode after the stop.
 
-MAVSDK's timeouts are wall-clock (heartbeat 3 s, commands 0.5 s × 3), so the mock runs at 1×.
+MAVSDK's timeouts are wall-clock (heartbeat 3 s, commands 0.5 s × 3), so the mock runs at 1×,
+and each flight takes some 16 s: marked slow. Skipped where the `mavsdk` package (the native
+MAVSDK 4 binding) is not installed.
 """
 
 from __future__ import annotations
@@ -21,6 +23,11 @@ from typing import Any
 
 import numpy as np
 import pytest
+
+pytest.importorskip(
+    "mavsdk.asyncio", reason="needs the mavsdk package (MAVSDK 4)", exc_type=ImportError
+)
+
 from mavsdk.asyncio import Autopilot, ComponentType, Configuration, Mavsdk, System
 from mavsdk.asyncio.plugins.action import ActionAsync
 from mavsdk.asyncio.plugins.offboard import OffboardAsync, VelocityNedYaw
@@ -32,7 +39,12 @@ from remarl_fc.sitl.config import Flavour, SitlConfig
 from remarl_fc.sitl.fleet import SitlFleet
 from remarl_fc.sitl.vehicle import Guidance
 
-pytestmark = [pytest.mark.asyncio, pytest.mark.network, pytest.mark.timeout(120)]
+pytestmark = [
+    pytest.mark.asyncio,
+    pytest.mark.network,
+    pytest.mark.slow,
+    pytest.mark.timeout(120),
+]
 
 VEHICLES = 3
 WAIT_S = 15.0

@@ -55,17 +55,18 @@ async def test_heartbeat_only_until_streams_are_requested(sitl):
         assert ack.result == MavResult.ACCEPTED
         assert (ack.target_system, ack.target_component) == (255, 190)
         t0 = fleet.now_s()
-        await gcs.wait_sim(2.0)
-        rate = gcs.count("ATTITUDE", since_s=t0 + 0.2) / (fleet.now_s() - t0 - 0.2)
+        await gcs.sent_after("ATTITUDE", t0 + 2.0)  # the rate, counted on the vehicle's clock
+        rate = len(gcs.sent_between("ATTITUDE", t0 + 0.2, t0 + 2.0)) / 1.8
         assert 17.0 <= rate <= 23.0
         # REQUEST_DATA_STREAM(POSITION, 5 Hz) turns on the position group
         gcs.send(gcs.f.request_data_stream_encode(1, 1, 6, 5, 1))
         await gcs.wait_for("GLOBAL_POSITION_INT")
-        # −1 disables
-        await gcs.command(MavCmd.SET_MESSAGE_INTERVAL, MsgId.ATTITUDE, -1)
+        # −1 disables: nothing sent after the ACK
+        ack = await gcs.command(MavCmd.SET_MESSAGE_INTERVAL, MsgId.ATTITUDE, -1)
+        assert ack.result == MavResult.ACCEPTED
         t1 = fleet.now_s()
         await gcs.wait_sim(1.0)
-        assert gcs.count("ATTITUDE", since_s=t1 + 0.2) == 0
+        assert gcs.sent_between("ATTITUDE", t1, math.inf) == []
 
 
 async def test_boot_mode_is_overwritten_and_arming_waits_for_position(sitl):
@@ -85,7 +86,8 @@ async def test_boot_mode_is_overwritten_and_arming_waits_for_position(sitl):
         ack = await gcs.command(MavCmd.DO_SET_MODE, 1, CopterMode.GUIDED)
         assert ack.result == MavResult.FAILED  # GUIDED needs a position
         await gcs.wait_ready()
-        assert (await gcs.command(MavCmd.DO_SET_MODE, 1, CopterMode.LAND)).result == 0
+        ack = await gcs.command(MavCmd.DO_SET_MODE, 1, CopterMode.LAND)
+        assert ack.result == MavResult.ACCEPTED
         ack = await gcs.command(MavCmd.COMPONENT_ARM_DISARM, 1)
         assert ack.result == MavResult.FAILED
         assert "Mode not armable" in (await gcs.wait_for("STATUSTEXT")).text
@@ -138,10 +140,8 @@ async def test_guided_velocity_and_yaw_2503_and_units(sitl):
         gcs.hello()
         await arm_and_take_off(gcs)
         yaw = math.radians(90)
-        for _ in range(40):  # 4 simulated s at 10 Hz
-            gcs.send(velocity_yaw(gcs, 3.0, 2.0, yaw))
-            await gcs.wait_sim(0.1)
-        vel = fleet.frames.vel_ned_m_s[0]
+        await gcs.stream(lambda: velocity_yaw(gcs, 3.0, 2.0, yaw), seconds=4.0)
+        vel = fleet.frames.vel_ned_m_s[0].copy()
         assert vel[0] == pytest.approx(3.0, abs=0.1) and vel[1] == pytest.approx(2.0, abs=0.1)
         assert math.degrees(fleet.frames.yaw_rad[0]) == pytest.approx(90.0, abs=2.0)
         gcs.fresh()
@@ -150,7 +150,9 @@ async def test_guided_velocity_and_yaw_2503_and_units(sitl):
         assert gpi.hdg == pytest.approx(9000, abs=300)
         home = fleet.homes[0]
         n, e, _d = geodetic_to_ned(from_deg_e7(gpi.lat), from_deg_e7(gpi.lon), gpi.alt / 1000, home)
-        truth = fleet.frames.pos_ned_m[0] - fleet.frames.home_ned_m[0]
+        # the truth when it was sent: now, less the steady velocity since
+        since_s = fleet.now_s() - gpi.time_boot_ms / 1000
+        truth = fleet.frames.pos_ned_m[0] - fleet.frames.home_ned_m[0] - vel * since_s
         assert float(n) == pytest.approx(truth[0], abs=1.0)
         assert float(e) == pytest.approx(truth[1], abs=1.0)
         assert gpi.relative_alt == pytest.approx(-truth[2] * 1000, abs=1000)
@@ -163,39 +165,41 @@ async def test_guided_velocity_and_yaw_2503_and_units(sitl):
 
 
 async def test_guid_timeout_stops_but_stays_guided(sitl):
+    """GLOBAL_POSITION_INT's velocities, on the vehicle's clock from the last setpoint."""
     async with sitl() as (fleet, gcs):
         gcs.hello()
         await arm_and_take_off(gcs, 10.0)
-        for _ in range(20):
-            gcs.send(velocity_yaw(gcs, 0.0, 4.0, 0.0))
-            await gcs.wait_sim(0.1)
+        ap = fleet.vehicles[0]
+        await gcs.stream(lambda: velocity_yaw(gcs, 0.0, 4.0, 0.0), seconds=3.0)
         assert fleet.frames.vel_ned_m_s[0, 1] == pytest.approx(4.0, abs=0.2)
-        await gcs.wait_sim(2.5)  # < GUID_TIMEOUT (3 s): still flying
-        assert fleet.frames.vel_ned_m_s[0, 1] > 3.5
-        await gcs.wait_sim(3.0)  # > 3 s + deceleration: stopped
-        assert np.hypot(*fleet.frames.vel_ned_m_s[0, :2]) < 0.3
-        assert fleet.vehicles[0].custom_mode == CopterMode.GUIDED
+        last = ap.last_setpoint_s
+        await gcs.sent_after("GLOBAL_POSITION_INT", last + 5.5)
+        flying = gcs.sent_between("GLOBAL_POSITION_INT", last, last + 2.5)
+        assert len(flying) >= 20 and min(m.vy for m in flying) > 350  # < GUID_TIMEOUT (3 s)
+        stopped = gcs.sent_between("GLOBAL_POSITION_INT", last + 5.5, math.inf)
+        assert max(math.hypot(m.vx, m.vy) for m in stopped) < 30  # > 3 s + deceleration
+        assert ap.custom_mode == CopterMode.GUIDED
         gcs.send(velocity_yaw(gcs, 0.0, 4.0, 0.0))  # the next setpoint resumes
-        await gcs.wait_sim(2.5)
-        assert fleet.frames.vel_ned_m_s[0, 1] > 3.0
+        await gcs.until("the setpoint", lambda: ap.last_setpoint_s > last)
+        resumed = await gcs.sent_after("GLOBAL_POSITION_INT", ap.last_setpoint_s + 2.5)
+        assert resumed.vy > 300
 
 
 async def test_single_ignore_bit_makes_the_setpoint_invalid_and_stops(sitl):
     async with sitl() as (fleet, gcs):
         gcs.hello()
         await arm_and_take_off(gcs, 10.0)
-        for _ in range(20):
-            gcs.send(velocity_yaw(gcs, 4.0, 0.0, 0.0))
-            await gcs.wait_sim(0.1)
+        await gcs.stream(lambda: velocity_yaw(gcs, 4.0, 0.0, 0.0), seconds=2.0)
+        assert fleet.frames.vel_ned_m_s[0, 0] > 3.0
         trap = TYPE_MASK_VELOCITY_YAW | TypeMask.VZ_IGNORE  # 2535
-        for _ in range(30):
-            gcs.send(velocity_yaw(gcs, 4.0, 0.0, 0.0, mask=trap))
-            await gcs.wait_sim(0.1)
+        await gcs.stream(lambda: velocity_yaw(gcs, 4.0, 0.0, 0.0, mask=trap), seconds=3.0)
         assert np.hypot(*fleet.frames.vel_ned_m_s[0, :2]) < 0.3
         counters = fleet.vehicles[0].counters
-        assert counters.setpoints_ignored >= 30
+        invalid = "invalid: position, velocity and acceleration need all three axes"
+        assert counters.ignored_reasons[invalid] == 30
         # outside GUIDED setpoints are silently ignored
-        await gcs.command(MavCmd.DO_SET_MODE, 1, CopterMode.BRAKE)
+        ack = await gcs.command(MavCmd.DO_SET_MODE, 1, CopterMode.BRAKE)
+        assert ack.result == MavResult.ACCEPTED
         before = counters.ignored_reasons["not in GUIDED"]
         gcs.send(velocity_yaw(gcs, 4.0, 0.0, 0.0))
         await gcs.wait_sim(0.3)
@@ -214,8 +218,7 @@ async def test_auto_disarm_on_the_ground(sitl):
         await gcs.wait_sim(fleet.cfg.ardupilot.disarm_delay_s + 0.5)
         hb = await gcs.heartbeat_after(fleet.now_s())
         assert not hb.base_mode & MavModeFlag.SAFETY_ARMED
-        texts = [m.text for _, m in gcs.heard if m.get_type() == "STATUSTEXT"]
-        assert "Disarming motors" in texts
+        assert "Disarming motors" in gcs.texts()
 
 
 async def test_land_disarms_at_touchdown(sitl):

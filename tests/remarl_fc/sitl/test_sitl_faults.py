@@ -51,9 +51,10 @@ async def test_packet_loss_rate_is_close_to_asked(sitl):
         await gcs.wait_for("HEARTBEAT", limit_s=20.0)
         await gcs.command(MavCmd.SET_MESSAGE_INTERVAL, MsgId.ATTITUDE, 20_000)
         t0 = fleet.now_s()
-        await gcs.wait_sim(10.0)
-        got = gcs.count("ATTITUDE", since_s=t0 + 0.5)
-        expected = 50 * (fleet.now_s() - t0 - 0.5)
+        await gcs.until_sim(t0 + 10.0)
+        await gcs.sent_after("ATTITUDE", t0 + 9.5)  # counted on the vehicle's clock
+        got = len(gcs.sent_between("ATTITUDE", t0 + 0.5, t0 + 9.5))
+        expected = 50 * 9.0
         assert 0.6 * expected < got < 0.8 * expected  # 70 % delivered
 
 
@@ -64,18 +65,15 @@ async def test_gps_glitch_moves_reported_position_and_flags_the_ekf(sitl):
         await gcs.wait_ready()
         await gcs.command(MavCmd.SET_MESSAGE_INTERVAL, MsgId.GLOBAL_POSITION_INT, 100_000)
         await gcs.command(MavCmd.SET_MESSAGE_INTERVAL, MsgId.EKF_STATUS_REPORT, 100_000)
-        faults.glitch_gps(0, fleet.now_s() + 0.5, 2.0, 50.0)
-        await gcs.wait_sim(1.0)
-        gcs.fresh()
-        gpi = await gcs.wait_for("GLOBAL_POSITION_INT")
-        ekf = await gcs.wait_for("EKF_STATUS_REPORT")
+        start = fleet.now_s() + 0.5
+        faults.glitch_gps(0, start, 2.0, 50.0)
+        gpi = await gcs.sent_after("GLOBAL_POSITION_INT", start + 0.5)  # within the glitch
         n, _, _ = geodetic_to_ned(from_deg_e7(gpi.lat), from_deg_e7(gpi.lon), 0.0, fleet.homes[0])
         assert float(n) == pytest.approx(50.0, abs=0.5)
-        assert ekf.flags & EkfFlag.GPS_GLITCHING
+        t, ekf = await gcs.wait_for_stamped("EKF_STATUS_REPORT")  # no time_boot_ms: arrival
+        assert t < start + 2.0 and ekf.flags & EkfFlag.GPS_GLITCHING
         assert fleet.frames.pos_ned_m[0, 0] == pytest.approx(fleet.frames.home_ned_m[0, 0])
-        await gcs.wait_sim(2.0)
-        gcs.fresh()
-        gpi = await gcs.wait_for("GLOBAL_POSITION_INT")
+        gpi = await gcs.sent_after("GLOBAL_POSITION_INT", start + 2.1)  # after it
         n, _, _ = geodetic_to_ned(from_deg_e7(gpi.lat), from_deg_e7(gpi.lon), 0.0, fleet.homes[0])
         assert float(n) == pytest.approx(0.0, abs=0.5)
 

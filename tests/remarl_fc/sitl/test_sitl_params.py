@@ -16,6 +16,7 @@ from remarl_fc.mavlink.consts import (
     MavCmd,
     MavModeFlag,
     MavParamType,
+    MavResult,
     MsgId,
 )
 from remarl_fc.mavlink.params import INT_FORMATS, from_wire, to_wire
@@ -145,6 +146,22 @@ async def value_of(gcs, name: str):
     return await gcs.wait_for("PARAM_VALUE", lambda m: m.param_id == name)
 
 
+def said(text: str):
+    """A `Gcs.wait_for` predicate: a STATUSTEXT saying ``text``."""
+    return lambda m: m.text == text
+
+
+async def armed(gcs):
+    """Arm; (arrival time, ACK) of the accepted arming."""
+    gcs.fresh()
+    gcs.send(gcs.f.command_long_encode(1, 1, MavCmd.COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0))
+    t, ack = await gcs.wait_for_stamped(
+        "COMMAND_ACK", lambda m: m.command == MavCmd.COMPONENT_ARM_DISARM
+    )
+    assert ack.result == MavResult.ACCEPTED
+    return t, ack
+
+
 @pytest.mark.asyncio
 @pytest.mark.network
 @pytest.mark.timeout(120)
@@ -181,7 +198,7 @@ async def test_list_read_and_capabilities(sitl, flavour):
         }
 
         ack = await gcs.command(MavCmd.REQUEST_MESSAGE, MsgId.AUTOPILOT_VERSION)
-        assert ack.result == 0
+        assert ack.result == MavResult.ACCEPTED
         caps = (await gcs.wait_for("AUTOPILOT_VERSION")).capabilities
         bytewise = bool(caps & MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE)
         cast = bool(caps & MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST)
@@ -216,12 +233,9 @@ async def test_ardupilot_set_converts_units_refuses_and_takes_effect(sitl):
         param_set(gcs, "DISARM_DELAY", 2.0, MavParamType.INT8)
         assert (await value_of(gcs, "DISARM_DELAY")).param_value == 2.0
         await gcs.command(MavCmd.DO_SET_MODE, 1, CopterMode.GUIDED)
-        await gcs.command(MavCmd.COMPONENT_ARM_DISARM, 1)
-        assert ap.armed
-        await gcs.wait_sim(1.5)
-        assert ap.armed
-        await gcs.wait_sim(1.0)
-        assert not ap.armed
+        t_armed, _ = await armed(gcs)
+        t_disarmed, _ = await gcs.wait_for_stamped("STATUSTEXT", said("Disarming motors"))
+        assert 1.9 < t_disarmed - t_armed < 2.5 and not ap.armed
         summary = fleet.summary()["vehicles"][0]
         assert summary["params_set"] == {"RTL_ALT": 1, "DISARM_DELAY": 1}
         assert summary["params_refused"] == {"LAND_SPEED": 1}
@@ -251,16 +265,15 @@ async def test_px4_set_is_bytewise_typed_and_takes_effect(sitl):
         # COM_DISARM_PRFLT 2 s: armed without a take-off, disarmed after 2 s instead of 10
         param_set(gcs, "COM_DISARM_PRFLT", 2.0, MavParamType.REAL32)
         assert (await value_of(gcs, "COM_DISARM_PRFLT")).param_value == 2.0
-        assert (await gcs.command(MavCmd.COMPONENT_ARM_DISARM, 1)).result == 0
-        await gcs.wait_sim(1.5)
-        assert ap.armed
-        await gcs.wait_sim(1.0)
-        hb = await gcs.heartbeat_after(fleet.now_s())
+        t_armed, _ = await armed(gcs)
+        t_disarmed, _ = await gcs.wait_for_stamped("STATUSTEXT", said("Disarmed: no takeoff"))
+        assert 1.9 < t_disarmed - t_armed < 2.5
+        hb = await gcs.heartbeat_after(t_disarmed)
         assert not hb.base_mode & MavModeFlag.SAFETY_ARMED
 
         # ≤ 0 disables it: armed on the ground stays armed
         param_set(gcs, "COM_DISARM_PRFLT", -1.0, MavParamType.REAL32)
-        await value_of(gcs, "COM_DISARM_PRFLT")
-        assert (await gcs.command(MavCmd.COMPONENT_ARM_DISARM, 1)).result == 0
+        assert (await value_of(gcs, "COM_DISARM_PRFLT")).param_value == -1.0
+        await armed(gcs)
         await gcs.wait_sim(Px4Params().com_disarm_prflt_s + 1.0)
         assert ap.armed

@@ -8,6 +8,7 @@ import pytest
 
 from remarl_fc.mavlink.consts import (
     TYPE_MASK_VELOCITY_YAW,
+    LandedState,
     MavCmd,
     MavFrame,
     MavModeFlag,
@@ -33,9 +34,17 @@ def velocity(gcs, vn: float, ve: float, vd: float = 0.0, yaw: float = 0.0, frame
 
 async def stream(gcs, seconds: float, **kw) -> None:
     """Send velocity setpoints at 10 Hz for ``seconds`` simulated seconds."""
-    for _ in range(round(seconds * 10)):
-        gcs.send(velocity(gcs, **kw))
-        await gcs.wait_sim(0.1)
+    await gcs.stream(lambda: velocity(gcs, **kw), seconds)
+
+
+async def heartbeat_streaming(gcs, sim_s: float):
+    """The first HEARTBEAT after ``sim_s``, streaming setpoints at 10 Hz meanwhile (so that
+    OFFBOARD holds however long the heartbeat takes)."""
+    while True:
+        beats = [m for t, m in gcs.heard if t > sim_s and m.get_type() == "HEARTBEAT"]
+        if beats:
+            return beats[0]
+        await stream(gcs, 0.1, vn=0.0, ve=0.0)
 
 
 async def test_px4_streams_by_default_and_heartbeat_encoding(sitl):
@@ -61,11 +70,10 @@ async def test_offboard_needs_a_setpoint_stream(sitl):
         assert ack.result == MavResult.ACCEPTED
         hb = await gcs.heartbeat_after(fleet.now_s())
         assert px4_mode_parts(hb.custom_mode)[0] == Px4MainMode.POSCTL
-        gcs.send(velocity(gcs, 0.0, 0.0))
-        await gcs.wait_sim(0.2)
+        gcs.send(velocity(gcs, 0.0, 0.0))  # proof of life, then at once the mode change
         ack = await gcs.command(MavCmd.DO_SET_MODE, 1, Px4MainMode.OFFBOARD)
         assert ack.result == MavResult.ACCEPTED
-        hb = await gcs.heartbeat_after(fleet.now_s())
+        hb = await heartbeat_streaming(gcs, fleet.now_s())
         assert hb.custom_mode == OFFBOARD
         assert hb.base_mode & MavModeFlag.CUSTOM_MODE_ENABLED
 
@@ -74,10 +82,12 @@ async def test_offboard_flight_then_loss_goes_to_hold_then_the_action(sitl):
     async with sitl(flavour="px4") as (fleet, gcs):
         gcs.hello()
         await gcs.wait_ready()
+        gcs.send(velocity(gcs, 0.0, 0.0, -2.0))  # proof of life, then at once the mode change
+        ack = await gcs.command(MavCmd.DO_SET_MODE, 1, Px4MainMode.OFFBOARD)
+        assert ack.result == MavResult.ACCEPTED
         gcs.send(velocity(gcs, 0.0, 0.0, -2.0))
-        await gcs.wait_sim(0.2)
-        assert (await gcs.command(MavCmd.DO_SET_MODE, 1, Px4MainMode.OFFBOARD)).result == 0
-        assert (await gcs.command(MavCmd.COMPONENT_ARM_DISARM, 1)).result == 0
+        ack = await gcs.command(MavCmd.COMPONENT_ARM_DISARM, 1)
+        assert ack.result == MavResult.ACCEPTED
         await stream(gcs, 4.0, vn=0.0, ve=0.0, vd=-2.0)  # climb in offboard
         assert fleet.frames.height_m()[0] > 4.0
         await stream(gcs, 4.0, vn=5.0, ve=0.0, vd=0.0, yaw=math.radians(45))
@@ -97,9 +107,9 @@ async def test_offboard_flight_then_loss_goes_to_hold_then_the_action(sitl):
 async def test_px4_frames_and_arming_rules(sitl):
     async with sitl(flavour="px4") as (fleet, gcs):
         gcs.hello()
-        hb = await gcs.wait_for("HEARTBEAT")
-        ack = await gcs.command(MavCmd.COMPONENT_ARM_DISARM, 1)
-        assert ack.result == MavResult.TEMPORARILY_REJECTED  # no position yet
+        ack = await gcs.command(MavCmd.COMPONENT_ARM_DISARM, 1)  # at once: no position yet
+        assert ack.result == MavResult.TEMPORARILY_REJECTED
+        assert (await gcs.wait_for("STATUSTEXT")).text == "Arming denied: no global position"
         await gcs.wait_ready()
         # LOCAL_OFFSET_NED (7) is ArduPilot-only: PX4 drops it, so no proof of life
         gcs.send(velocity(gcs, 1.0, 0.0, frame=MavFrame.LOCAL_OFFSET_NED))
@@ -108,7 +118,8 @@ async def test_px4_frames_and_arming_rules(sitl):
         assert ack.result == MavResult.TEMPORARILY_REJECTED
         assert fleet.vehicles[0].counters.ignored_reasons["invalid: frame 7 not accepted"] == 1
         # arm in POSCTL and sit: COM_DISARM_PRFLT disarms after 10 s
-        assert (await gcs.command(MavCmd.COMPONENT_ARM_DISARM, 1)).result == 0
+        ack = await gcs.command(MavCmd.COMPONENT_ARM_DISARM, 1)
+        assert ack.result == MavResult.ACCEPTED
         await gcs.wait_sim(fleet.cfg.px4.com_disarm_prflt_s + 0.5)
         hb = await gcs.heartbeat_after(fleet.now_s())
         assert not hb.base_mode & MavModeFlag.SAFETY_ARMED
@@ -118,7 +129,8 @@ async def test_px4_takeoff_to_mis_takeoff_alt_then_hold_and_land(sitl):
     async with sitl(flavour="px4") as (fleet, gcs):
         gcs.hello()
         await gcs.wait_ready()
-        assert (await gcs.command(MavCmd.COMPONENT_ARM_DISARM, 1)).result == 0
+        ack = await gcs.command(MavCmd.COMPONENT_ARM_DISARM, 1)
+        assert ack.result == MavResult.ACCEPTED
         ack = await gcs.command(MavCmd.NAV_TAKEOFF, 0, 0, 0, math.nan, math.nan, math.nan, math.nan)
         assert ack.result == MavResult.ACCEPTED
         await gcs.wait_sim(4.0)
@@ -127,7 +139,7 @@ async def test_px4_takeoff_to_mis_takeoff_alt_then_hold_and_land(sitl):
         assert hb.custom_mode == HOLD
         gcs.fresh()
         ext = await gcs.wait_for("EXTENDED_SYS_STATE")
-        assert ext.landed_state == 2  # IN_AIR
-        assert (await gcs.command(MavCmd.NAV_LAND)).result == 0
+        assert ext.landed_state == LandedState.IN_AIR
+        assert (await gcs.command(MavCmd.NAV_LAND)).result == MavResult.ACCEPTED
         await gcs.wait_sim(8.0)
         assert fleet.vehicles[0].landed and not fleet.vehicles[0].armed  # COM_DISARM_LAND
