@@ -20,6 +20,7 @@ from remarl_fc.flight.config import Clock, FlyConfig, Member
 from remarl_fc.mavlink.codec import Codec
 from remarl_fc.mavlink.consts import (
     CopterMode,
+    LandedState,
     MavCmd,
     MavComponent,
     MavModeFlag,
@@ -169,6 +170,20 @@ class Commander:
                 lambda: check(t.custom_mode),
                 MODE_CONFIRM_S,
             )
+
+    async def hold(self, member: Member) -> str:
+        """The hold mode; a vehicle still armed on the ground is disarmed instead.
+
+        Returns:
+            What was done, for the event log.
+        """
+        t = member.track
+        if t.armed and t.landed_state == LandedState.ON_GROUND:
+            disarm = MavCmd.COMPONENT_ARM_DISARM
+            await self.command(member, disarm, 0, done=lambda: not t.armed)
+            return "on the ground: disarmed"
+        await self.set_mode(member, "hold")
+        return "holding"
 
 
 def enum_name(enum_cls: Any, value: int) -> str:

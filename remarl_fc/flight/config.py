@@ -18,6 +18,7 @@ from typing import Literal
 import numpy as np
 
 from remarl_fc.bus.core import BusCore
+from remarl_fc.errors import ConfigError
 from remarl_fc.flight.mission import Mission
 from remarl_fc.flight.tracking import VehicleTrack
 from remarl_fc.mavlink.codec import SigningConfig
@@ -162,6 +163,31 @@ class Member:
     remote_status: str | None = None  # a peer's status as its process publishes it
     ready_ne_m: np.ndarray | None = None  # where it was when it became ready to start
     ready_t: float | None = None  # when (UNIX s): every process derives the same start
+
+
+def members_of(mission: Mission, local: frozenset[int] | None) -> list[Member]:
+    """Every vehicle of the mission in slot order, ``local`` ones flown by this process.
+
+    Raises:
+        ConfigError: ``local`` names a vehicle that is not in the mission.
+    """
+    ids = {p.system_id for p in mission.vehicles}
+    mine = local if local is not None else frozenset(ids)
+    unknown = sorted(mine - ids)
+    if unknown:
+        raise ConfigError(
+            f"vehicle(s) {unknown} are not in the mission {mission.source} "
+            f"(its system ids: {sorted(ids)})"
+        )
+    return [
+        Member(
+            p.slot,
+            p.system_id,
+            VehicleTrack(p.system_id, mission.origin),
+            local=p.system_id in mine,
+        )
+        for p in mission.by_slot()
+    ]
 
 
 def bus_core(cfg: FlyConfig, local: frozenset[int]) -> BusCore:

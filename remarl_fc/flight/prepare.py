@@ -2,6 +2,8 @@
 
 `Preparation.prepare_one` runs once per vehicle this process flies, concurrently:
 
+0. (`Preparation.prepare_swarm`) wait for a HEARTBEAT of every vehicle, prepare them all
+   concurrently, then wait for the whole swarm to be ready (over the bus: one start for all);
 1. ask for the telemetry streams (`TELEMETRY`; ADS-B relay best effort);
 2. read and judge the failsafe parameters (`remarl_fc.flight.paramcheck`): an error finding
    raises `UnsafeParameters` before anything is armed;
@@ -16,9 +18,14 @@ goes through `remarl_fc.flight.core.transition` (via the ``apply`` callback).
 
 from __future__ import annotations
 
+import asyncio
 import math
+import time
 from collections.abc import Callable
 from dataclasses import replace
+
+import numpy as np
+from numpy.typing import NDArray
 
 from remarl_fc.errors import CommandRejected, RemarlError, UnsafeParameters
 from remarl_fc.flight.commands import Commander, enum_name
@@ -26,6 +33,7 @@ from remarl_fc.flight.config import PX4_TELEMETRY, TELEMETRY, Clock, FlyConfig, 
 from remarl_fc.flight.core import TAKEOFF_DONE_FRACTION, Vehicle
 from remarl_fc.flight.mission import VehiclePlan
 from remarl_fc.flight.paramcheck import ParamReader, check_params, checked_names
+from remarl_fc.flight.peers import Peers
 from remarl_fc.flight.status import Status
 from remarl_fc.mavlink.consts import LandedState, MavCmd, MavState, MsgId
 
@@ -72,6 +80,43 @@ class Preparation:
         self.cfg, self.commands, self.params, self.clock = cfg, commands, params, clock
         self.plans = plans
         self.vehicle, self.update, self.apply, self.event = vehicle, update, apply, event
+
+    async def prepare_swarm(
+        self, mine: list[Member], peers: Peers
+    ) -> tuple[NDArray[np.float64], float]:
+        """Prepare every vehicle of this process at once, then wait for the whole swarm.
+
+        Returns:
+            The swarm's start: every vehicle's ready position (N, 2) in slot order, and the
+            start time on the flight clock — the same in every process of the swarm bus.
+        """
+        cfg = self.cfg
+        await self.commands.wait_until(
+            "a HEARTBEAT from every vehicle this process flies",
+            lambda: all(m.track.autopilot is not None for m in mine),
+            cfg.ready_timeout_s,
+        )
+        async with asyncio.TaskGroup() as tg:
+            for m in mine:
+                tg.create_task(self.prepare_one(m), name=f"remarl[{m.system_id}].prepare")
+        for m in mine:
+            m.ready_ne_m, m.ready_t = m.track.ne_m.copy(), time.time()
+        plan: list[tuple[NDArray[np.float64], float]] = []
+
+        def all_ready() -> bool:
+            peers.sync(self.clock.now())
+            got = peers.start_plan()
+            if got is not None:
+                plan.append(got)
+            return got is not None
+
+        await self.commands.wait_until(
+            "every vehicle of the swarm ready (states on the swarm bus)",
+            all_ready,
+            cfg.ready_timeout_s + cfg.takeoff_timeout_s,
+        )
+        positions, start_unix = plan[0]
+        return positions, self.clock.now() - (time.time() - start_unix) * self.clock.speedup
 
     def _stream(self, m: Member, *, prestream: bool, climb_target_m: float | None = None) -> None:
         v = self.vehicle(m.system_id)

@@ -20,6 +20,7 @@ from remarl_fc.flight.config import Member
 from remarl_fc.flight.control import Decision, SwarmController
 from remarl_fc.flight.status import Status
 from remarl_fc.flight.tracking import NO_FIX
+from remarl_fc.flight.traffic import ROUTINE_REJECTIONS
 
 Rows = Sequence[tuple[Member, Status]]
 """Every vehicle of the flight with its status, in slot order."""
@@ -128,8 +129,10 @@ def anomalies(rows: Rows, link: dict[str, Any], traffic: dict[str, Any]) -> list
             reasons = ", ".join(f"{k} {v}" for k, v in sorted(odd.items()))
             add("rejected telemetry", f"{rejected} messages rejected ({reasons})", True,
                 m.system_id)  # fmt: skip
-    rejected_adsb = traffic.get("rejected", {})
-    if rejected_adsb:
-        reasons = ", ".join(f"{k} {v}" for k, v in sorted(rejected_adsb.items()))
-        add("rejected ADS-B", f"reports from trusted sources rejected ({reasons})", True)
+    odd_adsb = {k: v for k, v in traffic.get("rejected", {}).items() if k not in ROUTINE_REJECTIONS}
+    if odd_adsb:
+        reasons = ", ".join(f"{k} {v}" for k, v in sorted(odd_adsb.items()))
+        add("rejected ADS-B", f"impossible reports from trusted sources ({reasons})", True)
+    if traffic.get("conflicts"):
+        add("ADS-B conflict", f"{traffic['conflicts']} ICAOs reported at two places", True)
     return out

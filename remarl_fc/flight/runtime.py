@@ -41,9 +41,9 @@ import numpy as np
 
 from remarl_fc.bus.core import SwarmBus
 from remarl_fc.bus.memory import MemoryBroker, MemoryBus
-from remarl_fc.errors import ConfigError, RemarlError, SpoofingDetected
+from remarl_fc.errors import RemarlError
 from remarl_fc.flight.commands import Commander
-from remarl_fc.flight.config import Clock, FlyConfig, Member, bus_core
+from remarl_fc.flight.config import Clock, FlyConfig, Member, bus_core, members_of
 from remarl_fc.flight.control import ControlSpec, PolicyLike, SwarmController
 from remarl_fc.flight.core import (
     Command,
@@ -62,6 +62,7 @@ from remarl_fc.flight.flightlog import DecisionLog, mission_header
 from remarl_fc.flight.paramcheck import ParamReader
 from remarl_fc.flight.peers import Peers
 from remarl_fc.flight.prepare import Preparation
+from remarl_fc.flight.receive import Receiver
 from remarl_fc.flight.report import (
     anomalies,
     decision_rows,
@@ -69,21 +70,17 @@ from remarl_fc.flight.report import (
     status_lines,
     vehicle_summaries,
 )
-from remarl_fc.flight.status import BEFORE_CONTROL, OBSTACLE, Status
-from remarl_fc.flight.tracking import VehicleTrack
+from remarl_fc.flight.status import OBSTACLE, Status
 from remarl_fc.flight.traffic import TrafficPicture
-from remarl_fc.flight.trust import SourceGate, Verdict
+from remarl_fc.flight.trust import SourceGate
 from remarl_fc.mavlink.codec import Codec
 from remarl_fc.mavlink.consts import (
     TYPE_MASK_VELOCITY_YAW,
-    LandedState,
     MavAutopilot,
-    MavCmd,
     MavComponent,
     MavFrame,
     MavState,
     MavType,
-    MsgId,
 )
 from remarl_fc.mavlink.link import MavlinkLink, TlogWriter
 from remarl_fc.resource import Resource
@@ -116,21 +113,10 @@ class SwarmRuntime(Resource):
         self.clock = Clock(cfg.speedup)
         self.on_status = on_status
         mission = cfg.mission
-        self.members = [
-            Member(p.slot, p.system_id, VehicleTrack(p.system_id, mission.origin))
-            for p in mission.by_slot()
-        ]
+        self.members = members_of(mission, cfg.vehicles)
         self.by_sysid = {m.system_id: m for m in self.members}
         self.plans = {p.system_id: p for p in mission.vehicles}
-        local = cfg.vehicles if cfg.vehicles is not None else frozenset(self.by_sysid)
-        unknown = sorted(local - set(self.by_sysid))
-        if unknown:
-            raise ConfigError(
-                f"vehicle(s) {unknown} are not in the mission {mission.source} "
-                f"(its system ids: {sorted(self.by_sysid)})"
-            )
-        for m in self.members:
-            m.local = m.system_id in local
+        local = frozenset(m.system_id for m in self.members if m.local)
         self.traffic = TrafficPicture(mission.origin)
         self.bus: SwarmBus = bus or MemoryBus(MemoryBroker(), bus_core(cfg, local))
         self.peers = Peers(
@@ -172,8 +158,10 @@ class SwarmRuntime(Resource):
         self.tick_s: list[float] = []
         """Wall time of each setpoint tick (checks + setpoints for every vehicle), s."""
         self._to_hold: asyncio.Queue[Member] = asyncio.Queue()
-        self._spoofed = asyncio.Event()
-        self._spoof_error: SpoofingDetected | None = None
+        self.receiver = Receiver(
+            self.gate, self.by_sysid, self.links, self.traffic, self.commands, self.params,
+            lambda sysid: self.vehicles[sysid].status, self._event, cfg.connections,
+        )  # fmt: skip
 
     # -- lifetime -----------------------------------------------------------------------
 
@@ -222,54 +210,9 @@ class SwarmRuntime(Resource):
 
     def _receiver(self, k: int) -> Callable[[Any, float, Any], bool]:
         def on_message(msg: Any, t_mono: float, address: Any) -> bool:
-            return self._on_message(k, msg, self.clock.at(t_mono), address)
+            return self.receiver.on_message(k, msg, self.clock.at(t_mono), address)
 
         return on_message
-
-    def _on_message(self, k: int, msg: Any, now: float, address: Any) -> bool:
-        """One frame from link ``k``: through the source gate, then to its track."""
-        got = self.gate.admit(k, address, msg)
-        member = self.by_sysid.get(got.system_id)
-        if got.alarm is not None and member is not None:
-            self._event(member, got.alarm)
-        if got.identity_claim and self.vehicles[got.system_id].status in BEFORE_CONTROL:
-            self._identity_conflict(got.system_id)
-        if got.verdict == Verdict.DROP:
-            return False
-        if got.verdict == Verdict.TRAFFIC:
-            self.traffic.update(msg, now, source=(msg.get_srcSystem(), msg.get_srcComponent()))
-            return True
-        assert member is not None  # the gate passes only the mission's vehicles
-        if got.bound:
-            member.link = self.links[k]
-            member.link.bind(member.system_id, address)
-            self._event(member, f"bound to {self.gate.bound[member.system_id]}")
-        if not member.local:
-            return True  # another process flies it: its state comes over the bus
-        member.track.update(msg, now)
-        mid = msg.get_msgId()
-        if mid == MsgId.COMMAND_ACK:
-            self.commands.on_ack(member.system_id, msg)
-        elif mid == MsgId.PARAM_VALUE:
-            self.params.on_value(member.system_id, msg, bytewise=member.track.is_px4)
-        return True
-
-    def _identity_conflict(self, system_id: int) -> None:
-        if self._spoofed.is_set():
-            return
-        sources = (str(self.gate.bound[system_id]), *(
-            str(a.source) for a in self.gate.alarms if a.system_id == system_id
-        ))  # fmt: skip
-        self._spoof_error = SpoofingDetected(
-            link=", ".join(self.cfg.connections), system_id=system_id, sources=sources
-        )
-        self._spoofed.set()
-
-    async def _refuse_spoofed_start(self) -> None:
-        """Raise `SpoofingDetected` once a second source claims a vehicle before take-off."""
-        await self._spoofed.wait()
-        assert self._spoof_error is not None
-        raise self._spoof_error
 
     # -- the flight ---------------------------------------------------------------------
 
@@ -308,7 +251,9 @@ class SwarmRuntime(Resource):
     async def _mission(self) -> None:
         try:
             async with asyncio.TaskGroup() as tg:
-                watch = tg.create_task(self._refuse_spoofed_start(), name="remarl.spoof_watch")
+                watch = tg.create_task(
+                    self.receiver.refuse_spoofed_start(), name="remarl.spoof_watch"
+                )
                 await self._prepare()
                 watch.cancel()
             await self._fly()
@@ -324,37 +269,9 @@ class SwarmRuntime(Resource):
         return [m for m in self.members if m.local]
 
     async def _prepare(self) -> None:
-        cfg = self.cfg
         mine = self.local_members()
-        await self.commands.wait_until(
-            "a HEARTBEAT from every vehicle this process flies",
-            lambda: all(m.track.autopilot is not None for m in mine),
-            cfg.ready_timeout_s,
-        )
-        async with asyncio.TaskGroup() as tg:
-            for m in mine:
-                tg.create_task(
-                    self.preparation.prepare_one(m), name=f"remarl[{m.system_id}].prepare"
-                )
-        for m in mine:
-            m.ready_ne_m, m.ready_t = m.track.ne_m.copy(), time.time()
-        plan: list[tuple[np.ndarray, float]] = []
-
-        def all_ready() -> bool:
-            self.peers.sync(self.clock.now())
-            got = self.peers.start_plan()
-            if got is not None:
-                plan.append(got)
-            return got is not None
-
-        await self.commands.wait_until(
-            "every vehicle of the swarm ready (states on the swarm bus)",
-            all_ready,
-            cfg.ready_timeout_s + cfg.takeoff_timeout_s,
-        )
-        positions, start_unix = plan[0]
-        start = self.clock.now() - (time.time() - start_unix) * self.clock.speedup
-        self.controller.start(positions, start)
+        start_ne_m, start = await self.preparation.prepare_swarm(mine, self.peers)
+        self.controller.start(start_ne_m, start)
         for m in mine:
             self._apply(self.vehicles[m.system_id], Status.CONTROLLED, "under control")
 
@@ -487,17 +404,8 @@ class SwarmRuntime(Resource):
                 self._to_hold.task_done()
 
     async def _hold(self, m: Member) -> None:
-        """The hold mode; an armed vehicle still on the ground is disarmed instead."""
-        t = m.track
         try:
-            if t.armed and t.landed_state == LandedState.ON_GROUND:
-                await self.commands.command(
-                    m, MavCmd.COMPONENT_ARM_DISARM, 0, done=lambda: not t.armed
-                )
-                self._event(m, "on the ground: disarmed")
-                return
-            await self.commands.set_mode(m, "hold")
-            self._event(m, "holding")
+            self._event(m, await self.commands.hold(m))
         except RemarlError as exc:
             self._event(m, f"hold command failed: {exc}")
 

@@ -220,7 +220,7 @@ class TrafficPicture:
         # ver_velocity is not used (the policy avoids sideways only), so it is not checked.
         n, e, d = geodetic_to_ned(from_deg_e7(lat), from_deg_e7(lon), alt_m, self.origin)
         ne = np.array([float(n), float(e)])
-        if float(np.hypot(*ne)) > MAX_RANGE_M:
+        if math.hypot(*ne.tolist()) > MAX_RANGE_M:
             return self._reject("out of range")
         course = math.radians(heading / 100.0)
         vel = np.array([speed * math.cos(course), speed * math.sin(course)])
@@ -255,14 +255,14 @@ class TrafficPicture:
             return self._reject(_SHARED + "not finite")
         ne = np.array([float(ne_m[0]), float(ne_m[1])])
         vel = np.array([float(vel_ne_m_s[0]), float(vel_ne_m_s[1])])
-        if float(np.hypot(*ne)) > MAX_RANGE_M:
+        if math.hypot(*ne.tolist()) > MAX_RANGE_M:
             return self._reject(_SHARED + "out of range")
         height = math.nan if height_m is None else float(height_m)
         if height_m is not None and not (
             MIN_ALTITUDE_M <= self.origin.alt_m + height <= MAX_ALTITUDE_M
         ):
             return self._reject(_SHARED + "altitude out of range")
-        if float(np.hypot(*vel)) > self.max_speed_m_s:
+        if math.hypot(*vel.tolist()) > self.max_speed_m_s:
             return self._reject(_SHARED + "impossible speed")
         if now - t > self.max_age_s:
             return self._reject(_SHARED + "stale")
