@@ -150,7 +150,7 @@ class ArduCopterLogic(Autopilot[ArduPilotParams]):
 
     def request_mode(self, cmd: Command, now_s: float) -> Result:
         """p2 = mode number; during boot accepted, then overwritten by the initial mode."""
-        mode = int(cmd.params[1])
+        mode = cmd.int_param(1)
         if self.booting(now_s):
             self.custom_mode = mode
             return MavResult.ACCEPTED, ""

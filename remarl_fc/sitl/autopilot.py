@@ -320,7 +320,7 @@ class Autopilot(ABC, Generic[P]):
 
     def cmd_set_mode(self, cmd: Command, now_s: float) -> Result:
         """MAV_CMD_DO_SET_MODE: p1 must have CUSTOM_MODE_ENABLED; the flavour reads the mode."""
-        if not int(cmd.params[0]) & MavModeFlag.CUSTOM_MODE_ENABLED:
+        if not cmd.int_param(0, 0, 255) & MavModeFlag.CUSTOM_MODE_ENABLED:
             return self.spec.set_mode_not_custom, ""
         return self.request_mode(cmd, now_s)
 

@@ -8,6 +8,7 @@ protocol: every command addressed to it gets exactly one COMMAND_ACK, back to it
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -46,9 +47,26 @@ class Command:
         except ValueError:
             return str(self.command)
 
+    def int_param(self, k: int, low: int = 0, high: int = 2**32 - 1) -> int:
+        """Parameter ``k`` (0-based) truncated to an integer (a C cast), within ``[low, high]``.
+
+        Raises:
+            BadParameter: it is NaN, infinite or out of range (the command is then answered
+                DENIED, as an autopilot refuses a malformed command, instead of the mock
+                failing).
+        """
+        value = self.params[k]
+        if not math.isfinite(value) or not low <= value <= high:
+            raise BadParameter(f"param{k + 1} {value:g} invalid (not in {low}..{high})")
+        return int(value)
+
     def frame_in(self, allowed: tuple[int, ...]) -> bool:
         """COMMAND_INT frame check (COMMAND_LONG has no frame and passes)."""
         return self.frame is None or self.frame in allowed
+
+
+class BadParameter(ValueError):
+    """A command parameter that cannot be what the command needs (see `Command.int_param`)."""
 
 
 Handler = Callable[[Command, float], Result]
@@ -90,7 +108,10 @@ class CommandServer:
         if handler is None:
             result, text = int(MavResult.UNSUPPORTED), ""
         else:
-            result, text = handler(cmd, now_s)
+            try:
+                result, text = handler(cmd, now_s)
+            except BadParameter as exc:
+                result, text = int(MavResult.DENIED), f"{cmd.name}: {exc}"
         ch.counters.results[MavResult(result).name] += 1
         ch.emit(
             ch.factory.command_ack_encode(

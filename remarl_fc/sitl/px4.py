@@ -166,7 +166,7 @@ class Px4Logic(Autopilot[Px4Params]):
 
     def request_mode(self, cmd: Command, now_s: float) -> Result:
         """p2 = main mode, p3 = sub mode, each cast to uint8 as PX4 does."""
-        main, sub = int(cmd.params[1]) & 0xFF, int(cmd.params[2]) & 0xFF
+        main, sub = cmd.int_param(1) & 0xFF, cmd.int_param(2) & 0xFF
         return self.enter_mode(px4_custom_mode(main, sub), now_s)
 
     def enter_mode(self, mode: int, now_s: float) -> Result:

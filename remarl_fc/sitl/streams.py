@@ -95,7 +95,7 @@ class StreamSchedule:
 
     def cmd_set_message_interval(self, cmd: Command, now_s: float) -> Result:
         """MAV_CMD_SET_MESSAGE_INTERVAL: p1 message id, p2 µs (−1 off, 0 default)."""
-        msg_id, interval_us = int(cmd.params[0]), cmd.params[1]
+        msg_id, interval_us = cmd.int_param(0, 0, 2**24 - 1), cmd.params[1]
         if msg_id not in self.supported:
             return MavResult.FAILED, ""
         if interval_us < 0:
@@ -108,7 +108,7 @@ class StreamSchedule:
 
     def cmd_request_message(self, cmd: Command, now_s: float) -> Result:
         """MAV_CMD_REQUEST_MESSAGE: p1 message id, sent once after the ACK."""
-        msg_id = int(cmd.params[0])
+        msg_id = cmd.int_param(0, 0, 2**24 - 1)
         if msg_id not in self.supported | {MsgId.AUTOPILOT_VERSION}:
             return MavResult.UNSUPPORTED, ""
         self.requested.append(msg_id)

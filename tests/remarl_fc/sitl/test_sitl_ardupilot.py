@@ -230,3 +230,25 @@ async def test_land_disarms_at_touchdown(sitl):
         await gcs.wait_sim(15.0)
         assert fleet.vehicles[0].landed and not fleet.vehicles[0].armed
         assert fleet.finished()
+
+
+async def test_malformed_command_parameters_are_denied_not_fatal(sitl):
+    """NaN or out-of-range parameters are refused like any malformed command (during boot
+    too); the mock goes on serving."""
+    nan = float("nan")
+    async with sitl() as (_fleet, gcs):
+        gcs.hello()
+        ack = await gcs.command(MavCmd.DO_SET_MODE, 1, -1)  # during boot
+        assert ack.result == MavResult.DENIED
+        await gcs.wait_ready()
+        for params in ((nan, CopterMode.GUIDED), (1, nan), (1, 1e12)):
+            ack = await gcs.command(MavCmd.DO_SET_MODE, *params)
+            assert ack.result == MavResult.DENIED
+            text = await gcs.wait_for("STATUSTEXT", lambda m: "invalid" in m.text)
+            assert text.text.startswith("DO_SET_MODE: param")
+        ack = await gcs.command(MavCmd.SET_MESSAGE_INTERVAL, nan, 1e5)
+        assert ack.result == MavResult.DENIED
+        ack = await gcs.command(MavCmd.DO_SET_MODE, 1, CopterMode.GUIDED)
+        assert ack.result == MavResult.ACCEPTED  # still serving
+        hb = await gcs.wait_for("HEARTBEAT", lambda m: m.custom_mode == CopterMode.GUIDED)
+        assert hb.custom_mode == CopterMode.GUIDED
