@@ -1,31 +1,61 @@
-"""Export a trained swarm to one self-describing policy file (safetensors, no pickle).
+"""Export a trained swarm to one self-describing, checksummed policy file (safetensors, no pickle).
 
 Tensors: the actors (``actor.*``) — all inference needs — and the critics (``critic.*``) for
 Q-value plots, each with a leading agent dimension (1 when parameters are shared). Metadata
 (``remarl_policy``, JSON): schema version, scenario and its units, observation layout and scales,
-action bound, dt, speed, agent count, sharing, network size, training commit, metrics.
+action bound, dt, speed, agent count, sharing, network size, training commit, metrics, and the
+checksum over all of it (`sim.policy_file`, the format shared with the loader
+`remarl_fc.policy_io`). A file is checked against that format before it is written, and written
+atomically, so the exporter never leaves a file the loader would refuse.
+
+Files written before checksums existed get one with `rehash_policy`, or from the shell::
+
+    python -m policies.export --rehash FILE [FILE ...]
+
+This module imports torch only inside `export_policy`, so rehashing works without it.
 """
 
 from __future__ import annotations
 
+import argparse
 import dataclasses
-import hashlib
 import json
+import math
+import os
 import subprocess
+import sys
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-import torch
-from safetensors.torch import save_file
+import numpy as np
+from numpy.typing import NDArray
 
 from policies.config import DDPGConfig
-from policies.ddpg import DDPGNets
-from policies.train import load_checkpoint
+from sim.errors import RemarlError
 from sim.observation import CLIP, COLUMNS, ObservationLayout
+from sim.policy_file import (
+    CHECKSUM_KEY,
+    METADATA_KEY,
+    POLICY_SCHEMA,
+    PolicyFileError,
+    PolicyFormatError,
+    Problem,
+    parse_metadata,
+    scenario_hash,
+    sign_policy,
+    verify_policy,
+)
 from sim.scenarios import load_scenario
 
-POLICY_SCHEMA = 1
-"""Version of the policy file layout; `remarl_fc.policy_io` refuses others."""
+__all__ = [
+    "POLICY_SCHEMA",
+    "Rehash",
+    "export_policy",
+    "read_policy_file",
+    "rehash_policy",
+    "write_policy",
+]
 
 
 def _commit() -> str:
@@ -53,6 +83,11 @@ def export_policy(
         checkpoint: "best" or "last".
         metrics: evaluation figures to embed (e.g. the eval JSON of the shipped policy).
     """
+    import torch
+
+    from policies.ddpg import DDPGNets
+    from policies.train import load_checkpoint
+
     config = json.loads((run_dir / "config.json").read_text())
     train_cfg = config["train"]
     cfg = load_scenario(train_cfg["scenario"])
@@ -61,16 +96,16 @@ def export_policy(
     agents = 1 if ddpg.shared else cfg.uav.count
     nets = DDPGNets.create(agents, layout.size, ddpg)
     meta_ckpt = load_checkpoint(run_dir / f"{checkpoint}.safetensors", nets)
-    tensors: dict[str, torch.Tensor] = {}
+    tensors: dict[str, NDArray[np.float32]] = {}
     for prefix, module in (("actor", nets.actor), ("critic", nets.critic)):
         for key, value in module.state_dict().items():
-            tensors[f"{prefix}.{key}"] = value.detach().contiguous().to(torch.float32)
+            tensors[f"{prefix}.{key}"] = value.detach().cpu().contiguous().to(torch.float32).numpy()
     scenario = dataclasses.asdict(cfg)
     meta = {
         "schema": POLICY_SCHEMA,
         "scenario": cfg.name,
         "scenario_config": scenario,
-        "scenario_hash": hashlib.sha256(json.dumps(scenario, sort_keys=True).encode()).hexdigest(),
+        "scenario_hash": scenario_hash(scenario),
         "agents": cfg.uav.count,
         "shared": ddpg.shared,
         "hidden": ddpg.hidden,
@@ -88,10 +123,160 @@ def export_policy(
         "d_col_m": cfg.d_col_m,
         "reward": train_cfg["reward"],
         "training": {"commit": _commit(), "steps": meta_ckpt["step"], "seed": train_cfg["seed"]},
-        "metrics": metrics or {},
+        "metrics": _finite_or_null(metrics or {}),
     }
+    return write_policy(out, tensors, meta)
+
+
+def _finite_or_null(value: Any) -> Any:
+    """``value`` with NaN and infinities replaced by None (JSON null).
+
+    Metrics are informative, and a policy file's metadata holds finite numbers only.
+    """
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, dict):
+        return {k: _finite_or_null(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_finite_or_null(v) for v in value]
+    return value
+
+
+def write_policy(
+    out: Path,
+    tensors: Mapping[str, NDArray[Any]],
+    meta: Mapping[str, Any],
+    *,
+    header: Mapping[str, str] | None = None,
+) -> dict[str, Any]:
+    """Sign ``meta`` and write the policy file ``out`` atomically; returns the metadata written.
+
+    The file is checked before it is written (`sim.policy_file.sign_policy`) and read back and
+    verified before it replaces ``out``, so ``out`` is either the old file or a valid new one.
+
+    Args:
+        header: other safetensors header entries to keep (strings).
+
+    Raises:
+        PolicyFileError: the metadata or the tensors are not a valid policy (nothing written).
+    """
+    from safetensors.numpy import save
+
+    signed = sign_policy(tensors, meta)
+    data = save(dict(tensors), metadata={**(header or {}), METADATA_KEY: json.dumps(signed)})
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = out.with_name(out.name + ".part")
-    save_file(tensors, str(tmp), metadata={"remarl_policy": json.dumps(meta)})
-    tmp.replace(out)
-    return meta
+    try:
+        with tmp.open("wb") as fh:
+            fh.write(data)
+            fh.flush()
+            os.fsync(fh.fileno())
+        back, _, back_meta = read_policy_file(tmp)
+        verify_policy(back, back_meta)
+        tmp.replace(out)
+    finally:
+        tmp.unlink(missing_ok=True)
+    return signed
+
+
+def read_policy_file(
+    path: Path,
+) -> tuple[dict[str, NDArray[Any]], dict[str, str], dict[str, Any]]:
+    """(tensors, safetensors header metadata, parsed policy metadata) of a file, unverified.
+
+    Raises:
+        PolicyFormatError: not a safetensors file, or no remarl-fc metadata in it.
+    """
+    from safetensors import safe_open
+
+    try:
+        with safe_open(str(path), framework="numpy") as f:
+            header = dict(f.metadata() or {})
+            tensors = {k: f.get_tensor(k) for k in f.keys()}  # noqa: SIM118 - not a dict
+    except Exception as exc:  # whatever a damaged file makes the parser raise
+        text = " ".join(str(exc).split())[:160] or type(exc).__name__
+        raise PolicyFormatError(
+            [Problem("file", f"not a readable safetensors file: {text}")]
+        ) from exc
+    return tensors, header, parse_metadata(header)
+
+
+@dataclasses.dataclass(frozen=True)
+class Rehash:
+    """What `rehash_policy` did.
+
+    Attributes:
+        checksum: the file's checksum now. written: False when it already had a valid one.
+    """
+
+    checksum: str
+    written: bool
+
+
+def rehash_policy(path: Path | str, *, force: bool = False) -> Rehash:
+    """Add a checksum to a policy file written before checksums existed, in place.
+
+    The tensors are written back bit for bit and the other metadata unchanged; the file must
+    pass every other check of the loader (schema, tensors, finite in-range weights). A file that
+    already has a valid checksum is left alone.
+
+    Args:
+        force: also re-sign a file whose checksum does not match its contents. Only for a file
+            you changed on purpose: a mismatch otherwise means the file is damaged.
+
+    Raises:
+        PolicyFileError: not a policy file, invalid metadata or weights, or (without ``force``)
+            a checksum that does not match.
+    """
+    path = Path(path)
+    tensors, header, meta = read_policy_file(path)
+    if CHECKSUM_KEY in meta:
+        try:
+            verify_policy(tensors, meta)
+            return Rehash(str(meta[CHECKSUM_KEY]), written=False)
+        except PolicyFileError as exc:
+            if exc.kind != "checksum" or not force:
+                raise
+    signed = write_policy(path, tensors, meta, header=header)
+    return Rehash(str(signed[CHECKSUM_KEY]), written=True)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``python -m policies.export --rehash FILE ...``; returns the exit status (2 on errors)."""
+    parser = argparse.ArgumentParser(
+        prog="python -m policies.export",
+        description="Add a checksum to policy files written before policy files carried one "
+        "(export new ones with remarl-fc export).",
+    )
+    parser.add_argument(
+        "--rehash",
+        nargs="+",
+        metavar="FILE",
+        required=True,
+        help="policy files to checksum in place (tensors and metadata unchanged)",
+    )
+    parser.add_argument(
+        "--force",
+        action="store_true",
+        help="also re-sign a file whose checksum does not match (only if you changed it on "
+        "purpose: otherwise the file is damaged)",
+    )
+    args = parser.parse_args(argv)
+    status = 0
+    for name in args.rehash:
+        try:
+            result = rehash_policy(Path(name), force=args.force)
+        except PolicyFileError as exc:
+            print(f"{parser.prog}: error: {name}: {exc.describe(name)}", file=sys.stderr)
+            status = 2
+        except RemarlError as exc:
+            print(f"{parser.prog}: error: {name}: {exc}", file=sys.stderr)
+            status = 2
+        else:
+            done = "checksum added" if result.written else "already has a valid checksum"
+            print(f"{name}: {done} ({result.checksum})")
+    return status
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -2,14 +2,17 @@
 
 A policy is resolved by zoo name (``3u2o`` → ``policies/zoo/3u2o.safetensors``) or by path.
 The safetensors format holds only tensors and a JSON header: loading one never executes code.
-Everything is checked before use: the header, the schema version, the tensor names and shapes
-against the metadata, and — with `Policy.check_scenario` — the scenario it is asked to fly.
+Everything is checked before use (the format is `sim.policy_file`'s, shared with the writer), in
+this order: the file is safetensors with remarl-fc metadata; the metadata fits the schema (each
+bad key named); the checksum is there and matches; the tensor names, dtypes and shapes fit the
+metadata and every weight is finite and within ±`sim.policy_file.WEIGHT_BOUND`. With
+`Policy.check_scenario`, the scenario it is asked to fly. A file that fails any of these is a
+`PolicyFileInvalid` (a `PolicyError`) whose one-line message says what to do.
 """
 
 from __future__ import annotations
 
 import importlib.util
-import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -20,12 +23,55 @@ from numpy.typing import NDArray
 from remarl_fc.errors import PolicyError, PolicySpecMismatch
 from sim.config import ScenarioConfig
 from sim.observation import ObservationLayout
+from sim.policy_file import (
+    ACTOR_LAYERS,
+    CHECKSUM_KEY,
+    CRITIC_LAYERS,
+    POLICY_SCHEMA,
+    PolicyChecksumError,
+    PolicyFileError,
+    PolicyFormatError,
+    PolicyUnsignedError,
+    Problem,
+    parse_metadata,
+    verify_policy,
+)
 
-POLICY_SCHEMA = 1
-"""The policy file layout this loader reads (written by `policies.export`)."""
+__all__ = [
+    "ACTOR_LAYERS",
+    "CRITIC_LAYERS",
+    "POLICY_SCHEMA",
+    "Policy",
+    "PolicyChecksumFailed",
+    "PolicyFileInvalid",
+    "load_policy",
+    "resolve",
+    "zoo_dir",
+    "zoo_names",
+]
 
-ACTOR_LAYERS = ("l1", "out")
-CRITIC_LAYERS = ("obs_l", "act_l", "l2", "out")
+
+class PolicyFileInvalid(PolicyError):
+    """A policy file that fails a check of `sim.policy_file` (format, schema, tensors, weights).
+
+    Attributes:
+        kind: which check failed: "format", "schema", "unsigned", "checksum", "tensors" or
+            "weights". problems: (key or tensor, message) pairs. key: the first problem's key.
+    """
+
+    def __init__(self, exc: PolicyFileError, *, source: str, path: str) -> None:
+        super().__init__(exc.describe(path), source=source)
+        self.kind = exc.kind
+        self.problems = tuple((p.key, p.message) for p in exc.problems)
+        self.key = exc.key
+
+
+class PolicyChecksumFailed(PolicyFileInvalid):
+    """The file has no checksum, or a wrong one.
+
+    ``kind`` is "unsigned" (written before policy files carried checksums) or "checksum" (the
+    file changed after it was written).
+    """
 
 
 def zoo_dir() -> Path:
@@ -75,6 +121,11 @@ class Policy:
     meta: dict[str, Any]
     actor: dict[str, tuple[NDArray[np.float32], NDArray[np.float32]]]
     critic: dict[str, tuple[NDArray[np.float32], NDArray[np.float32]]]
+
+    @property
+    def checksum(self) -> str:
+        """The file's ``sha256:…`` checksum (what was verified at load; for logs)."""
+        return str(self.meta.get(CHECKSUM_KEY, ""))
 
     @property
     def agents(self) -> int:
@@ -146,50 +197,48 @@ class Policy:
                 raise PolicySpecMismatch(self.source, field, expected, actual)
 
 
-def load_policy(name_or_path: str | Path) -> Policy:
-    """Load and validate a policy file (zoo name or path). Raises `PolicyError` subclasses."""
-    from safetensors import SafetensorError, safe_open
+def _read(path: Path) -> tuple[dict[str, NDArray[Any]], dict[str, Any]]:
+    """Tensors and metadata of a safetensors file; `PolicyFormatError` if it is none."""
+    from safetensors import safe_open
 
+    try:
+        with safe_open(str(path), framework="numpy") as f:
+            header = f.metadata()
+            tensors = {k: f.get_tensor(k) for k in f.keys()}  # noqa: SIM118 - not a dict
+    except Exception as exc:  # whatever a damaged file makes the parser raise
+        text = " ".join(str(exc).split())[:160] or type(exc).__name__
+        raise PolicyFormatError(
+            [Problem("file", f"not a readable safetensors file: {text}")]
+        ) from exc
+    return tensors, parse_metadata(header)
+
+
+def load_policy(name_or_path: str | Path) -> Policy:
+    """Load and verify a policy file (zoo name or path).
+
+    Raises:
+        PolicyError: no such file or zoo name. PolicyFileInvalid: the file fails a check
+            (`PolicyChecksumFailed` for a missing or wrong checksum); its message says what to do.
+    """
     path = resolve(name_or_path)
     source = str(name_or_path)
     try:
-        with safe_open(str(path), framework="numpy") as f:
-            header = f.metadata() or {}
-            tensors = {k: f.get_tensor(k) for k in f.keys()}  # noqa: SIM118 - not a dict
-    except (SafetensorError, OSError, ValueError) as exc:
-        raise PolicyError(f"not a readable safetensors file ({exc})", source=source) from exc
-    if "remarl_policy" not in header:
-        raise PolicyError("not a remarl-fc policy (no remarl_policy metadata)", source=source)
-    try:
-        meta = json.loads(header["remarl_policy"])
-    except json.JSONDecodeError as exc:
-        raise PolicyError(f"corrupt metadata ({exc})", source=source) from exc
-    if meta.get("schema") != POLICY_SCHEMA:
-        raise PolicySpecMismatch(source, "policy file schema", POLICY_SCHEMA, meta.get("schema"))
-    for key in ("agents", "observation", "action", "dt_s", "speed_m_s", "shared", "hidden"):
-        if key not in meta:
-            raise PolicyError(f"metadata lacks {key!r}", source=source)
+        tensors, meta = _read(path)
+        verify_policy(tensors, meta)
+    except (PolicyUnsignedError, PolicyChecksumError) as exc:
+        raise PolicyChecksumFailed(exc, source=source, path=str(path)) from exc
+    except PolicyFileError as exc:
+        raise PolicyFileInvalid(exc, source=source, path=str(path)) from exc
 
-    def layers(prefix: str, names: tuple[str, ...], required: bool) -> dict[str, Any]:
-        out = {}
-        for name in names:
-            w, b = tensors.get(f"{prefix}.{name}.weight"), tensors.get(f"{prefix}.{name}.bias")
-            if w is None or b is None:
-                if required:
-                    raise PolicyError(f"missing tensor {prefix}.{name}", source=source)
-                return {}
-            out[name] = (np.asarray(w, np.float32), np.asarray(b, np.float32))
-        return out
+    def layers(prefix: str, names: tuple[str, ...]) -> dict[str, Any]:
+        keys = [(f"{prefix}.{n}.weight", f"{prefix}.{n}.bias") for n in names]
+        if not all(w in tensors and b in tensors for w, b in keys):
+            return {}  # only the critic may be absent (verified)
+        return {n: (tensors[w], tensors[b]) for n, (w, b) in zip(names, keys, strict=True)}
 
-    actor = layers("actor", ACTOR_LAYERS, required=True)
-    critic = layers("critic", CRITIC_LAYERS, required=False)
-    agents = 1 if meta["shared"] else int(meta["agents"])
-    size, hidden = int(meta["observation"]["size"]), int(meta["hidden"])
-    expected = {"l1": (agents, size, hidden), "out": (agents, hidden, 1)}
-    for name, shape in expected.items():
-        if actor[name][0].shape != shape or actor[name][1].shape != (agents, 1, shape[2]):
-            raise PolicyError(
-                f"tensor actor.{name} has shape {actor[name][0].shape}, metadata says {shape}",
-                source=source,
-            )
-    return Policy(source=source, meta=meta, actor=actor, critic=critic)
+    return Policy(
+        source=source,
+        meta=meta,
+        actor=layers("actor", ACTOR_LAYERS),
+        critic=layers("critic", CRITIC_LAYERS),
+    )

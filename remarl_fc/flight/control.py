@@ -14,12 +14,16 @@ mission's north/east metres and NED yaw are converted in `remarl_fc.frames` only
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
+from remarl_fc.flight.config import Member
+from remarl_fc.flight.status import OBSTACLE, Status
+from remarl_fc.flight.traffic import TrafficPicture
 from remarl_fc.frames import heading_to_yaw, ne_to_sim, sim_to_ne
 from sim.kinematics import heading_velocity
 from sim.observation import ObservationLayout, build_observations
@@ -185,3 +189,33 @@ class SwarmController:
         """Within the arrival distance of its target (horizontal)."""
         xy = ne_to_sim(np.asarray(position_ne_m, dtype=np.float64))
         return bool(np.hypot(*(xy - self.targets_xy[slot])) < self.spec.arrival_m)
+
+
+def obstacle_picture(
+    traffic: TrafficPicture,
+    rows: Sequence[tuple[Member, Status]],
+    now: float,
+    band_m: float,
+) -> tuple[FloatArray, FloatArray]:
+    """(M, 2) positions and velocities north/east of every obstacle the policy must avoid.
+
+    The ADS-B intruders within ±``band_m`` of the swarm's mean height (nearest the swarm centre
+    first, capped by the picture), and the vehicles no longer flown by the policy (`OBSTACLE`:
+    lost, held, pilot) at their last track extrapolated to ``now``.
+    """
+    tracks = [m.track for m, _ in rows]
+    known = [t.ne_m for t in tracks if math.isfinite(t.t_position)]
+    heights = [t.height_m for t in tracks if math.isfinite(t.height_m)]
+    centre = np.mean(known, axis=0) if known else None
+    height = float(np.mean(heights)) if heights else 0.0
+    pos, vel = [], []
+    for intr in traffic.current(now, height, band_m, near_ne_m=centre):
+        pos.append(intr.predicted_ne_m(now))
+        vel.append(intr.vel_ne_m_s)
+    for m, status in rows:
+        if status in OBSTACLE and math.isfinite(m.track.t_position):
+            pos.append(m.track.predicted_ne_m(now))
+            vel.append(m.track.vel_ned_m_s[:2])
+    if not pos:
+        return np.zeros((0, 2)), np.zeros((0, 2))
+    return np.array(pos), np.array(vel)

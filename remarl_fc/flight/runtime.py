@@ -1,37 +1,25 @@
-"""``remarl-fc fly``: the asyncio runtime that flies a swarm policy on ArduPilot or PX4.
+"""``remarl-fc fly``: the asyncio shell that flies a swarm policy on ArduPilot or PX4.
 
-    async with SwarmRuntime(cfg, policy) as rt:   # links open; on any exit: every vehicle holds
+    async with SwarmRuntime(cfg, policy, spec) as rt:  # links open; any exit: every vehicle holds
         await rt.run()
 
-One `asyncio.TaskGroup` owns every task, each named ``remarl.<what>``:
+One `asyncio.TaskGroup` owns every task, each named ``remarl.<what>``: ``heartbeat`` (1 Hz),
+``mission`` (prepare every vehicle — `remarl_fc.flight.prepare` — then one policy decision
+per dt), ``setpoints`` (at ≥ 10 Hz one tick of the sans-I/O core `remarl_fc.flight.core`:
+telemetry snapshots in; setpoints, holds and events out), ``holds`` (the hold modes the core
+asks for, each waiting for its ACK), ``bus_rx``/``bus_tx`` (`remarl_fc.flight.peers`).
+Frames come in through `remarl_fc.flight.receive` (the source gate); commands go out through
+`remarl_fc.flight.commands`. Every wait has a deadline on the flight clock and raises; on any
+exit — the end of the mission, an error, Ctrl-C — every vehicle still flown is told to hold.
 
-* ``heartbeat`` — the controller's HEARTBEAT at 1 Hz (MAV_TYPE_ONBOARD_CONTROLLER);
-* ``mission`` — prepare every vehicle (streams, failsafe parameters checked by
-  `remarl_fc.flight.paramcheck`, position, optional take-off, take control), then the decision loop:
-  every dt, one policy decision for the whole swarm;
-* ``setpoints`` — at ≥ 10 Hz, one tick of the sans-I/O core (`remarl_fc.flight.core`): an
-  immutable snapshot of each vehicle's telemetry goes in; setpoints
-  (SET_POSITION_TARGET_LOCAL_NED velocity + yaw, type_mask 2503), holds and events come out,
-  after the safety checks: stale telemetry → an obstacle, held when it comes back; a mode the
-  pilot chose → released, never fought; a geofence breach ahead → hold; target reached →
-  hold and release. Status changes follow `remarl_fc.flight.status`;
-* ``holds`` — sends the hold mode the core asks for (each waits for its ACK);
-* ``bus_rx``, ``bus_tx`` — the swarm bus (`remarl_fc.flight.peers`).
-
-Receiving is callback-driven (`remarl_fc.mavlink.link`); vehicle preparation and take-off are
-in `remarl_fc.flight.prepare`; commands, mode changes and waits go through
-`remarl_fc.flight.commands.Commander`; the settings and per-vehicle I/O rows are in
-`remarl_fc.flight.config`; the console lines, log rows and summary in
-`remarl_fc.flight.report`. Every wait has a deadline on the monotonic clock and raises
-(`LinkTimeout`, `CommandRejected`); on any exit — the end of the mission, an error, Ctrl-C —
-every vehicle still under control is sent the hold mode.
+This module is the one place that owns a flight's tasks, clocks and resources, so it stays
+whole (about 450 lines): every decision it carries out is made elsewhere, without I/O.
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
-import math
 import time
 from collections.abc import Callable
 from dataclasses import replace
@@ -44,7 +32,12 @@ from remarl_fc.bus.memory import MemoryBroker, MemoryBus
 from remarl_fc.errors import RemarlError
 from remarl_fc.flight.commands import Commander
 from remarl_fc.flight.config import Clock, FlyConfig, Member, bus_core, members_of
-from remarl_fc.flight.control import ControlSpec, PolicyLike, SwarmController
+from remarl_fc.flight.control import (
+    ControlSpec,
+    PolicyLike,
+    SwarmController,
+    obstacle_picture,
+)
 from remarl_fc.flight.core import (
     Command,
     Event,
@@ -70,7 +63,7 @@ from remarl_fc.flight.report import (
     status_lines,
     vehicle_summaries,
 )
-from remarl_fc.flight.status import OBSTACLE, Status
+from remarl_fc.flight.status import Status
 from remarl_fc.flight.traffic import TrafficPicture
 from remarl_fc.flight.trust import SourceGate
 from remarl_fc.mavlink.codec import Codec
@@ -296,26 +289,12 @@ class SwarmRuntime(Resource):
                     "every other vehicle done: given up",
                 )
 
-    def _obstacles(self, now: float, height_m: float) -> tuple[np.ndarray, np.ndarray]:
-        pos, vel = [], []
-        known = [m.track.ne_m for m in self.members if math.isfinite(m.track.t_position)]
-        centre = np.mean(known, axis=0) if known else None
-        for intr in self.traffic.current(now, height_m, self.cfg.adsb_band_m, near_ne_m=centre):
-            pos.append(intr.predicted_ne_m(now))
-            vel.append(intr.vel_ne_m_s)
-        for m in self.members:
-            if self.vehicles[m.system_id].status in OBSTACLE and math.isfinite(m.track.t_position):
-                pos.append(m.track.predicted_ne_m(now))
-                vel.append(m.track.vel_ned_m_s[:2])
-        if not pos:
-            return np.zeros((0, 2)), np.zeros((0, 2))
-        return np.array(pos), np.array(vel)
-
     def _decide(self, now: float) -> None:
         self._sync_peers(now)
         positions = np.array([m.track.predicted_ne_m(now) for m in self.members])
-        heights = [m.track.height_m for m in self.members if math.isfinite(m.track.height_m)]
-        obstacles, obstacle_vel = self._obstacles(now, float(np.mean(heights)) if heights else 0.0)
+        obstacles, obstacle_vel = obstacle_picture(
+            self.traffic, self._report_rows(), now, self.cfg.adsb_band_m
+        )
         t0 = time.perf_counter()
         decision = self.controller.decide(now, positions, obstacles, obstacle_vel)
         self.decide_s.append(time.perf_counter() - t0)
