@@ -63,8 +63,14 @@ def add_eval(sub: Any) -> None:
 def add_export(sub: Any) -> None:
     """Add ``export``."""
     p = sub.add_parser("export", help="write a policy file from a training run")
-    p.add_argument("run", help="run folder (the --out of train)")
-    p.add_argument("--out", required=True, help="the .safetensors file to write")
+    p.add_argument("run", nargs="?", help="run folder (the --out of train)")
+    p.add_argument("--out", help="the .safetensors file to write")
+    p.add_argument(
+        "--rehash",
+        metavar="FILE",
+        help="instead: add a checksum to a policy file written before checksums "
+        "(in place; tensors unchanged)",
+    )
     add_choice(p, "--checkpoint", ["best", "last"])
     p.add_argument("--metrics", default=None, help="eval JSON to embed in the file")
     finish(p, cmd_export)
@@ -165,9 +171,17 @@ def cmd_eval(args: argparse.Namespace) -> int:
 
 
 def cmd_export(args: argparse.Namespace) -> int:
-    """Write a policy file from a training run folder."""
-    from policies.export import export_policy
+    """Write a policy file from a training run folder (or add a checksum to an old one)."""
+    from policies.export import export_policy, rehash_policy
 
+    if args.rehash:
+        done = rehash_policy(Path(args.rehash))
+        what = "added a checksum to" if done.written else "already signed:"
+        payload = {"file": args.rehash, "checksum": done.checksum, "written": done.written}
+        emit(args, payload, f"{what} {args.rehash} ({done.checksum})")
+        return 0
+    if not args.run or not args.out:
+        raise ConfigError("export: give the run folder and --out FILE (or --rehash FILE)")
     run = Path(args.run)
     if not (run / "config.json").is_file():
         raise ConfigError(f"{run}: not a training run folder (no config.json); pass --out of train")

@@ -153,3 +153,28 @@ def test_train_rejects_unknown_scenario_before_writing(capsys, tmp_path):
     assert code == 2
     assert "unknown scenario" in err
     assert not (tmp_path / "r").exists()
+
+
+def test_export_rehash_signs_an_old_policy_file(tmp_path, capsys):
+    import json as _json
+
+    from safetensors import safe_open
+    from safetensors.numpy import load_file, save_file
+
+    from remarl_fc.errors import PolicyError
+    from remarl_fc.policy_io import load_policy, zoo_dir
+
+    src = zoo_dir() / "2u1o.safetensors"
+    with safe_open(str(src), "np") as f:
+        meta = _json.loads(f.metadata()["remarl_policy"])
+    meta.pop("checksum")
+    old = tmp_path / "old.safetensors"
+    save_file(load_file(str(src)), str(old), metadata={"remarl_policy": _json.dumps(meta)})
+    with pytest.raises(PolicyError, match="no checksum"):
+        load_policy(old)
+    assert main(["export", "--rehash", str(old), "--json"]) == 0
+    out = _json.loads(capsys.readouterr().out)
+    assert out["written"] and out["checksum"].startswith("sha256:")
+    assert load_policy(old).agents == 2
+    assert main(["export"]) == 2
+    assert "give the run folder and --out FILE" in capsys.readouterr().err
