@@ -45,11 +45,20 @@ class MockFlight:
     ground_truth: dict[str, Any]
 
 
-def attacker_for(runtime: SwarmRuntime, victim: int = 2, seed: int = 0) -> Attacker:
+def attacker_for(
+    runtime: SwarmRuntime,
+    victim: int = 2,
+    seed: int = 0,
+    *,
+    radio: bool = False,
+    from_start: bool = True,
+) -> Attacker:
     """A hostile sender (`remarl_fc.sitl.attacker`) against ``runtime``'s first link.
 
     It watches ``victim``'s true track (here: the runtime's own, before any forged fix could
-    touch it) and starts its in-flight attacks once every vehicle is under control.
+    touch it) and starts its in-flight attacks once every vehicle is under control. With
+    ``radio`` its frames arrive from the victim's own address (a forger on the vehicle's
+    radio link: binding cannot tell them apart, only signing can), once the victim is bound.
     """
     address = runtime.links[0].local_address
     if address is None:
@@ -70,7 +79,15 @@ def attacker_for(runtime: SwarmRuntime, victim: int = 2, seed: int = 0) -> Attac
         n, e = np.mean(known, axis=0)
         return float(n), float(e)
 
+    link = runtime.links[0]
+
+    def inject(frame: bytes) -> None:
+        if victim in link.bound:
+            link._received(frame, link.where[victim])
+
     return Attacker(
+        inject=inject if radio else None,
+        from_start=from_start,
         target=address,
         victim=victim,
         origin=runtime.cfg.mission.origin,

@@ -5,7 +5,8 @@ under the attack table (remarl_fc.sitl.attacker) from another address, unsigned 
 
 Prints one row per flight: what fly concluded (exit status, vehicles reached on trusted
 telemetry) against the mock's ground truth (reached, collisions, closest approaches), and what
-the link dropped.
+the link dropped. The last row forges from the victim's own address (a radio link): there
+binding cannot help and fly must only never claim more than trusted telemetry shows.
 """
 
 from __future__ import annotations
@@ -16,38 +17,61 @@ import json
 import os
 from typing import Any
 
+from remarl_fc.cli.common import EXIT_USAGE
 from remarl_fc.cli.fly import fly_exit_status
 from remarl_fc.demo import attacker_for, fly_on_mock
+from remarl_fc.errors import RemarlError
 
 
-async def one(scenario: str, speedup: float, *, attack: bool, signed: bool) -> dict[str, Any]:
+async def one(
+    scenario: str,
+    speedup: float,
+    *,
+    attack: bool,
+    signed: bool,
+    radio: bool = False,
+    from_start: bool = True,
+) -> dict[str, Any]:
     box: dict[str, Any] = {}
 
     async def during(fleet: Any, runtime: Any) -> None:
-        box["attacker"] = attacker_for(runtime)
-        await box["attacker"].run()
+        box["fleet"], box["runtime"] = fleet, runtime
+        if attack:
+            box["attacker"] = attacker_for(runtime, radio=radio, from_start=from_start)
+            await box["attacker"].run()
+        await asyncio.Event().wait()
 
-    flight = await fly_on_mock(
-        scenario,
-        speedup=speedup,
-        during=during if attack else None,
-        signing_key=os.urandom(32) if signed else None,
-    )
-    truth, rt = flight.ground_truth, flight.runtime
+    error = ""
+    try:
+        flight = await fly_on_mock(
+            scenario, speedup=speedup, during=during,
+            signing_key=os.urandom(32) if signed else None,
+        )  # fmt: skip
+        truth, rt = flight.ground_truth, flight.runtime
+        status = fly_exit_status(rt)
+    except* RemarlError as group:  # the flight stopped: what the mock saw, fly's own account
+        first = group.exceptions[0]
+        error = str(first).split(": ", 1)[-1][:90]
+        truth, rt, status = box["fleet"].summary(), box["runtime"].summary(), EXIT_USAGE
     link = rt["link"]
     return {
-        "flight": ("attacked" if attack else "clean") + (", signed" if signed else ""),
-        "exit": fly_exit_status(rt),
+        "flight": ("attacked" if attack else "clean")
+        + (" at the vehicle's own address" if radio else "")
+        + ("" if from_start else ", in flight only")
+        + (", signed" if signed else ""),
+        "exit": status,
         "reached (fly)": len(rt["reached"]),
         "reached (truth)": truth["reached_targets"],
+        "armed on the ground (truth)": sum(v["armed"] and v["landed"] for v in truth["vehicles"]),
         "collisions": truth["collisions_vehicle_intruder"] + truth["collisions_vehicle_vehicle"],
         "min to intruder m": truth["min_vehicle_intruder_m"],
         "min between vehicles m": truth["min_vehicle_vehicle_m"],
         "forged frames sent": box["attacker"].sent if attack else 0,
         "dropped by the gate": sum(link["dropped"].values()),
-        "rejected unsigned": sum(v["link"]["rejected_unsigned"] for v in truth["vehicles"]),
+        "rejected unsigned (fly)": link["rejected_unsigned"],
         "spoofing alarms": len(link["alarms"]),
         "anomalies touching belief": sum(a["affected"] for a in rt["anomalies"]),
+        "error": error,
     }
 
 
@@ -57,9 +81,13 @@ def main() -> None:
     parser.add_argument("--speedup", type=float, default=4.0)
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
+    cases = [  # attack, signed, radio, from the start
+        (False, False, False, True), (True, False, False, True), (True, True, False, True),
+        (True, False, True, True), (True, False, True, False),
+    ]  # fmt: skip
     rows = [
-        asyncio.run(one(args.scenario, args.speedup, attack=a, signed=s))
-        for a, s in ((False, False), (True, False), (True, True))
+        asyncio.run(one(args.scenario, args.speedup, attack=a, signed=s, radio=r, from_start=f))
+        for a, s, r, f in cases
     ]
     if args.json:
         print(json.dumps(rows))

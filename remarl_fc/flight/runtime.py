@@ -436,6 +436,8 @@ class SwarmRuntime(Resource):
             "signed": self.cfg.signing is not None,
             **self.gate.summary(),
             "refused_not_logged": sum(link.refused_not_logged for link in self.links),
+            "rejected_unsigned": self.codec.stats.rejected_unsigned,
+            "bad_frames": self.codec.stats.bad_frames,
         }
         traffic = self.traffic.stats()
         vehicles = vehicle_summaries(rows)

@@ -62,6 +62,14 @@ REJECTIONS_UNTRUSTED = 10
 REJECTIONS_WINDOW_S = 3.0
 """Window for `REJECTIONS_UNTRUSTED`, s."""
 
+HEARTBEATS_UNTRUSTED = 6
+"""This many HEARTBEATs within `HEARTBEAT_WINDOW_S` make the telemetry untrusted: an
+autopilot sends one a second per link, so a faster stream means a second sender on the
+vehicle's own source (whose HEARTBEATs could otherwise fake a pilot takeover)."""
+
+HEARTBEAT_WINDOW_S = 2.0
+"""Window for `HEARTBEATS_UNTRUSTED`, s."""
+
 
 NO_FIX = "no fix (lat = lon = 0)"
 """The rejection of a position sent before the GPS has a fix: normal while booting, not an
@@ -126,6 +134,9 @@ class VehicleTrack:
     _rejections: deque[float] = field(
         default_factory=lambda: deque(maxlen=REJECTIONS_UNTRUSTED), repr=False
     )
+    _heartbeats: deque[float] = field(
+        default_factory=lambda: deque(maxlen=HEARTBEATS_UNTRUSTED), repr=False
+    )
 
     # -- derived ------------------------------------------------------------------------
 
@@ -189,6 +200,17 @@ class VehicleTrack:
             self.system_status, self.t_heartbeat = msg.system_status, now
             ours = self.in_external_control_mode()
             self.other_mode_heartbeats = 0 if ours else self.other_mode_heartbeats + 1
+            self._heartbeats.append(now)
+            beats = self._heartbeats
+            if (
+                self.untrusted is None
+                and len(beats) == HEARTBEATS_UNTRUSTED
+                and now - beats[0] < HEARTBEAT_WINDOW_S
+            ):
+                self.untrusted = (
+                    f"{HEARTBEATS_UNTRUSTED} HEARTBEATs within {HEARTBEAT_WINDOW_S:g} s: "
+                    "more than one sender on its source"
+                )
         elif mid == MsgId.GLOBAL_POSITION_INT:
             self._position(msg, now)
         elif mid == MsgId.ATTITUDE:

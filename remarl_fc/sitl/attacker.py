@@ -82,6 +82,11 @@ class Attacker:
     armed: Callable[[], bool]
     period_s: float = 0.0125
     seed: int = 0
+    from_start: bool = True
+    """Send the start-up attacks from the start (False: everything only once ``armed()``)."""
+    inject: Callable[[bytes], None] | None = None
+    """Instead of sending from its own socket, hand each frame to this (a forger on the
+    vehicle's own radio: its frames arrive from the vehicle's address)."""
     sent: int = 0
 
     async def run(self) -> None:
@@ -92,13 +97,18 @@ class Attacker:
         in_flight = False
         async with UdpEndpoint(("127.0.0.1", 0), on_datagram=lambda *_: None) as udp:
             while True:
-                frames = self._startup_round(forger, stranger, rng)
                 in_flight = in_flight or self.armed()
+                frames = []
+                if self.from_start or in_flight:
+                    frames = self._startup_round(forger, stranger, rng)
                 if in_flight:
                     rounds += 1
                     frames += self._flight_round(forger, stranger, rng, rounds)
                 for frame in frames:
-                    udp.send(frame, self.target)
+                    if self.inject is not None:
+                        self.inject(frame)
+                    else:
+                        udp.send(frame, self.target)
                 self.sent += len(frames)
                 await asyncio.sleep(self.period_s)
 

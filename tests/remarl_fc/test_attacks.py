@@ -99,6 +99,7 @@ async def test_signing_rejects_the_attack_before_it_is_parsed():
     assert_clean_outcome(flight)
     assert flight.runtime["link"]["signed"]
     assert flight.runtime["link"]["alarms"] == []  # unsigned forgeries never reach the gate
+    assert flight.runtime["link"]["rejected_unsigned"] > 1000
     assert flight.runtime["link"]["foreign_frames"] == {}
 
 

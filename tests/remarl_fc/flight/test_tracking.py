@@ -393,3 +393,15 @@ def test_statustext_is_made_printable():
     t = track()
     t.update(statustext("PreArm: \x1b[2J\x07bad"), 1.0)
     assert t.last_text(0.0) == "PreArm: ?[2J?bad"
+
+
+def test_a_heartbeat_flood_on_the_vehicles_source_makes_it_untrusted():
+    t = track()
+    guided = heartbeat(custom_mode=CopterMode.GUIDED)
+    for k in range(30):  # 1 Hz, as an autopilot sends them
+        t.update(guided, float(k))
+    assert t.untrusted is None
+    loiter = heartbeat(custom_mode=CopterMode.LOITER)
+    for k in range(6):  # a second sender at 10 Hz
+        t.update(loiter, 30.0 + k / 10)
+    assert t.untrusted is not None and "more than one sender" in t.untrusted
