@@ -38,6 +38,9 @@ The method, as the paper, on the swarm simulator's vectorised environment (`sim.
 
 The training loop, the model file and the greedy policy are in `policies.coma_train`
 (``python -m policies.coma_train --scenario 3u1o --budget-steps 200000``).
+
+The method is one concept kept whole (about 420 lines, most of them this account of it); its
+training loop, model files and greedy policy are in `policies.coma_train`.
 """
 
 from __future__ import annotations

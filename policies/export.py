@@ -33,16 +33,14 @@ from numpy.typing import NDArray
 
 from policies.config import DDPGConfig
 from sim.errors import RemarlError
-from sim.observation import CLIP, COLUMNS, ObservationLayout
+from sim.observation import ObservationLayout
 from sim.policy_file import (
     CHECKSUM_KEY,
     METADATA_KEY,
     POLICY_SCHEMA,
     PolicyFileError,
-    PolicyFormatError,
-    Problem,
-    parse_metadata,
-    scenario_hash,
+    build_metadata,
+    read_policy_file,
     sign_policy,
     verify_policy,
 )
@@ -100,31 +98,14 @@ def export_policy(
     for prefix, module in (("actor", nets.actor), ("critic", nets.critic)):
         for key, value in module.state_dict().items():
             tensors[f"{prefix}.{key}"] = value.detach().cpu().contiguous().to(torch.float32).numpy()
-    scenario = dataclasses.asdict(cfg)
-    meta = {
-        "schema": POLICY_SCHEMA,
-        "scenario": cfg.name,
-        "scenario_config": scenario,
-        "scenario_hash": scenario_hash(scenario),
-        "agents": cfg.uav.count,
-        "shared": ddpg.shared,
-        "hidden": ddpg.hidden,
-        "observation": {
-            **dataclasses.asdict(layout),
-            "size": layout.size,
-            "rows": layout.rows,
-            "columns": COLUMNS,
-            "clip": CLIP,
-            "frame": "heading (x ahead, y left); positions / range_m, velocities / speed_m_s",
-        },
-        "action": {"normalised_bound": 1.0, "max_turn_rad": cfg.uav.max_turn_rad},
-        "dt_s": cfg.dt_s,
-        "speed_m_s": cfg.uav.speed_m_s,
-        "d_col_m": cfg.d_col_m,
-        "reward": train_cfg["reward"],
-        "training": {"commit": _commit(), "steps": meta_ckpt["step"], "seed": train_cfg["seed"]},
-        "metrics": _finite_or_null(metrics or {}),
-    }
+    meta = build_metadata(
+        cfg,
+        shared=ddpg.shared,
+        hidden=ddpg.hidden,
+        reward=train_cfg["reward"],
+        training={"commit": _commit(), "steps": meta_ckpt["step"], "seed": train_cfg["seed"]},
+        metrics=_finite_or_null(metrics or {}),
+    )
     return write_policy(out, tensors, meta)
 
 
@@ -177,28 +158,6 @@ def write_policy(
     finally:
         tmp.unlink(missing_ok=True)
     return signed
-
-
-def read_policy_file(
-    path: Path,
-) -> tuple[dict[str, NDArray[Any]], dict[str, str], dict[str, Any]]:
-    """(tensors, safetensors header metadata, parsed policy metadata) of a file, unverified.
-
-    Raises:
-        PolicyFormatError: not a safetensors file, or no remarl-fc metadata in it.
-    """
-    from safetensors import safe_open
-
-    try:
-        with safe_open(str(path), framework="numpy") as f:
-            header = dict(f.metadata() or {})
-            tensors = {k: f.get_tensor(k) for k in f.keys()}  # noqa: SIM118 - not a dict
-    except Exception as exc:  # whatever a damaged file makes the parser raise
-        text = " ".join(str(exc).split())[:160] or type(exc).__name__
-        raise PolicyFormatError(
-            [Problem("file", f"not a readable safetensors file: {text}")]
-        ) from exc
-    return tensors, header, parse_metadata(header)
 
 
 @dataclasses.dataclass(frozen=True)

@@ -30,10 +30,8 @@ from sim.policy_file import (
     POLICY_SCHEMA,
     PolicyChecksumError,
     PolicyFileError,
-    PolicyFormatError,
     PolicyUnsignedError,
-    Problem,
-    parse_metadata,
+    read_policy_file,
     verify_policy,
 )
 
@@ -197,22 +195,6 @@ class Policy:
                 raise PolicySpecMismatch(self.source, field, expected, actual)
 
 
-def _read(path: Path) -> tuple[dict[str, NDArray[Any]], dict[str, Any]]:
-    """Tensors and metadata of a safetensors file; `PolicyFormatError` if it is none."""
-    from safetensors import safe_open
-
-    try:
-        with safe_open(str(path), framework="numpy") as f:
-            header = f.metadata()
-            tensors = {k: f.get_tensor(k) for k in f.keys()}  # noqa: SIM118 - not a dict
-    except Exception as exc:  # whatever a damaged file makes the parser raise
-        text = " ".join(str(exc).split())[:160] or type(exc).__name__
-        raise PolicyFormatError(
-            [Problem("file", f"not a readable safetensors file: {text}")]
-        ) from exc
-    return tensors, parse_metadata(header)
-
-
 def load_policy(name_or_path: str | Path) -> Policy:
     """Load and verify a policy file (zoo name or path).
 
@@ -223,7 +205,7 @@ def load_policy(name_or_path: str | Path) -> Policy:
     path = resolve(name_or_path)
     source = str(name_or_path)
     try:
-        tensors, meta = _read(path)
+        tensors, _, meta = read_policy_file(path)
         verify_policy(tensors, meta)
     except (PolicyUnsignedError, PolicyChecksumError) as exc:
         raise PolicyChecksumFailed(exc, source=source, path=str(path)) from exc

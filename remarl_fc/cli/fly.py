@@ -22,6 +22,20 @@ from remarl_fc.cli.common import (
     finish,
 )
 
+FLY_FLAGS = {
+    "dry_run": "dry_run",
+    "require_signing": "require_signing",
+    "lost_timeout_s": "lost_timeout",
+    "setpoint_hz": "setpoint_hz",
+    "hold": "hold",
+    "system_id": "system_id",
+    "speedup": "speedup",
+    "max_flight_s": "max_flight",
+    "swarm": "swarm",
+    "bus_prefix": "bus_prefix",
+}
+"""`FlyConfig` settings that ``fly`` takes from its flags as they are: setting → flag (its dest)."""
+
 
 def add_parsers(sub: Any) -> None:
     """Add ``fly``, ``demo`` and ``plot-flight``."""
@@ -183,20 +197,11 @@ def cmd_fly(args: argparse.Namespace) -> int:
             mission=mission,
             takeoff_m=None if by_mission else args.takeoff,
             takeoff_to_mission_alt=by_mission,
-            dry_run=args.dry_run,
             check_params=not args.no_param_check,
             log_dir=Path(args.log) if args.log else None,
             signing=signing,
-            require_signing=args.require_signing,
-            lost_timeout_s=args.lost_timeout,
-            setpoint_hz=args.setpoint_hz,
-            hold=args.hold,
-            system_id=args.system_id,
-            speedup=args.speedup,
-            max_flight_s=args.max_flight,
             vehicles=frozenset(args.vehicle) if args.vehicle else None,
-            swarm=args.swarm,
-            bus_prefix=args.bus_prefix,
+            **{setting: getattr(args, flag) for setting, flag in FLY_FLAGS.items()},
         )
     except ValueError as exc:
         raise ConfigError(f"fly: {exc}") from exc

@@ -49,6 +49,19 @@ def add_train(sub: Any) -> None:
     finish(p, cmd_train)
 
 
+TRAIN_FLAGS = {
+    "scenario": "scenario",
+    "num_envs": "envs",
+    "total_steps": "steps",
+    "minutes": "minutes",
+    "seed": "seed",
+    "eval_every": "eval_every",
+    "eval_episodes": "eval_episodes",
+    "reward": "reward",
+}
+"""`TrainConfig` settings that ``train`` takes from its flags as they are: setting → flag."""
+
+
 def add_eval(sub: Any) -> None:
     """Add ``eval``."""
     p = sub.add_parser("eval", help="evaluate a policy file (numpy inference)")
@@ -108,17 +121,8 @@ def cmd_train(args: argparse.Namespace) -> int:
     from policies.train import train
     from sim.scenarios import load_scenario
 
-    cfg = TrainConfig(
-        scenario=args.scenario,
-        num_envs=args.envs,
-        total_steps=args.steps,
-        minutes=args.minutes,
-        seed=args.seed,
-        eval_every=args.eval_every,
-        eval_episodes=args.eval_episodes,
-        reward=args.reward,
-        ddpg=DDPGConfig(shared=args.shared),
-    )
+    settings = {setting: getattr(args, flag) for setting, flag in TRAIN_FLAGS.items()}
+    cfg = TrainConfig(**settings, ddpg=DDPGConfig(shared=args.shared))
     load_scenario(cfg.scenario)  # a bad name fails here, before anything is written
     out = Path(args.out or f"runs/{Path(cfg.scenario).stem}-s{cfg.seed}")
     with progress_bar(enabled=not args.json) as progress:

@@ -23,7 +23,7 @@ import contextlib
 import time
 from collections.abc import Callable
 from dataclasses import replace
-from typing import Any, Self
+from typing import Any
 
 import numpy as np
 
@@ -76,13 +76,13 @@ from remarl_fc.mavlink.consts import (
     MavType,
 )
 from remarl_fc.mavlink.link import MavlinkLink, TlogWriter
-from remarl_fc.resource import Resource
+from remarl_fc.resource import StackOwner
 
 HOLD_CONFIRM_S = 6.0
 """At the end, wait at most this long for the last hold commands to be confirmed."""
 
 
-class SwarmRuntime(Resource):
+class SwarmRuntime(StackOwner):
     """The flight (see the module docstring).
 
     Args:
@@ -141,7 +141,6 @@ class SwarmRuntime(Resource):
             cfg, self.commands, self.params, self.clock, self.plans,
             lambda sysid: self.vehicles[sysid], self._update, self._apply, self._event,
         )  # fmt: skip
-        self._stack: contextlib.AsyncExitStack | None = None
         self._log: DecisionLog | None = None
         self._done = asyncio.Event()
         self.decisions = 0
@@ -158,46 +157,32 @@ class SwarmRuntime(Resource):
 
     # -- lifetime -----------------------------------------------------------------------
 
-    async def __aenter__(self) -> Self:
-        if self._stack is not None:
-            raise RuntimeError("this SwarmRuntime is already open")
-        stack = contextlib.AsyncExitStack()
-        await stack.__aenter__()
-        try:
-            log_dir = self.cfg.log_dir
+    async def _enter(self, stack: contextlib.AsyncExitStack) -> None:
+        """Open the logs, the links and the bus, on ``stack``."""
+        log_dir = self.cfg.log_dir
+        if log_dir is not None:
+            log_dir.mkdir(parents=True, exist_ok=True)
+            header = mission_header(
+                self.cfg.mission,
+                d_col_m=self.spec.arrival_m,
+                speed_m_s=self.spec.speed_m_s,
+                dt_s=self.spec.dt_s,
+                speedup=self.cfg.speedup,
+            )
+            fh = stack.enter_context((log_dir / "decisions.jsonl").open("w"))
+            self._log = DecisionLog(fh, header)
+        for k, url in enumerate(self.cfg.connections):
+            tlog = None
             if log_dir is not None:
-                log_dir.mkdir(parents=True, exist_ok=True)
-                header = mission_header(
-                    self.cfg.mission,
-                    d_col_m=self.spec.arrival_m,
-                    speed_m_s=self.spec.speed_m_s,
-                    dt_s=self.spec.dt_s,
-                    speedup=self.cfg.speedup,
-                )
-                fh = stack.enter_context((log_dir / "decisions.jsonl").open("w"))
-                self._log = DecisionLog(fh, header)
-            for k, url in enumerate(self.cfg.connections):
-                tlog = None
-                if log_dir is not None:
-                    name = "flight.tlog" if len(self.cfg.connections) == 1 else f"link{k}.tlog"
-                    tlog = TlogWriter(log_dir / name)
-                link = MavlinkLink(url, self.codec, self._receiver(k), tlog=tlog)
-                self.links.append(await stack.enter_async_context(link))
-            await stack.enter_async_context(self.bus)
-        except BaseException:
-            await stack.aclose()
-            raise
-        self._stack = stack
-        return self
+                name = "flight.tlog" if len(self.cfg.connections) == 1 else f"link{k}.tlog"
+                tlog = TlogWriter(log_dir / name)
+            link = MavlinkLink(url, self.codec, self._receiver(k), tlog=tlog)
+            self.links.append(await stack.enter_async_context(link))
+        await stack.enter_async_context(self.bus)
 
-    async def aclose(self, exc_type: type[BaseException] | None = None) -> None:
-        """Hold every vehicle still flown, then close the links, logs and bus."""
-        try:
-            await self.hold_all(reason=f"exit ({exc_type.__name__})" if exc_type else "exit")
-        finally:
-            stack, self._stack = self._stack, None
-            if stack is not None:
-                await stack.aclose()
+    async def _leave(self, exc_type: type[BaseException] | None) -> None:
+        """Hold every vehicle still flown, while the links are open (then they close)."""
+        await self.hold_all(reason=f"exit ({exc_type.__name__})" if exc_type else "exit")
 
     # -- receiving ----------------------------------------------------------------------
 

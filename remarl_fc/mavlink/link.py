@@ -34,7 +34,7 @@ from typing import IO, Any, Self
 from remarl_fc.errors import LinkLost
 from remarl_fc.mavlink.codec import Codec, Message
 from remarl_fc.mavlink.udp import Address, UdpEndpoint, parse_host_port
-from remarl_fc.resource import Resource
+from remarl_fc.resource import SyncResource
 
 MessageHandler = Callable[[Message, float, Any], bool]
 """Called with (message, monotonic receive time s, source address) for every valid message;
@@ -155,7 +155,7 @@ class _Stream(asyncio.Protocol):
         self.link._lost(exc or ConnectionError("closed by the peer"))
 
 
-class MavlinkLink(Resource):
+class MavlinkLink(SyncResource):
     """One connection to one or more vehicles (an async context manager).
 
     Args:
@@ -217,10 +217,6 @@ class MavlinkLink(Resource):
                 self.tlog.close()
             raise
         return self
-
-    async def aclose(self, exc_type: type[BaseException] | None = None) -> None:
-        """Close the connection and the log."""
-        self.close()
 
     def close(self) -> None:
         """Close the connection and the log (idempotent)."""

@@ -48,6 +48,25 @@ def to_wire(value: float, ptype: int, *, bytewise: bool) -> float:
     return result
 
 
+def is_signalling_nan_pattern(value: int, ptype: int) -> bool:
+    """Whether an integer's byte-wise float is a signalling NaN, which cannot cross a Python float.
+
+    The message libraries carry param_value as a Python float (a C double): converting such a
+    float32 to a double and back sets its quiet bit (CPython before 3.14), so the integers whose
+    bits are 0x7F800001–0x7FBFFFFF or 0xFF800001–0xFFBFFFFF (for INT32: 2,139,095,041 to
+    2,143,289,343 and −8,388,607 to −4,194,305) do not survive byte-wise encoding. No parameter
+    the runtime reads or the mock serves takes such a value.
+
+    >>> is_signalling_nan_pattern(-4194305, MavParamType.INT32), is_signalling_nan_pattern(5, 6)
+    (True, False)
+    """
+    fmt = _int_format(ptype)
+    if fmt is None:
+        return False
+    (bits,) = struct.unpack("<I", struct.pack(fmt[0], value).ljust(4, b"\0"))
+    return bool((bits >> 23) & 0xFF == 0xFF and bits & 0x7FFFFF and not bits & 0x400000)
+
+
 def from_wire(raw: float, ptype: int, *, bytewise: bool) -> float:
     """The value a PARAM_VALUE or PARAM_SET's param_value carries (inverse of `to_wire`)."""
     fmt = _int_format(ptype)

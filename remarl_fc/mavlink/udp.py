@@ -15,7 +15,7 @@ from collections.abc import Callable
 from typing import Self
 
 from remarl_fc.errors import LinkLost, LinkTimeout
-from remarl_fc.resource import Resource
+from remarl_fc.resource import SyncResource
 
 Address = tuple[str, int]
 DatagramHandler = Callable[[bytes, Address], None]
@@ -57,7 +57,7 @@ class _Protocol(asyncio.DatagramProtocol):
         self.owner._lost(exc)
 
 
-class UdpEndpoint(Resource):
+class UdpEndpoint(SyncResource):
     """A bound UDP socket in the event loop.
 
     Args:
@@ -111,10 +111,6 @@ class UdpEndpoint(Resource):
             sock = transport.get_extra_info("socket")
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, self.receive_buffer_bytes)
         return self
-
-    async def aclose(self, exc_type: type[BaseException] | None = None) -> None:
-        """Close the socket."""
-        self.close()
 
     def close(self) -> None:
         """Close the socket (idempotent)."""

@@ -23,8 +23,7 @@ import contextlib
 import dataclasses
 import functools
 import math
-from types import TracebackType
-from typing import Any, Self
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -33,6 +32,7 @@ from remarl_fc.frames import GeoPoint, heading_to_yaw, ned_to_geodetic, sim_to_n
 from remarl_fc.mavlink.codec import Codec, SigningConfig
 from remarl_fc.mavlink.consts import MavComponent
 from remarl_fc.mavlink.udp import Address
+from remarl_fc.resource import StackOwner
 from remarl_fc.sitl.ardupilot import ArduCopterLogic
 from remarl_fc.sitl.autopilot import TICK_HZ, Autopilot
 from remarl_fc.sitl.channel import Emit
@@ -78,7 +78,7 @@ def grid_layout(n: int, spacing_m: float) -> FloatArray:
     return np.stack([k // cols * spacing_m, k % cols * spacing_m], axis=-1).astype(np.float64)
 
 
-class SitlFleet:
+class SitlFleet(StackOwner):
     """A fleet of mock autopilots (see the module docstring).
 
     Args:
@@ -156,7 +156,6 @@ class SitlFleet:
             self.rng,
         )
         self._done = asyncio.Event()
-        self._stack: contextlib.AsyncExitStack | None = None
         self._task: asyncio.Task[None] | None = None
         self._pilot_done: set[int] = set()
         self._wall_start = 0.0
@@ -167,40 +166,20 @@ class SitlFleet:
 
     # -- lifetime -----------------------------------------------------------------------
 
-    async def __aenter__(self) -> Self:
-        if self._stack is not None:
-            raise RuntimeError("this SitlFleet is already running; use one `async with`")
-        stack = contextlib.AsyncExitStack()
-        await stack.__aenter__()
-        try:
-            await self.links.open(stack)
-            group = await stack.enter_async_context(asyncio.TaskGroup())
-            self._loop = self.links.loop = asyncio.get_running_loop()
-            self._wall_start = self._loop.time()
-            self._task = group.create_task(self._physics(), name="sitl.physics")
-        except BaseException:
-            await stack.aclose()
-            raise
-        self._stack = stack
-        return self
+    async def _enter(self, stack: contextlib.AsyncExitStack) -> None:
+        """Open the links and start the physics task, on ``stack``."""
+        await self.links.open(stack)
+        group = await stack.enter_async_context(asyncio.TaskGroup())
+        self._loop = self.links.loop = asyncio.get_running_loop()
+        self._wall_start = self._loop.time()
+        self._task = group.create_task(self._physics(), name="sitl.physics")
 
-    async def __aexit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        stack, self._stack = self._stack, None
+    async def _leave(self, exc_type: type[BaseException] | None) -> None:
+        """Stop the physics before the links close."""
         if self._task is not None:
             self._task.cancel()
         if self._loop is not None:
             self._wall_end = self._loop.time()
-        if stack is None:
-            return
-        if exc_type is not None and issubclass(exc_type, asyncio.CancelledError):
-            await stack.__aexit__(exc_type, exc, tb)  # let the TaskGroup see its own cancel
-        else:  # the caller's own error propagates as it is, not wrapped in a group
-            await stack.aclose()
 
     @property
     def faults(self) -> Faults:

@@ -15,10 +15,11 @@ import numpy as np
 import pytest
 from safetensors import safe_open
 from safetensors.numpy import load_file, save_file
+from tiny_policy import tiny_meta, tiny_tensors
 
 from policies.export import Rehash, rehash_policy, write_policy
 from remarl_fc.policy_io import PolicyChecksumFailed, load_policy
-from sim.observation import CLIP, COLUMNS, ObservationLayout
+from sim.observation import ObservationLayout
 from sim.policy_file import (
     CHECKSUM_KEY,
     METADATA_KEY,
@@ -27,50 +28,9 @@ from sim.policy_file import (
     PolicySchemaError,
     PolicyTensorError,
     PolicyWeightsError,
-    expected_shapes,
     policy_checksum,
-    scenario_hash,
 )
 from sim.scenarios import load_scenario
-
-
-def tiny_meta(scenario: str = "2u1o", *, hidden: int = 4) -> dict[str, Any]:
-    """Unsigned metadata as `policies.export` builds it (tuples and all, before JSON)."""
-    cfg = load_scenario(scenario)
-    layout = ObservationLayout.from_scenario(cfg)
-    config = dataclasses.asdict(cfg)
-    return {
-        "schema": 1,
-        "scenario": cfg.name,
-        "scenario_config": config,
-        "scenario_hash": scenario_hash(json.loads(json.dumps(config))),
-        "agents": cfg.uav.count,
-        "shared": False,
-        "hidden": hidden,
-        "observation": {
-            **dataclasses.asdict(layout),
-            "size": layout.size,
-            "rows": layout.rows,
-            "columns": COLUMNS,
-            "clip": CLIP,
-            "frame": "heading (x ahead, y left); positions / range_m, velocities / speed_m_s",
-        },
-        "action": {"normalised_bound": 1.0, "max_turn_rad": cfg.uav.max_turn_rad},
-        "dt_s": cfg.dt_s,
-        "speed_m_s": cfg.uav.speed_m_s,
-        "d_col_m": cfg.d_col_m,
-        "reward": "remarl",
-        "training": {"commit": "abc1234", "steps": 100, "seed": 0},
-        "metrics": {"success_rate": 0.5},
-    }
-
-
-def tiny_tensors(meta: dict[str, Any], seed: int = 0) -> dict[str, np.ndarray]:
-    rng = np.random.default_rng(seed)
-    return {
-        name: rng.normal(0, 0.5, shape).astype(np.float32)
-        for name, shape in expected_shapes(meta).items()
-    }
 
 
 def write_old(path: Path, tensors: dict[str, np.ndarray], meta: dict[str, Any], **header: str):

@@ -129,20 +129,3 @@ def test_bad_policy_files_are_clear_errors(tmp_path, trained):
         policy.check_scenario(load_scenario("3u2o"))
     with pytest.raises(PolicySpecMismatch):
         policy.act(np.zeros((3, policy.layout.size), np.float32))
-
-
-def test_loading_never_unpickles(tmp_path):
-    """A pickle payload renamed .safetensors is rejected without being executed."""
-    import pickle
-
-    marker = tmp_path / "executed"
-
-    class Boom:
-        def __reduce__(self):
-            return (marker.write_text, ("yes",))
-
-    evil = tmp_path / "evil.safetensors"
-    evil.write_bytes(pickle.dumps(Boom()))
-    with pytest.raises(PolicyError):
-        load_policy(evil)
-    assert not marker.exists()

@@ -123,7 +123,7 @@ def test_three_processes_fly_the_swarm_over_mqtt(tmp_path, mosquitto):
 
 
 def test_broker_outage_mid_flight(tmp_path, mosquitto):
-    speedup = 2.0
+    speedup = 4.0
 
     def outage(broker) -> None:
         logs = [tmp_path / f"log{i}" / "decisions.jsonl" for i in (1, 2, 3)]

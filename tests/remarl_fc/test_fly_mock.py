@@ -101,6 +101,25 @@ async def test_link_cut_is_detected_within_a_second_and_the_vehicle_is_held():
     assert truth["vehicles"][1]["custom_mode"] == CopterMode.BRAKE
 
 
+async def test_a_vehicle_that_stays_lost_ends_the_flight_after_the_lost_timeout():
+    async def cut(fleet, runtime) -> None:
+        await until_controlled(runtime)
+        fleet.faults.cut_link(1, fleet.now_s(), 10_000.0)  # vehicle 2 never comes back
+
+    flight = await fly_on_mock(
+        "3u2o", speedup=SPEEDUP, during=cut, fly_options={"lost_timeout_s": 5.0}
+    )
+    v2 = next(v for v in flight.runtime["vehicles"] if v["system_id"] == 2)
+    assert v2["status"] == "lost"
+    (given_up,) = [t for t, e in v2["events"] if "still lost after the lost timeout (5 s)" in e]
+    last_reach = max(
+        t for v in flight.runtime["vehicles"] for t, e in v["events"] if "target reached" in e
+    )
+    assert given_up <= last_reach + 5.0 + 2.5  # the timeout, plus one decision step
+    assert flight.runtime["reached"] == [1, 3]
+    assert flight.runtime["decisions"] < 40  # not run on to --max-flight
+
+
 async def test_a_mode_the_pilot_takes_is_never_fought():
     marks: dict[str, int] = {}
 

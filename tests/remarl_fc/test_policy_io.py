@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import contextlib
 import copy
-import dataclasses
 import hashlib
 import json
 import math
@@ -21,6 +20,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from safetensors.numpy import load_file, save_file
+from tiny_policy import tiny_meta, tiny_tensors
 
 from remarl_fc.errors import PolicyError
 from remarl_fc.policy_io import (
@@ -30,60 +30,17 @@ from remarl_fc.policy_io import (
     zoo_dir,
     zoo_names,
 )
-from sim.observation import CLIP, COLUMNS, ObservationLayout
 from sim.policy_file import (
     CHECKSUM_KEY,
     METADATA_KEY,
     REQUIRED_KEYS,
     WEIGHT_BOUND,
-    expected_shapes,
     metadata_problems,
     policy_checksum,
-    scenario_hash,
     verify_policy,
 )
-from sim.scenarios import load_scenario
 
 # ------------------------------------------------------------------------------------ helpers
-
-
-def tiny_meta(scenario: str = "2u1o", *, hidden: int = 4, shared: bool = False) -> dict[str, Any]:
-    """Unsigned metadata as `policies.export` writes it."""
-    cfg = load_scenario(scenario)
-    layout = ObservationLayout.from_scenario(cfg)
-    config = dataclasses.asdict(cfg)
-    return {
-        "schema": 1,
-        "scenario": cfg.name,
-        "scenario_config": config,
-        "scenario_hash": scenario_hash(config),
-        "agents": cfg.uav.count,
-        "shared": shared,
-        "hidden": hidden,
-        "observation": {
-            **dataclasses.asdict(layout),
-            "size": layout.size,
-            "rows": layout.rows,
-            "columns": COLUMNS,
-            "clip": CLIP,
-            "frame": "heading (x ahead, y left); positions / range_m, velocities / speed_m_s",
-        },
-        "action": {"normalised_bound": 1.0, "max_turn_rad": cfg.uav.max_turn_rad},
-        "dt_s": cfg.dt_s,
-        "speed_m_s": cfg.uav.speed_m_s,
-        "d_col_m": cfg.d_col_m,
-        "reward": "remarl",
-        "training": {"commit": "abc1234", "steps": 100, "seed": 0},
-        "metrics": {"success_rate": 0.5, "train_env_steps": None},
-    }
-
-
-def tiny_tensors(meta: dict[str, Any], seed: int = 0) -> dict[str, np.ndarray]:
-    rng = np.random.default_rng(seed)
-    return {
-        name: rng.normal(0, 0.5, shape).astype(np.float32)
-        for name, shape in expected_shapes(meta).items()
-    }
 
 
 def write(path: Path, tensors: dict[str, np.ndarray], meta: Any, *, sign: bool = True) -> Path:

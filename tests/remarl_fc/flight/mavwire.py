@@ -74,35 +74,12 @@ def statustext(text: str, severity: int = 4) -> Any:
 
 
 def adsb(
-    icao: int,
-    north: float,
-    east: float,
-    height: float,
-    *,
-    heading_cdeg: int = 0,
-    speed_cm_s: int = 0,
-    flags: int = ADSB_ALL,
-    tslc: int = 0,
-    origin: GeoPoint = ORIGIN,
+    icao: int, north: float, east: float, height: float, *, origin: GeoPoint = ORIGIN, **fields: int
 ) -> Any:
+    """An ADSB_VEHICLE at (north, east, height) m from ``origin``; ``fields`` as `adsb_raw`."""
     lat, lon, alt = ned_to_geodetic(north, east, -height, origin)
-    return wire(
-        F.adsb_vehicle_encode(
-            icao,
-            int(to_deg_e7(lat)),
-            int(to_deg_e7(lon)),
-            1,  # ADSB_ALTITUDE_TYPE_GEOMETRIC
-            round(float(alt) * 1000),
-            heading_cdeg,
-            speed_cm_s,
-            0,
-            b"INTRUDER",
-            14,  # UAV
-            tslc,
-            flags,
-            0,
-        )
-    )
+    altitude_mm = round(float(alt) * 1000)
+    return adsb_raw(icao, int(to_deg_e7(lat)), int(to_deg_e7(lon)), altitude_mm, **fields)
 
 
 def adsb_raw(

@@ -209,36 +209,28 @@ async def test_udpin_and_udpout_talk_and_dispatch_by_system_id():
 
 @pytest.mark.asyncio
 @pytest.mark.network
-async def test_udpin_replies_to_where_a_system_was_last_heard():
+@pytest.mark.parametrize("bound", [False, True], ids=["last-heard", "bound"])
+async def test_udpin_replies_to_where_a_system_was_last_heard_unless_it_is_bound(bound):
+    """System 3 is heard from one port, then from another (a reconnect, or a forger): replies
+    follow it to the new port, unless the first address was bound; then they all go there."""
     async with udp_pair(3, 3) as (gcs, gcs_inbox, vehicles):
-        (old, in_old, c_old), (new, in_new, c_new) = vehicles
-        old.send(heartbeat(c_old))
-        await until(lambda: len(gcs_inbox.got) == 1, "first heartbeat")
-        new.send(heartbeat(c_new))  # system 3 moved to another port (e.g. a reconnect)
-        await until(lambda: len(gcs_inbox.got) == 2, "second heartbeat")
-        assert gcs.where[3][1] == new.local_address[1]
+        (first, in_first, c_first), (second, in_second, c_second) = vehicles
+        first.send(heartbeat(c_first))
+        await until(lambda: len(gcs_inbox.got) == 1, "the first heartbeat")
+        if bound:
+            gcs.bind(3, gcs.where[3])
+        second.send(heartbeat(c_second))  # system 3's id from another port
+        await until(lambda: len(gcs_inbox.got) == 2, "the second heartbeat")
+        to, heard, unheard = (
+            (first, in_first, in_second) if bound else (second, in_second, in_first)
+        )
+        assert gcs.where[3][1] == to.local_address[1]
         assert gcs.send(statustext(gcs.codec, b"here"), 3)
-        await until(lambda: len(in_new.got) == 1, "the reply")
-        await asyncio.sleep(0.05)
-        assert in_old.got == []
-
-
-@pytest.mark.asyncio
-@pytest.mark.network
-async def test_a_bound_system_is_sent_to_its_bound_address_only():
-    async with udp_pair(3, 3) as (gcs, gcs_inbox, vehicles):
-        (real, in_real, c_real), (forger, in_forger, c_forger) = vehicles
-        real.send(heartbeat(c_real))
-        await until(lambda: len(gcs_inbox.got) == 1, "the vehicle's heartbeat")
-        gcs.bind(3, gcs.where[3])
-        forger.send(heartbeat(c_forger))  # system 3's id from another port
-        await until(lambda: len(gcs_inbox.got) == 2, "the forger's heartbeat")
-        assert gcs.where[3][1] == real.local_address[1]  # did not move
-        assert gcs.send(statustext(gcs.codec, b"to the real one"), 3)
-        await until(lambda: len(in_real.got) == 1, "the reply")
         assert gcs.send(statustext(gcs.codec, b"again"), 3)
-        await until(lambda: len(in_real.got) == 2, "the second reply")
-        assert in_forger.got == []  # both went to the bound address, in order
+        await until(lambda: len(heard.got) == 2, "both replies")
+        await asyncio.sleep(0.05)
+        assert [m.text for m, _ in heard.got] == ["here", "again"]
+        assert unheard.got == []
 
 
 class Refuser(Inbox):

@@ -6,7 +6,7 @@ import math
 import struct
 
 import pytest
-from hypothesis import given
+from hypothesis import assume, given
 from hypothesis import strategies as st
 
 from remarl_fc.mavlink.consts import (
@@ -19,7 +19,12 @@ from remarl_fc.mavlink.consts import (
     MavResult,
     MsgId,
 )
-from remarl_fc.mavlink.params import INT_FORMATS, from_wire, to_wire
+from remarl_fc.mavlink.params import (
+    INT_FORMATS,
+    from_wire,
+    is_signalling_nan_pattern,
+    to_wire,
+)
 from remarl_fc.sitl.config import ArduPilotParams, Px4Params
 from remarl_fc.sitl.params import ARDUPILOT_PARAMS, PX4_PARAMS, ParamRejected, ParamTable
 
@@ -41,6 +46,8 @@ def typed_ints(draw: st.DrawFn) -> tuple[MavParamType, int]:
 @given(typed_ints(), st.booleans())
 def test_integer_values_survive_the_wire_in_both_encodings(typed, bytewise):
     ptype, value = typed
+    # a signalling-NaN bit pattern cannot cross a Python float (documented in the encoder)
+    assume(not (bytewise and is_signalling_nan_pattern(value, ptype)))
     wire = to_wire(value, ptype, bytewise=bytewise)
     # what a MAVLink frame carries is a float32: pack it as pymavlink does
     (on_the_wire,) = struct.unpack("<f", struct.pack("<f", wire))

@@ -1,0 +1,397 @@
+"""The metadata of a policy file: its keys, what each may hold, and how it is checked and built.
+
+The metadata is one JSON object under the safetensors header key ``remarl_policy``
+(`METADATA_KEY`); `metadata_problems` documents every key. `build_metadata` writes it for a
+policy trained on a scenario (`policies.export`), `check_metadata` and `scenario_config` read it
+back (`remarl_fc.policy_io`, through `sim.policy_file.verify_policy`). A header without readable
+metadata is a `PolicyFormatError`; metadata that breaks the schema, a `PolicySchemaError`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import math
+import re
+import typing
+from collections.abc import Mapping
+from typing import Any, get_args, get_origin, get_type_hints
+
+from sim.config import FieldValueError, ScenarioConfig
+from sim.observation import CLIP, COLUMNS, ROW_OBSTACLES, ObservationLayout
+from sim.policy_checksum import CHECKSUM_KEY, CHECKSUM_PREFIX
+from sim.policy_problems import Checker, PolicyFileError, Problem, show
+
+POLICY_SCHEMA = 1
+"""Version of the policy file layout this module describes (the metadata's ``schema``)."""
+
+METADATA_KEY = "remarl_policy"
+"""Key of the safetensors header entry that holds the JSON metadata."""
+
+MAX_METADATA_DEPTH = 16
+"""Deepest nesting of JSON objects and arrays accepted in the metadata (the writer's is 3)."""
+
+REQUIRED_KEYS = (
+    "schema",
+    "scenario",
+    "scenario_config",
+    "scenario_hash",
+    "agents",
+    "shared",
+    "hidden",
+    "observation",
+    "action",
+    "dt_s",
+    "speed_m_s",
+    "d_col_m",
+    "reward",
+    "training",
+    "metrics",
+)
+"""Top-level metadata keys every policy file has; with `CHECKSUM_KEY`, the only ones allowed (an
+unknown key is a problem: it is what a damaged key name looks like)."""
+
+OBSERVATION_KEYS = (
+    "max_obstacles",
+    "range_m",
+    "aperture_rad",
+    "speed_m_s",
+    "size",
+    "rows",
+    "columns",
+    "clip",
+    "frame",
+)
+"""Keys of ``observation`` (all required)."""
+
+ACTION_KEYS = ("normalised_bound", "max_turn_rad")
+"""Keys of ``action`` (all required)."""
+
+TRAINING_KEYS = ("commit", "steps", "seed")
+"""Keys of ``training`` (all required). ``metrics`` is free-form (finite numbers)."""
+
+_HEX64 = re.compile(r"[0-9a-f]{64}")
+_SCENARIO_NAME = re.compile(r"[^/\\\x00-\x1f\x7f]{1,255}")
+
+
+class PolicyFormatError(PolicyFileError):
+    """Not a safetensors file, or no (parseable) remarl-fc metadata in it."""
+
+    kind = "format"
+    summary = "not a policy file"
+
+    def details(self) -> str:
+        """The problems' messages (the key adds nothing here)."""
+        return "; ".join(p.message for p in self.problems)
+
+
+class PolicySchemaError(PolicyFileError):
+    """The metadata misses a key, or holds a value of the wrong type or out of range."""
+
+    kind = "schema"
+    summary = "bad policy metadata"
+
+
+def parse_metadata(header: Mapping[str, str] | None) -> dict[str, Any]:
+    """The metadata dict of a safetensors header (its ``__metadata__`` strings).
+
+    Raises:
+        PolicyFormatError: no `METADATA_KEY` entry, or one that is not a JSON object.
+    """
+    text = (header or {}).get(METADATA_KEY)
+    if not isinstance(text, str):
+        raise PolicyFormatError(
+            [Problem("file", f"not a remarl-fc policy: no {METADATA_KEY} metadata")]
+        )
+    try:
+        meta = json.loads(text)
+    except (ValueError, RecursionError) as exc:  # JSONDecodeError, too many digits, too deep
+        raise PolicyFormatError(
+            [Problem(METADATA_KEY, f"metadata is not valid JSON ({show(str(exc))})")]
+        ) from exc
+    if not isinstance(meta, dict):
+        raise PolicySchemaError(
+            [Problem(METADATA_KEY, f"must be a JSON object, got {type(meta).__name__}")]
+        )
+    return meta
+
+
+def _walk(meta: Mapping[str, Any], check: Checker) -> bool:
+    """Flag non-finite numbers and nesting beyond `MAX_METADATA_DEPTH`; False if too deep."""
+    stack: list[tuple[str, Any, int]] = [("", meta, 0)]
+    while stack:
+        key, value, depth = stack.pop()
+        if depth > MAX_METADATA_DEPTH:
+            check.add(key or METADATA_KEY, f"nests deeper than {MAX_METADATA_DEPTH} levels")
+            return False
+        if isinstance(value, float) and not math.isfinite(value):
+            check.add(key, f"must be a finite number, got {value!r}")
+        elif isinstance(value, dict):
+            stack.extend((f"{key}.{k}" if key else k, v, depth + 1) for k, v in value.items())
+        elif isinstance(value, list | tuple):
+            stack.extend((f"{key}[{i}]", v, depth + 1) for i, v in enumerate(value))
+    return True
+
+
+def _convert(value: Any, hint: Any, key: str, check: Checker) -> tuple[bool, Any]:
+    """(ok, value) for a JSON value read into a config field of type ``hint``."""
+    if hint is bool:
+        ok = isinstance(value, bool)
+        expected = "true or false"
+    elif hint is float:
+        ok = not isinstance(value, bool) and isinstance(value, int | float)
+        ok, value, expected = ok and math.isfinite(value), float(value) if ok else value, "a number"
+    elif hint is int:
+        ok = not isinstance(value, bool) and isinstance(value, int)
+        expected = "an integer"
+    elif hint is str:
+        ok, expected = isinstance(value, str), "a string"
+    elif get_origin(hint) is typing.Literal:
+        choices = get_args(hint)
+        ok, expected = value in choices and isinstance(value, str), f"one of {', '.join(choices)}"
+    elif get_origin(hint) is tuple:
+        args = get_args(hint)
+        expected = f"a list of {len(args)} numbers"
+        ok = isinstance(value, list | tuple) and len(value) == len(args)
+        if ok:
+            items = [_convert(v, a, key, Checker()) for v, a in zip(value, args, strict=True)]
+            ok, value = all(o for o, _ in items), tuple(v for _, v in items)
+    else:  # pragma: no cover - every ScenarioConfig field is one of the above
+        ok, expected = False, str(hint)
+    if not ok:
+        check.add(key, f"must be {expected}, got {show(value)}")
+    return ok, value
+
+
+_FIELDS: dict[type[Any], tuple[dict[str, Any], dict[str, dataclasses.Field[Any]]]] = {}
+
+
+def _fields(cls: type[Any]) -> tuple[dict[str, Any], dict[str, dataclasses.Field[Any]]]:
+    """Type hints and fields of a config dataclass (resolving hints is slow: once per class)."""
+    if cls not in _FIELDS:
+        _FIELDS[cls] = get_type_hints(cls), {f.name: f for f in dataclasses.fields(cls)}
+    return _FIELDS[cls]
+
+
+def _build(cls: type[Any], raw: Any, prefix: str, check: Checker) -> Any:
+    """The config dataclass ``cls`` from its `dataclasses.asdict` form, or None (problems noted)."""
+    if not isinstance(raw, dict):
+        check.add(prefix.rstrip("."), f"must be an object, got {show(raw)}")
+        return None
+    hints, fields = _fields(cls)
+    kwargs: dict[str, Any] = {}
+    ok = True
+    for key, value in raw.items():
+        if key not in fields:
+            check.add(prefix + key, f"unknown key (known: {', '.join(sorted(fields))})")
+            ok = False
+            continue
+        hint = hints[key]
+        if isinstance(hint, type) and dataclasses.is_dataclass(hint):
+            kwargs[key] = _build(hint, value, f"{prefix}{key}.", check)
+            ok = ok and kwargs[key] is not None
+        else:
+            good, kwargs[key] = _convert(value, hint, prefix + key, check)
+            ok = ok and good
+    for name, spec in fields.items():
+        required = (
+            spec.default is dataclasses.MISSING and spec.default_factory is dataclasses.MISSING
+        )
+        if name not in raw and required:
+            check.add(prefix + name, "required key is missing")
+            ok = False
+    if not ok:
+        return None
+    try:
+        return cls(**kwargs)
+    except FieldValueError as exc:  # a dotted field is relative to the ScenarioConfig
+        root = prefix.split(".", 1)[0] + "."
+        check.add((root if "." in exc.field else prefix) + exc.field, exc.reason)
+        return None
+
+
+def scenario_config(meta: Mapping[str, Any]) -> ScenarioConfig:
+    """The `ScenarioConfig` of a policy's ``scenario_config`` (`dataclasses.asdict` form).
+
+    Raises:
+        PolicySchemaError: naming the key that is missing, unknown, mistyped or out of range.
+    """
+    check = Checker()
+    cfg = _build(ScenarioConfig, meta.get("scenario_config"), "scenario_config.", check)
+    if check.problems or not isinstance(cfg, ScenarioConfig):
+        raise PolicySchemaError(check.problems or [Problem("scenario_config", "is missing")])
+    return cfg
+
+
+def scenario_hash(config: Mapping[str, Any]) -> str:
+    """The ``scenario_hash`` the writer stores: SHA-256 of the sorted-key JSON of the config."""
+    return hashlib.sha256(json.dumps(config, sort_keys=True).encode()).hexdigest()
+
+
+def build_metadata(
+    cfg: ScenarioConfig,
+    *,
+    shared: bool,
+    hidden: int,
+    reward: str,
+    training: Mapping[str, Any],
+    metrics: Mapping[str, Any],
+) -> dict[str, Any]:
+    """The unsigned metadata of a policy trained on ``cfg`` (its keys: `metadata_problems`).
+
+    Args:
+        shared: one set of parameters for every agent. hidden: units of every hidden layer.
+        reward: the reward it was trained on. training: ``commit``, ``steps`` and ``seed``.
+        metrics: evaluation figures (finite numbers or null).
+    """
+    layout = ObservationLayout.from_scenario(cfg)
+    scenario = dataclasses.asdict(cfg)
+    return {
+        "schema": POLICY_SCHEMA,
+        "scenario": cfg.name,
+        "scenario_config": scenario,
+        "scenario_hash": scenario_hash(scenario),
+        "agents": cfg.uav.count,
+        "shared": shared,
+        "hidden": hidden,
+        "observation": {
+            **dataclasses.asdict(layout),
+            "size": layout.size,
+            "rows": layout.rows,
+            "columns": COLUMNS,
+            "clip": CLIP,
+            "frame": "heading (x ahead, y left); positions / range_m, velocities / speed_m_s",
+        },
+        "action": {"normalised_bound": 1.0, "max_turn_rad": cfg.uav.max_turn_rad},
+        "dt_s": cfg.dt_s,
+        "speed_m_s": cfg.uav.speed_m_s,
+        "d_col_m": cfg.d_col_m,
+        "reward": reward,
+        "training": dict(training),
+        "metrics": dict(metrics),
+    }
+
+
+def metadata_problems(meta: object) -> list[Problem]:
+    """Everything wrong with a policy's metadata; empty when it is valid.
+
+    The schema (`POLICY_SCHEMA` 1; ranges as the simulator's config enforces them):
+
+    - ``schema``: 1. ``scenario``: the scenario's name (1–255 characters, no path separator
+      or control character).
+    - ``scenario_config``: the `ScenarioConfig` as `dataclasses.asdict` writes it; it must build
+      one (every key known, typed and in range). ``scenario_hash``: `scenario_hash` of it.
+    - ``agents``: integer >= 1, = ``scenario_config.uav.count``. ``shared``: bool.
+      ``hidden``: integer >= 1 (units of every hidden layer).
+    - ``observation``: ``max_obstacles`` integer >= 1, ``range_m`` > 0, ``aperture_rad`` in
+      (0, 2π], ``speed_m_s`` > 0 (all equal to the scenario's), ``rows`` = 2 + max_obstacles,
+      ``columns`` = `COLUMNS`, ``size`` = rows·columns + max_obstacles, ``clip`` = `CLIP`,
+      ``frame`` a string.
+    - ``action``: ``normalised_bound`` 1.0, ``max_turn_rad`` in (0, π/2] (= the scenario's).
+    - ``dt_s``, ``speed_m_s``, ``d_col_m``: finite > 0, equal to the scenario's.
+    - ``reward``: a string. ``training``: ``commit`` string, ``steps`` integer >= 0, ``seed``
+      integer. ``metrics``: an object.
+    - ``checksum`` (optional here, required by `check_checksum`): ``sha256:`` + 64 hex digits.
+    - no other keys (except in ``metrics``); every number finite; nesting at most
+      `MAX_METADATA_DEPTH`.
+    """
+    check = Checker()
+    if not isinstance(meta, dict):
+        return [Problem(METADATA_KEY, f"must be a JSON object, got {type(meta).__name__}")]
+    if not _walk(meta, check):
+        return check.problems
+    if "schema" not in meta:
+        check.add("schema", f"required key is missing (expected {POLICY_SCHEMA})")
+    elif meta["schema"] != POLICY_SCHEMA or isinstance(meta["schema"], bool):
+        check.add(
+            "schema",
+            f"this remarl-fc reads policy schema {POLICY_SCHEMA}, the file has "
+            f"{show(meta['schema'])} (use the remarl-fc that wrote it)",
+        )
+        return check.problems
+    check.known(meta, (*REQUIRED_KEYS, CHECKSUM_KEY))
+    name = check.string(meta, "scenario")
+    if name is not None and not _SCENARIO_NAME.fullmatch(name):
+        check.add("scenario", f"must be a scenario name (no '/'), got {show(name)}")
+    cfg, cfg_raw = None, check.obj(meta, "scenario_config")
+    if cfg_raw is not None:
+        cfg = _build(ScenarioConfig, cfg_raw, "scenario_config.", check)
+    digest = check.string(meta, "scenario_hash")
+    if digest is not None and not _HEX64.fullmatch(digest):
+        check.add("scenario_hash", f"must be 64 lowercase hex digits, got {show(digest)}")
+    elif cfg is not None and digest is not None:
+        recorded = meta["scenario_config"]
+        if digest != scenario_hash(recorded):
+            check.add("scenario_hash", "does not match scenario_config (SHA-256 of its JSON)")
+    agents = check.integer(meta, "agents")
+    check.boolean(meta, "shared")
+    check.integer(meta, "hidden")
+    dt_s, speed, d_col = (check.number(meta, k) for k in ("dt_s", "speed_m_s", "d_col_m"))
+    check.string(meta, "reward")
+    obs = check.obj(meta, "observation")
+    layout: dict[str, Any] = {}
+    if obs is not None:
+        p = "observation."
+        check.known(obs, OBSERVATION_KEYS, p)
+        m = check.integer(obs, "max_obstacles", p)
+        layout["range_m"] = check.number(obs, "range_m", p)
+        layout["aperture_rad"] = check.number(obs, "aperture_rad", p, high=2 * math.pi)
+        layout["speed_m_s"] = check.number(obs, "speed_m_s", p)
+        rows, columns, size = (check.integer(obs, k, p) for k in ("rows", "columns", "size"))
+        check.equal(p + "columns", columns, COLUMNS, "the observation's columns")
+        if m is not None:
+            layout["max_obstacles"] = m
+            check.equal(p + "rows", rows, ROW_OBSTACLES + m, "2 + max_obstacles")
+            check.equal(p + "size", size, (ROW_OBSTACLES + m) * COLUMNS + m, "rows·4 + m")
+        clip = check.number(obs, "clip", p)
+        check.equal(p + "clip", clip, CLIP, "the clip of sim.observation")
+        check.string(obs, "frame", p)
+    act = check.obj(meta, "action")
+    turn = None
+    if act is not None:
+        check.known(act, ACTION_KEYS, "action.")
+        bound = check.number(act, "normalised_bound", "action.")
+        check.equal("action.normalised_bound", bound, 1.0, "the tanh output bound")
+        turn = check.number(act, "max_turn_rad", "action.", high=math.pi / 2)
+    training = check.obj(meta, "training")
+    if training is not None:
+        check.known(training, TRAINING_KEYS, "training.")
+        check.string(training, "commit", "training.")
+        check.integer(training, "steps", "training.", minimum=0)
+        check.integer(training, "seed", "training.", minimum=None)
+    check.obj(meta, "metrics")
+    if CHECKSUM_KEY in meta:
+        value = meta[CHECKSUM_KEY]
+        if not (
+            isinstance(value, str)
+            and value.startswith(CHECKSUM_PREFIX)
+            and _HEX64.fullmatch(value[len(CHECKSUM_PREFIX) :])
+        ):
+            check.add(CHECKSUM_KEY, f"must be 'sha256:' + 64 hex digits, got {show(value)}")
+    if isinstance(cfg, ScenarioConfig):
+        of = "scenario_config"
+        check.equal("scenario", name, cfg.name, f"{of}.name")
+        check.equal("agents", agents, cfg.uav.count, f"{of}.uav.count")
+        check.equal("dt_s", dt_s, cfg.dt_s, f"{of}.dt_s")
+        check.equal("speed_m_s", speed, cfg.uav.speed_m_s, f"{of}.uav.speed_m_s")
+        check.equal("d_col_m", d_col, cfg.d_col_m, f"{of}.d_col_m")
+        check.equal("action.max_turn_rad", turn, cfg.uav.max_turn_rad, f"{of}.uav.max_turn_rad")
+        s = cfg.sensing
+        for key, want, what in (
+            ("max_obstacles", s.max_obstacles, "sensing.max_obstacles"),
+            ("range_m", s.range_m, "sensing.range_m"),
+            ("aperture_rad", s.aperture_rad, "sensing.aperture_rad"),
+            ("speed_m_s", cfg.uav.speed_m_s, "uav.speed_m_s"),
+        ):
+            check.equal(f"observation.{key}", layout.get(key), want, f"{of}.{what}")
+    return check.problems
+
+
+def check_metadata(meta: object) -> dict[str, Any]:
+    """``meta`` if it is valid metadata (`metadata_problems`); else raise `PolicySchemaError`."""
+    problems = metadata_problems(meta)
+    if problems:
+        raise PolicySchemaError(problems)
+    assert isinstance(meta, dict)
+    return meta
