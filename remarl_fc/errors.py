@@ -8,7 +8,9 @@ converted where they enter (``raise X from exc``), so callers need to know only 
      │    └── ScenarioError                  scenario name/file that cannot be used
      │    └── SigningKeyError                a MAVLink signing key file that cannot be used
      ├── PolicyError                         a policy file that cannot be used
-     │    └── PolicySpecMismatch             ... for this scenario or vehicle set
+     │    ├── PolicySpecMismatch             ... for this scenario or vehicle set
+     │    └── PolicyFileInvalid              ... failing a check of its format, schema, weights
+     │         └── PolicyChecksumFailed      ... with no checksum or a wrong one
      ├── LinkError                           a MAVLink link that cannot be used
      │    ├── LinkTimeout                    an awaited message did not come in time
      │    ├── LinkLost                       the socket failed or the peer went silent
@@ -22,6 +24,7 @@ Messages say what to do next.
 from __future__ import annotations
 
 from sim.errors import ConfigError, RemarlError, ScenarioError
+from sim.policy_file import PolicyFileError
 
 __all__ = [
     "CommandRejected",
@@ -29,7 +32,9 @@ __all__ = [
     "LinkError",
     "LinkLost",
     "LinkTimeout",
+    "PolicyChecksumFailed",
     "PolicyError",
+    "PolicyFileInvalid",
     "PolicySpecMismatch",
     "RemarlError",
     "ScenarioError",
@@ -65,6 +70,29 @@ class PolicySpecMismatch(PolicyError):
             source=source,
         )
         self.field, self.expected, self.actual = field, expected, actual
+
+
+class PolicyFileInvalid(PolicyError):
+    """A policy file that fails a check of `sim.policy_file` (format, schema, tensors, weights).
+
+    Attributes:
+        kind: which check failed: "format", "schema", "unsigned", "checksum", "tensors" or
+            "weights". problems: (key or tensor, message) pairs. key: the first problem's key.
+    """
+
+    def __init__(self, exc: PolicyFileError, *, source: str, path: str) -> None:
+        super().__init__(exc.describe(path), source=source)
+        self.kind = exc.kind
+        self.problems = tuple((p.key, p.message) for p in exc.problems)
+        self.key = exc.key
+
+
+class PolicyChecksumFailed(PolicyFileInvalid):
+    """The file has no checksum, or a wrong one.
+
+    ``kind`` is "unsigned" (written before policy files carried checksums) or "checksum" (the
+    file changed after it was written).
+    """
 
 
 class SigningKeyError(ConfigError):

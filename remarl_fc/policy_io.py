@@ -20,7 +20,12 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from remarl_fc.errors import PolicyError, PolicySpecMismatch
+from remarl_fc.errors import (
+    PolicyChecksumFailed,
+    PolicyError,
+    PolicyFileInvalid,
+    PolicySpecMismatch,
+)
 from sim.config import ScenarioConfig
 from sim.observation import ObservationLayout
 from sim.policy_file import (
@@ -47,29 +52,6 @@ __all__ = [
     "zoo_dir",
     "zoo_names",
 ]
-
-
-class PolicyFileInvalid(PolicyError):
-    """A policy file that fails a check of `sim.policy_file` (format, schema, tensors, weights).
-
-    Attributes:
-        kind: which check failed: "format", "schema", "unsigned", "checksum", "tensors" or
-            "weights". problems: (key or tensor, message) pairs. key: the first problem's key.
-    """
-
-    def __init__(self, exc: PolicyFileError, *, source: str, path: str) -> None:
-        super().__init__(exc.describe(path), source=source)
-        self.kind = exc.kind
-        self.problems = tuple((p.key, p.message) for p in exc.problems)
-        self.key = exc.key
-
-
-class PolicyChecksumFailed(PolicyFileInvalid):
-    """The file has no checksum, or a wrong one.
-
-    ``kind`` is "unsigned" (written before policy files carried checksums) or "checksum" (the
-    file changed after it was written).
-    """
 
 
 def zoo_dir() -> Path:
