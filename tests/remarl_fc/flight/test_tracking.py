@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import csv
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -20,7 +22,12 @@ from mavwire import (
     wire,
 )
 
-from remarl_fc.flight.tracking import MAX_SPEED_M_S, STATUSTEXT_KEPT, VehicleTrack
+from remarl_fc.flight.tracking import (
+    DISAGREEMENT_UNTRUSTED_M,
+    MAX_SPEED_M_S,
+    STATUSTEXT_KEPT,
+    VehicleTrack,
+)
 from remarl_fc.frames import GeoPoint, ned_to_geodetic, to_deg_e7, yaw_to_cdeg
 from remarl_fc.mavlink.consts import (
     EKF_GOOD,
@@ -405,3 +412,22 @@ def test_a_heartbeat_flood_on_the_vehicles_source_makes_it_untrusted():
     for k in range(6):  # a second sender at 10 Hz
         t.update(loiter, 30.0 + k / 10)
     assert t.untrusted is not None and "more than one sender" in t.untrusted
+
+
+TRACES = sorted((Path(__file__).resolve().parents[2] / "data" / "sitl").glob("*.csv"))
+
+
+@pytest.mark.parametrize("trace", TRACES, ids=lambda p: p.stem)
+def test_real_firmware_telemetry_is_never_distrusted(trace):
+    """ArduCopter and PX4 SITL, flying steps, turns and policy-like arcs: their position and
+    velocity agree to a few metres, far under the 15 m that makes a track untrusted."""
+    t = track()
+    worst = 0.0
+    with trace.open() as f:
+        for row in csv.DictReader(f):
+            now = float(row["t_s"])
+            vel = (float(row["vn_m_s"]), float(row["ve_m_s"]), 0.0)
+            t.update(position(float(row["n_m"]), float(row["e_m"]), 20.0, vel), now)
+            worst = max(worst, t.disagreement_m)
+    assert t.untrusted is None and not t.rejected
+    assert worst < DISAGREEMENT_UNTRUSTED_M / 3, worst  # measured: ≤ 0.3 m ArduCopter, ≤ 3.2 m PX4
