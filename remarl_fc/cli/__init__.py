@@ -20,12 +20,13 @@ Errors of the project (`remarl_fc.errors.RemarlError`) print one line on stderr 
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from collections.abc import Sequence
 
 from remarl_fc._version import __version__
 from remarl_fc.cli import bench, fly, learn, scenario, sitl
-from remarl_fc.cli.common import EXIT_USAGE, Handler
+from remarl_fc.cli.common import EXIT_BROKEN_PIPE, EXIT_USAGE, Handler
 from remarl_fc.errors import RemarlError
 
 __all__ = ["EXIT_USAGE", "build_parser", "main"]
@@ -62,3 +63,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     except RemarlError as exc:
         print(f"remarl-fc: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
+    except BrokenPipeError:  # the reader went away (`remarl-fc ... | head`): not our error
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return EXIT_BROKEN_PIPE

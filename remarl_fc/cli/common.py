@@ -23,6 +23,9 @@ EXIT_LINK_ANOMALY = 5
 """Exit status of ``fly`` when every vehicle reached its target but an anomaly of the link
 touched what we believed (rejected or untrusted telemetry): read the summary's ``anomalies``."""
 
+EXIT_BROKEN_PIPE = 141
+"""Exit status when standard output was closed by its reader (what a shell reports for SIGPIPE)."""
+
 EXIT_INTERRUPTED = 130
 """Exit status of ``train`` and ``compare`` stopped by Ctrl-C (what a shell reports for SIGINT)."""
 

@@ -178,3 +178,20 @@ def test_export_rehash_signs_an_old_policy_file(tmp_path, capsys):
     assert load_policy(old).agents == 2
     assert main(["export"]) == 2
     assert "give the run folder and --out FILE" in capsys.readouterr().err
+
+
+def test_a_reader_that_goes_away_is_not_a_traceback():
+    import subprocess
+    import sys as _sys
+
+    proc = subprocess.Popen(
+        [_sys.executable, "-m", "remarl_fc", "scenarios", "--json"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
+    assert proc.stdout is not None and proc.stderr is not None
+    with proc.stderr:
+        proc.stdout.close()  # `| head` that stopped reading
+        err = proc.stderr.read().decode()
+    assert proc.wait(timeout=60) == 141, err
+    assert "Traceback" not in err
