@@ -51,6 +51,9 @@ DEAD_RECKONING_TAU_S = 10.0
 toward the reported fixes, s: a position stream drifting at r m/s against its own velocity
 shows a disagreement of about r·τ."""
 
+DEAD_RECKONING_MAX_GAP_S = 5.0
+"""Fixes further apart than this on the vehicle's clock restart the dead reckoning, s."""
+
 DISAGREEMENT_UNTRUSTED_M = 15.0
 """A fix this far from the dead-reckoned position makes the vehicle's telemetry untrusted, m
 (a real autopilot's position and velocity come from one estimator and agree to about 1 m)."""
@@ -62,10 +65,12 @@ REJECTIONS_UNTRUSTED = 10
 REJECTIONS_WINDOW_S = 3.0
 """Window for `REJECTIONS_UNTRUSTED`, s."""
 
-HEARTBEATS_UNTRUSTED = 6
+HEARTBEATS_UNTRUSTED = 20
 """This many HEARTBEATs within `HEARTBEAT_WINDOW_S` make the telemetry untrusted: an
-autopilot sends one a second per link, so a faster stream means a second sender on the
-vehicle's own source (whose HEARTBEATs could otherwise fake a pilot takeover)."""
+autopilot sends one a second per link, so a sustained faster stream means a second sender on
+the vehicle's own source (whose HEARTBEATs could otherwise fake a pilot takeover). Counted by
+arrival time, so it is set high: a link that delivers a backlog after a stall bursts a few,
+and a vehicle silent for 20 s is lost long before."""
 
 HEARTBEAT_WINDOW_S = 2.0
 """Window for `HEARTBEATS_UNTRUSTED`, s."""
@@ -129,6 +134,7 @@ class VehicleTrack:
     )
     other_mode_heartbeats: int = 0
     dr_ne_m: FloatArray = field(default_factory=lambda: np.full(2, np.nan))
+    t_fix_vehicle_s: float = -math.inf
     disagreement_m: float = 0.0
     untrusted: str | None = None
     _rejections: deque[float] = field(
@@ -237,12 +243,18 @@ class VehicleTrack:
                 f"{REJECTIONS_UNTRUSTED} positions rejected within {REJECTIONS_WINDOW_S:g} s"
             )
 
-    def _dead_reckon(self, ne: FloatArray, vel: FloatArray, now: float) -> None:
-        """Compare the fix with the integrated velocity history; flag a disagreement."""
-        if not math.isfinite(self.t_position) or not np.isfinite(self.dr_ne_m).all():
+    def _dead_reckon(self, ne: FloatArray, vel: FloatArray, t_vehicle_s: float) -> None:
+        """Compare the fix with the integrated velocity history; flag a disagreement.
+
+        Time is the vehicle's own (GLOBAL_POSITION_INT.time_boot_ms), not the arrival time: a
+        link that delivers a backlog in one burst must not look like a position that outran its
+        velocity. A clock that goes back or jumps (a reboot) restarts the dead reckoning.
+        """
+        dt = t_vehicle_s - self.t_fix_vehicle_s
+        self.t_fix_vehicle_s = t_vehicle_s
+        if not 0.0 < dt <= DEAD_RECKONING_MAX_GAP_S or not np.isfinite(self.dr_ne_m).all():
             self.dr_ne_m = ne.copy()
             return
-        dt = max(0.0, now - self.t_position)
         predicted = self.dr_ne_m + 0.5 * (self.vel_ned_m_s[:2] + vel[:2]) * dt
         self.disagreement_m = float(np.linalg.norm(ne - predicted))
         pull = 1.0 - math.exp(-dt / DEAD_RECKONING_TAU_S)
@@ -264,12 +276,17 @@ class VehicleTrack:
             from_deg_e7(msg.lat), from_deg_e7(msg.lon), msg.alt / 1000.0, self.origin
         )
         ne = np.array([float(n), float(e)])
-        if math.isfinite(self.t_position) and now > self.t_position:
-            jump = float(np.linalg.norm(ne - self.ne_m))
-            if jump > MAX_SPEED_M_S * (now - self.t_position) + 5.0:
+        t_vehicle = int(msg.time_boot_ms) / 1000.0
+        if math.isfinite(self.t_position):
+            # the longer of the time between arrivals and on the vehicle's clock: a backlog
+            # delivered in one burst arrives at once but was flown over seconds
+            dt_vehicle = t_vehicle - self.t_fix_vehicle_s
+            flown = dt_vehicle if 0.0 < dt_vehicle <= DEAD_RECKONING_MAX_GAP_S else 0.0
+            elapsed = max(now - self.t_position, flown)
+            if float(np.linalg.norm(ne - self.ne_m)) > MAX_SPEED_M_S * elapsed + 5.0:
                 self._reject("position jump", now)
                 return
-        self._dead_reckon(ne, vel, now)
+        self._dead_reckon(ne, vel, t_vehicle)
         self.ne_m, self.height_m, self.vel_ned_m_s = ne, -float(d), vel
         self.t_position = now
         if msg.hdg != 65535 and not math.isfinite(self.t_yaw):

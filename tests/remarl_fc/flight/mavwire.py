@@ -43,12 +43,14 @@ def position(
     *,
     origin: GeoPoint = ORIGIN,
     hdg: int = 65535,
+    t_s: float = 1.0,
 ) -> Any:
+    """GLOBAL_POSITION_INT; ``t_s`` is the vehicle's clock (time_boot_ms)."""
     lat, lon, alt = ned_to_geodetic(north, east, -height, origin)
     vx, vy, vz = (round(v * 100) for v in vel_ned)
     return wire(
         F.global_position_int_encode(
-            1000,
+            round(t_s * 1000),
             int(to_deg_e7(lat)),
             int(to_deg_e7(lon)),
             round(float(alt) * 1000),

@@ -368,11 +368,11 @@ def test_a_takeover_is_believed_after_two_heartbeats_in_a_row():
 def test_a_position_stream_drifting_from_its_own_velocity_makes_the_track_untrusted():
     t = track()
     for k in range(100):  # 10 s at 10 Hz, flying north at 10 m/s, all consistent
-        t.update(position(10.0 * k / 10, 0.0, 20.0, (10.0, 0.0, 0.0)), k / 10)
+        t.update(position(10.0 * k / 10, 0.0, 20.0, (10.0, 0.0, 0.0), t_s=k / 10), k / 10)
     assert t.untrusted is None and t.disagreement_m < 1.0
     for k in range(100, 300):  # the position drifts east at 2 m/s; the velocity says north
         drift = 2.0 * (k - 100) / 10
-        t.update(position(10.0 * k / 10, drift, 20.0, (10.0, 0.0, 0.0)), k / 10)
+        t.update(position(10.0 * k / 10, drift, 20.0, (10.0, 0.0, 0.0), t_s=k / 10), k / 10)
     assert t.untrusted is not None and "disagrees with its own velocity" in t.untrusted
     assert not t.rejected  # nothing rejected: every fix was plausible on its own
 
@@ -385,6 +385,19 @@ def test_two_interleaved_streams_make_the_track_untrusted_by_rejections():
         t.update(position(north, 0.0, 20.0), k * 0.05)
     assert t.rejected["position jump"] >= 10
     assert t.untrusted is not None and "positions rejected" in t.untrusted
+
+
+def test_a_backlog_delivered_in_one_burst_is_not_distrusted():
+    """A link that stalls and then delivers 3 s of fixes at once: arrival times say the
+    vehicle jumped 30 m in no time, its own clock says it flew them; nothing is distrusted."""
+    t = track()
+    for k in range(50):
+        arrival = k / 10 if k < 20 else 5.0  # fixes 20..49 all arrive at t = 5 s
+        t.update(position(k * 1.0, 0.0, 20.0, (10.0, 0.0, 0.0), t_s=k / 10), arrival)
+    beat = heartbeat(custom_mode=CopterMode.GUIDED)
+    for _ in range(8):  # 8 s of heartbeats in the same burst
+        t.update(beat, 5.0)
+    assert t.untrusted is None and t.disagreement_m < 1.0
 
 
 def test_a_short_glitch_is_rejected_but_not_distrusted():
@@ -409,7 +422,7 @@ def test_a_heartbeat_flood_on_the_vehicles_source_makes_it_untrusted():
         t.update(guided, float(k))
     assert t.untrusted is None
     loiter = heartbeat(custom_mode=CopterMode.LOITER)
-    for k in range(6):  # a second sender at 10 Hz
+    for k in range(20):  # a second sender at 10 Hz
         t.update(loiter, 30.0 + k / 10)
     assert t.untrusted is not None and "more than one sender" in t.untrusted
 
@@ -427,7 +440,8 @@ def test_real_firmware_telemetry_is_never_distrusted(trace):
         for row in csv.DictReader(f):
             now = float(row["t_s"])
             vel = (float(row["vn_m_s"]), float(row["ve_m_s"]), 0.0)
-            t.update(position(float(row["n_m"]), float(row["e_m"]), 20.0, vel), now)
+            fix = position(float(row["n_m"]), float(row["e_m"]), 20.0, vel, t_s=now + 100.0)
+            t.update(fix, now)
             worst = max(worst, t.disagreement_m)
     assert t.untrusted is None and not t.rejected
     assert worst < DISAGREEMENT_UNTRUSTED_M / 3, worst  # measured: ≤ 0.3 m ArduCopter, ≤ 3.2 m PX4
