@@ -33,7 +33,7 @@ def add_rollout(sub: Any) -> None:
     """Add ``rollout``."""
     p = sub.add_parser("rollout", help="fly one episode with a hand-written policy and draw it")
     p.add_argument("--scenario", default="3u2o", help=SCENARIO_3U2O_HELP)
-    add_choice(p, "--policy", ["straight", "potential-field"], default="potential-field")
+    add_choice(p, "--policy", ["straight", "potential-field", "orca"], default="potential-field")
     p.add_argument("--out", default="run.png", help="run.png (last frame) or run.gif (animated)")
     add_seed(p)
     finish(p, cmd_rollout)

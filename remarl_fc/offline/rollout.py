@@ -17,26 +17,33 @@ from sim.config import ScenarioConfig
 from sim.env import episode_metrics
 from sim.errors import ConfigError
 from sim.heuristics import potential_field_actions, straight_actions
+from sim.orca import orca_actions
 from sim.scenarios import load_scenario
+from sim.state import SwarmState
 from sim.swarm import SwarmSim
 
-POLICIES = ("straight", "potential-field")
+POLICIES = ("straight", "potential-field", "orca")
 """Hand-written policies `rollout` can fly."""
 
 GIF_FRAME_MS = 250
 """Duration of one GIF frame (one decision step), milliseconds."""
 
-Policy = Callable[[NDArray[np.float32], ScenarioConfig], NDArray[np.float32]]
+Policy = Callable[[NDArray[np.float32], SwarmState, ScenarioConfig], NDArray[np.float32]]
+"""A hand-written policy: (flat observations (B, N, D), the simulator state, the scenario) →
+normalised actions (B, N). Policies that act on what a UAV observes read the observations; a
+classical planner such as ORCA reads the state (positions, velocities, targets)."""
 
 
 def policy_by_name(name: str) -> Policy:
     """The hand-written policy called ``name`` (see `POLICIES`)."""
     if name == "straight":
-        return lambda obs, cfg: straight_actions(obs)
+        return lambda obs, state, cfg: straight_actions(obs)
     if name == "potential-field":
-        return lambda obs, cfg: potential_field_actions(
+        return lambda obs, state, cfg: potential_field_actions(
             obs, cfg.sensing.max_obstacles, cfg.uav.max_turn_rad
         )
+    if name == "orca":
+        return lambda obs, state, cfg: orca_actions(state, cfg)
     raise ConfigError(f"unknown policy {name!r}; choose one of: {', '.join(POLICIES)}")
 
 
@@ -60,7 +67,7 @@ def rollout(scenario: str, policy: str, out: Path, seed: int = 0) -> dict[str, A
     frames = [render_frame(cfg, state, 0, np.asarray(trail))] if suffix == ".gif" else []
     episode: dict[str, Any] = {}
     for _ in range(cfg.max_steps):
-        state, result = sim.step(state, act(sim.observe(state).flat(), cfg), rng)
+        state, result = sim.step(state, act(sim.observe(state).flat(), state, cfg), rng)
         trail.append(state.pos_m[0].copy())
         if suffix == ".gif":
             frames.append(render_frame(cfg, state, 0, np.asarray(trail)))

@@ -195,3 +195,24 @@ def test_a_reader_that_goes_away_is_not_a_traceback():
         err = proc.stderr.read().decode()
     assert proc.wait(timeout=60) == 141, err
     assert "Traceback" not in err
+
+
+def test_rollout_flies_orca_and_reports_its_metrics(capsys, tmp_path):
+    out = tmp_path / "x.png"
+    args = ["rollout", "--scenario", "3u2o", "--policy", "orca", "--out", str(out), "--json"]
+    code, text, _ = run(capsys, *args)
+    assert code == 0
+    result = json.loads(text)
+    assert result["policy"] == "orca" and result["scenario"] == "3u2o"
+    assert result["success"] is True  # ORCA goes round the obstacles (straight does not)
+    assert result["collision_u2o"] is False and result["collision_u2u"] is False
+    assert result["min_d_u2o_m"] >= 20.0 and result["min_d_u2u_m"] >= 20.0
+    assert result["length"] >= 1 and result["energy_rad"] > 0
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert not list(tmp_path.glob("*.part"))
+
+
+def test_rollout_lists_orca_among_its_policies(capsys):
+    with pytest.raises(SystemExit):
+        main(["rollout", "--help"])
+    assert "orca" in capsys.readouterr().out
