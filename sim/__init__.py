@@ -6,7 +6,8 @@ Modules: `sim.config` (defaults), `sim.scenarios` (TOML scenarios), `sim.spawn` 
 distances, energy), `sim.observation` (the one observation builder), `sim.state` (the
 simulator's state), `sim.transition` (the stages of one step), `sim.swarm` (the simulator),
 `sim.vector_env` and `sim.env` (Gymnasium and PettingZoo faces), `sim.evaluation` (episodes,
-metrics and evaluation seeds of every method), `sim.heuristics`, `sim.render` (pictures) and
+metrics and evaluation seeds of every method), `sim.heuristics` and `sim.orca` (hand-written
+controllers), `sim.render` (pictures) and
 `sim.arrays` (array types). Arrays are batch first: (envs, agents, ...).
 """
 

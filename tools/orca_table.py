@@ -2,7 +2,8 @@
 
     python tools/orca_table.py                 # the Markdown table and ORCA's decision time
     python tools/orca_table.py --episodes 50   # quicker
-    python tools/orca_table.py --sweep         # the sweep behind sim.orca's constants
+    python tools/orca_table.py --scenarios 20u4o,50u8o   # beyond the paper
+    python tools/orca_table.py --sweep         # the sweep behind sim.orca's constants (~11 min)
 
 Every figure comes from `sim.evaluation` (`run_episodes`, `summarize`) on the evaluation seeds
 of `remarl-fc eval` (`evaluation_seed()`); the sweep uses its own seeds (the "ablation" suite,
@@ -87,12 +88,12 @@ def decision_time_ms(scenario: str = TIMING_SCENARIO, calls: int = TIMING_CALLS)
     return statistics.median(times) * 1e3
 
 
-def table(episodes: int) -> None:
+def table(episodes: int, scenarios: tuple[str, ...] = PAPER_SCENARIOS) -> None:
     seed = evaluation_seed()
     print(f"{episodes} episodes per cell, seed {seed}; success / collisions U2O / U2U\n")
     print("| scenario | " + " | ".join(POLICIES) + " |")
     print("|---|" + "---|" * len(POLICIES))
-    for scenario in PAPER_SCENARIOS:
+    for scenario in scenarios:
         cells = []
         for name in POLICIES:
             r = evaluate(name, scenario, episodes, seed)
@@ -123,12 +124,13 @@ def sweep(episodes: int) -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--episodes", type=int, default=200)
+    parser.add_argument("--scenarios", default=",".join(PAPER_SCENARIOS), help="comma-separated")
     parser.add_argument("--sweep", action="store_true", help="sweep sim.orca's constants")
     args = parser.parse_args()
     if args.sweep:
         sweep(args.episodes)
     else:
-        table(args.episodes)
+        table(args.episodes, tuple(args.scenarios.split(",")))
 
 
 if __name__ == "__main__":
