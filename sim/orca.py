@@ -71,6 +71,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -168,30 +169,13 @@ class OrcaPlan:
         return ok
 
 
-def orca_actions(
-    state: SwarmState,
-    cfg: ScenarioConfig,
-    *,
-    horizon_s: float = HORIZON_S,
-    neighbour_horizon_s: float = NEIGHBOUR_HORIZON_S,
-    candidates: int = CANDIDATES,
-    margin_m: float = MARGIN_M,
-    priority: float = OBSTACLE_PRIORITY,
-) -> NDArray[np.float32]:
+def orca_actions(state: SwarmState, cfg: ScenarioConfig, **settings: Any) -> NDArray[np.float32]:
     """Every UAV's action (B, N), float32 in [−1, 1], the simulator's convention (a = action·a_max).
 
-    See the module docstring for the algorithm and `orca_plan` for the arguments; the plan also
-    holds the candidates and what was found about them.
+    ``settings`` are `orca_plan`'s keywords (horizons, candidates, margin, priority); the plan
+    also holds the candidates and what was found about them.
     """
-    return orca_plan(
-        state,
-        cfg,
-        horizon_s=horizon_s,
-        neighbour_horizon_s=neighbour_horizon_s,
-        candidates=candidates,
-        margin_m=margin_m,
-        priority=priority,
-    ).actions
+    return orca_plan(state, cfg, **settings).actions
 
 
 def orca_plan(
