@@ -211,8 +211,27 @@ class UAVConfig:
     target_x_m: float = 270.0
     """x of every UAV's target; the target keeps the UAV's spawn y (a straight pre-planned line)."""
 
+    starts_m: tuple[tuple[float, float], ...] = ()
+    """Per-UAV spawn positions [x, y], metres, one per UAV; empty: the formation's slots.
+    Given, they replace ``formation``, ``spacing_m``, ``rows`` and ``center_m``."""
+
+    targets_m: tuple[tuple[float, float], ...] = ()
+    """Per-UAV targets [x, y], metres, one per UAV; empty: ``target_x_m`` on each UAV's line."""
+
     def __post_init__(self) -> None:
         _integer(self, "count")
+        for name in ("starts_m", "targets_m"):
+            points = getattr(self, name)
+            _require(
+                not points or len(points) == self.count,
+                name,
+                f"must hold one [x, y] per UAV ({self.count}), got {len(points)}",
+            )
+            _require(
+                all(len(p) == 2 and all(math.isfinite(v) for v in p) for p in points),
+                name,
+                "every entry must be a finite [x, y]",
+            )
         _positive(self, "speed_m_s", "spacing_m")
         _require(
             0 < self.max_turn_rad <= math.pi / 2,
@@ -268,6 +287,45 @@ class ObstacleConfig:
             "heading_jitter_rad",
             f"must be <= π, got {self.heading_jitter_rad!r}",
         )
+
+
+@dataclass(frozen=True)
+class IntruderConfig:
+    """One intruder given by its encounter with one UAV, as airspace encounter models give it.
+
+    The geometry is what would happen if nobody turned: the UAV ``against`` flies straight to
+    its target at the UAV speed, the intruder flies straight at ``speed_m_s`` on a course
+    ``crossing_rad`` counter-clockwise from the UAV's (π: head-on, ±π/2: crossing, 0: same
+    direction — overtaking or overtaken by speed), and the two pass ``miss_m`` apart at the
+    closest point of approach (CPA), ``tcpa_s`` after the start. The parametrisation of the
+    MIT Lincoln Laboratory encounter models for unmanned aircraft, in the horizontal plane.
+    """
+
+    against: int = 0
+    """Index of the UAV whose encounter this is."""
+
+    crossing_rad: float = math.pi
+    """Intruder course minus the UAV's course, rad, counter-clockwise (file key crossing_deg)."""
+
+    speed_m_s: float = 10.0
+    """Intruder ground speed, m/s; 0 gives a static obstacle on (or ``miss_m`` beside) the path."""
+
+    miss_m: float = 0.0
+    """Signed horizontal miss distance at the CPA, metres: > 0 the intruder passes on the UAV's
+    left (of the relative velocity; of the UAV's course for a static intruder)."""
+
+    tcpa_s: float = 20.0
+    """Time from the start of the episode to the CPA, seconds."""
+
+    appear_s: float = 0.0
+    """The intruder is hidden from sensing until this time, seconds (rounded up to whole
+    decision steps): a late pop-up. It is there all along: it collides while hidden."""
+
+    def __post_init__(self) -> None:
+        _integer(self, "against", minimum=0)
+        _non_negative(self, "speed_m_s", "tcpa_s", "appear_s")
+        _require(math.isfinite(self.crossing_rad), "crossing_rad", "must be finite")
+        _require(math.isfinite(self.miss_m), "miss_m", "must be finite")
 
 
 @dataclass(frozen=True)
@@ -329,6 +387,9 @@ class ScenarioConfig:
     field: FieldConfig = dataclasses.field(default_factory=FieldConfig)
     reward: RewardConfig = dataclasses.field(default_factory=RewardConfig)
     pso: PSOConfig = dataclasses.field(default_factory=PSOConfig)
+    intruders: tuple[IntruderConfig, ...] = ()
+    """Obstacles placed by their encounter geometry (``[[intruders]]`` tables in a file)
+    instead of the random spawn line of `ObstacleConfig`; one per obstacle."""
 
     def __post_init__(self) -> None:
         _positive(self, "arena_length_m", "arena_width_m", "dt_s", "d_col_m")
@@ -344,6 +405,17 @@ class ScenarioConfig:
             "uav.target_x_m",
             f"must lie inside the arena (<= {self.arena_length_m})",
         )
+        _require(
+            not self.intruders or len(self.intruders) == self.obstacles.count,
+            "obstacles.count",
+            f"must equal the number of [[intruders]] ({len(self.intruders)})",
+        )
+        for k, intruder in enumerate(self.intruders):
+            _require(
+                intruder.against < self.uav.count,
+                f"intruders[{k}].against",
+                f"must name a UAV, 0 to {self.uav.count - 1}, got {intruder.against}",
+            )
 
     @property
     def step_length_m(self) -> float:

@@ -265,6 +265,7 @@ def obstacle_clearance(
     cy = pos[:, :, None, 1] - state.obstacle_pos_m[:, None, :, 1]
     dist = np.sqrt(cx * cx + cy * cy)
     sensed = (dist <= cfg.sensing.range_m) & state.active[..., None]
+    sensed &= state.obstacle_visible[:, None]  # a late pop-up is not sensed before it appears
     if cfg.sensing.aperture_rad < 2 * math.pi:  # the observation builder's sector test
         ahead = -(cx * np.cos(heading)[..., None] + cy * np.sin(heading)[..., None])
         sensed &= ahead >= dist * math.cos(0.5 * cfg.sensing.aperture_rad)

@@ -15,6 +15,21 @@ Example file::
 
     [obstacles]
     count = 2
+
+Per-UAV starts and targets (``[uav] starts_m``, ``targets_m``: lists of [x, y]) replace the
+formation and the target line; ``[[intruders]]`` tables place the obstacles by their
+encounter geometry (`sim.config.IntruderConfig`) instead of the random spawn line::
+
+    [uav]
+    count = 1
+    starts_m = [[50.0, 150.0]]
+    targets_m = [[270.0, 150.0]]
+
+    [[intruders]]         # head-on, passing 5 m to the left, 12 s from the start
+    crossing_deg = 180
+    speed_m_s = 10.0
+    miss_m = 5.0
+    tcpa_s = 12.0
 """
 
 from __future__ import annotations
@@ -30,7 +45,7 @@ from typing import Any, get_args, get_origin, get_type_hints
 
 import numpy as np
 
-from sim.config import FieldValueError, ScenarioConfig
+from sim.config import FieldValueError, IntruderConfig, ScenarioConfig
 from sim.errors import ScenarioError
 from sim.spawn import SPAWN_SPACING_FACTOR, min_pairwise_distance, swarm_layout
 
@@ -114,7 +129,10 @@ def _read(name_or_path: str | Path) -> tuple[str, str, str]:
 def scenario_from_dict(data: dict[str, Any], *, name: str, source: str) -> ScenarioConfig:
     """Build and validate a `ScenarioConfig` from parsed TOML (see module docstring)."""
     data = dict(data)
-    sections: dict[str, Any] = {}
+    intruders = _intruders(data.pop("intruders", []), source)
+    if intruders and isinstance(data.get("obstacles", {}), dict):
+        data["obstacles"] = {"count": len(intruders), **data.get("obstacles", {})}
+    sections: dict[str, Any] = {"intruders": intruders}
     for section, cls in SECTIONS.items():
         raw = data.pop(section, {})
         if not isinstance(raw, dict):
@@ -125,11 +143,22 @@ def scenario_from_dict(data: dict[str, Any], *, name: str, source: str) -> Scena
         {"name": data.pop("name", name), **data},
         prefix="",
         source=source,
-        skip=set(SECTIONS),
+        skip={*SECTIONS, "intruders"},
         extra=sections,
     )
     _check_geometry(top, source)
     return top
+
+
+def _intruders(raw: Any, source: str) -> tuple[IntruderConfig, ...]:
+    if not isinstance(raw, list) or not all(isinstance(t, dict) for t in raw):
+        raise ScenarioError(
+            "must be an array of tables ([[intruders]])", source=source, key="intruders"
+        )
+    return tuple(
+        _build(IntruderConfig, t, prefix=f"intruders[{k}].", source=source)
+        for k, t in enumerate(raw)
+    )
 
 
 def _build(
@@ -192,6 +221,13 @@ def _convert(value: Any, hint: Any, *, source: str, key: str) -> Any:
         if not isinstance(value, str):
             raise ScenarioError(f"must be a string, got {value!r}", source=source, key=key)
         return value
+    if origin is tuple and get_args(hint)[-1:] == (Ellipsis,):
+        if not isinstance(value, list):
+            raise ScenarioError(f"must be a list, got {value!r}", source=source, key=key)
+        item = get_args(hint)[0]
+        return tuple(
+            _convert(v, item, source=source, key=f"{key}[{k}]") for k, v in enumerate(value)
+        )
     if origin is tuple:
         args = get_args(hint)
         if not isinstance(value, list) or len(value) != len(args):
@@ -242,10 +278,14 @@ def _check_geometry(cfg: ScenarioConfig, source: str) -> None:
         )
     o = cfg.obstacles
     half = (o.count - 1) / 2 * o.spacing_m + o.lateral_jitter_m
-    if o.count and not (
-        0 <= o.spawn_x_m <= cfg.arena_length_m
-        and o.center_y_m - half >= 0
-        and o.center_y_m + half <= cfg.arena_width_m
+    if (
+        o.count
+        and not cfg.intruders
+        and not (
+            0 <= o.spawn_x_m <= cfg.arena_length_m
+            and o.center_y_m - half >= 0
+            and o.center_y_m + half <= cfg.arena_width_m
+        )
     ):
         raise ScenarioError(
             "obstacles can spawn outside the arena; move obstacles.spawn_x_m/center_y_m or "

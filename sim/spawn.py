@@ -6,18 +6,24 @@ headings counter-clockwise from +x, metres and radians.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
-from sim.arrays import FloatArray
+from sim.arrays import BoolArray, FloatArray, IntArray
 from sim.config import ObstacleConfig, ScenarioConfig, UAVConfig
 from sim.field import FieldSources
 from sim.kinematics import heading_velocity
 
 SPAWN_SPACING_FACTOR = 1.5
 """Minimum spawn distance between two UAVs, in units of d_col (SPEC §3)."""
+
+DEGENERATE_DIRECTION = 1e-6
+"""Below this length the mean of the UAVs' unit directions to their targets has no direction."""
 
 WEDGE_ARM_ANGLE_RAD = math.radians(60.0)
 """Angle between each arm of the "wedge" formation and the −x axis (arms trail the apex)."""
@@ -78,10 +84,19 @@ def formation_offsets(uav: UAVConfig) -> FloatArray:
 
 
 def swarm_layout(cfg: ScenarioConfig) -> SwarmLayout:
-    """Spawn positions, headings, targets and virtual centre of a scenario's swarm."""
-    centre = np.asarray(cfg.uav.center_m, dtype=np.float64)
-    positions = centre + formation_offsets(cfg.uav)
-    targets = np.stack([np.full(cfg.uav.count, cfg.uav.target_x_m), positions[:, 1]], axis=-1)
+    """Spawn positions, headings, targets and virtual centre of a scenario's swarm.
+
+    Per-UAV ``starts_m``/``targets_m`` of the scenario win over the formation and target line.
+    """
+    uav = cfg.uav
+    if uav.starts_m:
+        positions = np.asarray(uav.starts_m, dtype=np.float64)
+    else:
+        positions = np.asarray(uav.center_m, dtype=np.float64) + formation_offsets(uav)
+    if uav.targets_m:
+        targets = np.asarray(uav.targets_m, dtype=np.float64)
+    else:
+        targets = np.stack([np.full(uav.count, uav.target_x_m), positions[:, 1]], axis=-1)
     delta = targets - positions
     headings = np.arctan2(delta[:, 1], delta[:, 0])
     velocity, virtual_centre = virtual_centre_and_velocity(
@@ -96,13 +111,15 @@ def virtual_centre_and_velocity(
     """The swarm's pre-planned velocity v_s and virtual centre p* for UAVs at ``positions_m``.
 
     v_s has the UAV speed along the mean of the directions to the targets; p* lies on the line
-    through the centroid along v_s, ``lead_m`` ahead of the foremost UAV.
+    through the centroid along v_s, ``lead_m`` ahead of the foremost UAV. Where the directions
+    cancel (UAVs flying apart or toward each other), v_s points from the centroid of the starts
+    to the centroid of the targets, and along +x if those coincide too.
 
     Args:
-        positions_m, targets_m: (N, 2).
+        positions_m, targets_m: (..., N, 2), any batch dimensions first.
 
     Returns:
-        (velocity (2,), centre (2,)).
+        (velocity (..., 2), centre (..., 2)).
 
     >>> v, c = virtual_centre_and_velocity(np.array([[0.0, 0.0], [0.0, 10.0]]),
     ...                                    np.array([[100.0, 0.0], [100.0, 10.0]]), 10.0, 50.0)
@@ -110,12 +127,23 @@ def virtual_centre_and_velocity(
     ([10.0, 0.0], [50.0, 5.0])
     """
     delta = targets_m - positions_m
-    headings = np.arctan2(delta[:, 1], delta[:, 0])
-    mean_dir = np.array([np.cos(headings).mean(), np.sin(headings).mean()])
-    mean_dir /= np.linalg.norm(mean_dir)
-    centroid = positions_m.mean(axis=0)
-    front = float(((positions_m - centroid) @ mean_dir).max())  # the foremost UAV, along v
-    return speed_m_s * mean_dir, centroid + (front + lead_m) * mean_dir
+    headings = np.arctan2(delta[..., 1], delta[..., 0])
+    mean_dir = np.stack([np.cos(headings).mean(axis=-1), np.sin(headings).mean(axis=-1)], axis=-1)
+    norm = np.linalg.norm(mean_dir, axis=-1, keepdims=True)
+    if (norm < DEGENERATE_DIRECTION).any():
+        overall = targets_m.mean(axis=-2) - positions_m.mean(axis=-2)
+        fallback = np.where(
+            np.linalg.norm(overall, axis=-1, keepdims=True) > DEGENERATE_DIRECTION,
+            overall,
+            np.array([1.0, 0.0]),
+        )
+        mean_dir = np.where(norm < DEGENERATE_DIRECTION, fallback, mean_dir)
+        norm = np.linalg.norm(mean_dir, axis=-1, keepdims=True)
+    mean_dir = mean_dir / norm
+    centroid = positions_m.mean(axis=-2)
+    # The foremost UAV, along v.
+    front = np.einsum("...ni,...i->...n", positions_m - centroid[..., None, :], mean_dir).max(-1)
+    return speed_m_s * mean_dir, centroid + (front[..., None] + lead_m) * mean_dir
 
 
 def min_pairwise_distance(points_m: FloatArray) -> float:
@@ -162,11 +190,169 @@ def spawn_obstacles(
     return pos, heading_velocity(heading, o.speed_m_s)  # (B, M, 2) each
 
 
+@dataclass(frozen=True)
+class EpisodeStart:
+    """Where B episodes begin: everything that differs between episodes, drawn up front.
+
+    The simulator starts episodes from it (`sim.swarm.SwarmSim.start`); a scenario draws one
+    with `spawn_episodes`, the encounter generator (`sim.encounters`) with its own
+    distributions. UAVs start heading for their targets.
+
+    Attributes:
+        start_m, target_m: (B, N, 2) spawn positions and targets.
+        centre_m, swarm_vel_m_s: (B, 2) the virtual centre p* and its constant velocity.
+        obstacle_pos_m, obstacle_vel_m_s: (B, M, 2) obstacle positions and velocities.
+        obstacle_appear_step: (B, M) the decision step from which each obstacle can be sensed
+            (0: from the start).
+    """
+
+    start_m: FloatArray
+    target_m: FloatArray
+    centre_m: FloatArray
+    swarm_vel_m_s: FloatArray
+    obstacle_pos_m: FloatArray
+    obstacle_vel_m_s: FloatArray
+    obstacle_appear_step: IntArray
+
+    @property
+    def num_envs(self) -> int:
+        """B."""
+        return int(self.start_m.shape[0])
+
+    def take(self, envs: IntArray | BoolArray | slice) -> EpisodeStart:
+        """The episodes selected by ``envs`` (indices, a (B,) mask or a slice)."""
+        return EpisodeStart(*(getattr(self, f.name)[envs] for f in dataclasses.fields(self)))
+
+    @classmethod
+    def concat(cls, parts: list[EpisodeStart]) -> EpisodeStart:
+        """The episodes of ``parts``, in order (same N and M)."""
+        return cls(
+            *(np.concatenate([getattr(p, f.name) for p in parts]) for f in dataclasses.fields(cls))
+        )
+
+    @classmethod
+    def of_swarm(
+        cls,
+        start_m: FloatArray,
+        target_m: FloatArray,
+        obstacle_pos_m: FloatArray,
+        obstacle_vel_m_s: FloatArray,
+        obstacle_appear_step: IntArray,
+        speed_m_s: float,
+        lead_m: float,
+    ) -> EpisodeStart:
+        """Episodes whose virtual centre and swarm velocity follow from starts and targets."""
+        vel, centre = virtual_centre_and_velocity(start_m, target_m, speed_m_s, lead_m)
+        return cls(
+            start_m,
+            target_m,
+            centre,
+            vel,
+            obstacle_pos_m,
+            obstacle_vel_m_s,
+            obstacle_appear_step,
+        )
+
+
+def encounter_tracks(
+    own_start_m: FloatArray,
+    own_course_rad: FloatArray,
+    own_speed_m_s: float,
+    crossing_rad: FloatArray,
+    speed_m_s: FloatArray,
+    miss_m: FloatArray,
+    tcpa_s: FloatArray,
+) -> tuple[FloatArray, FloatArray]:
+    """Intruder start positions and velocities from encounter geometry (`IntruderConfig`).
+
+    All arguments broadcast together (any shape (...)); positions (..., 2). The UAV flies
+    straight from ``own_start_m`` (..., 2) on ``own_course_rad``; at ``tcpa_s`` the intruder
+    is ``miss_m`` to the left of the relative velocity (UAV minus intruder; of the UAV's course
+    when that vanishes, as for a static intruder overtaken at its own speed).
+
+    >>> p, v = encounter_tracks(np.zeros(2), np.array(0.0), 10.0, np.array(np.pi),
+    ...                         np.array(10.0), np.array(0.0), np.array(10.0))
+    >>> np.round(p, 6).tolist(), np.round(v, 6).tolist()  # head-on, 200 m ahead
+    ([200.0, 0.0], [-10.0, 0.0])
+    """
+    own_vel = heading_velocity(own_course_rad, own_speed_m_s)
+    vel = heading_velocity(own_course_rad + crossing_rad, speed_m_s)
+    rel = own_vel - vel
+    rel_norm = np.linalg.norm(rel, axis=-1, keepdims=True)
+    course = heading_velocity(own_course_rad, 1.0)
+    along = np.where(rel_norm > DEGENERATE_DIRECTION, rel / np.maximum(rel_norm, 1e-300), course)
+    left = np.stack([-along[..., 1], along[..., 0]], axis=-1)
+    tcpa = np.asarray(tcpa_s)[..., None]
+    at_cpa = own_start_m + own_vel * tcpa + np.asarray(miss_m)[..., None] * left
+    return at_cpa - vel * tcpa, vel
+
+
+def appear_step(appear_s: NDArray[Any], dt_s: float) -> IntArray:
+    """The decision step from which an intruder hidden until ``appear_s`` can be sensed."""
+    steps: IntArray = np.ceil(np.asarray(appear_s) / dt_s - 1e-9).astype(np.int64)
+    return steps
+
+
+def spawn_episodes(cfg: ScenarioConfig, rng: np.random.Generator, num_envs: int) -> EpisodeStart:
+    """B episodes of a scenario: its swarm layout and its obstacles.
+
+    Obstacles come from the ``[[intruders]]`` geometry, or else are drawn on the spawn line
+    (`spawn_obstacles`, the only use of ``rng``).
+    """
+    layout = swarm_layout(cfg)
+    b, n, m = num_envs, cfg.uav.count, cfg.obstacles.count
+    if cfg.intruders:
+        pos, vel, appear = _intruder_spawn(cfg, layout)
+        obs_pos, obs_vel = (np.broadcast_to(a, (b, m, 2)).copy() for a in (pos, vel))
+        obs_appear = np.broadcast_to(appear, (b, m)).copy()
+    else:
+        obs_pos, obs_vel = spawn_obstacles(cfg, rng, b)
+        obs_appear = np.zeros((b, m), dtype=np.int64)
+    return EpisodeStart(
+        start_m=np.broadcast_to(layout.positions_m, (b, n, 2)).copy(),
+        target_m=np.broadcast_to(layout.targets_m, (b, n, 2)).copy(),
+        centre_m=np.broadcast_to(layout.centre_m, (b, 2)).copy(),
+        swarm_vel_m_s=np.broadcast_to(layout.velocity_m_s, (b, 2)).copy(),
+        obstacle_pos_m=obs_pos,
+        obstacle_vel_m_s=obs_vel,
+        obstacle_appear_step=obs_appear,
+    )
+
+
+def _intruder_spawn(
+    cfg: ScenarioConfig, layout: SwarmLayout
+) -> tuple[FloatArray, FloatArray, IntArray]:
+    def column(name: str) -> FloatArray:
+        return np.array([getattr(i, name) for i in cfg.intruders], dtype=np.float64)
+
+    own = np.array([i.against for i in cfg.intruders])
+    pos, vel = encounter_tracks(
+        layout.positions_m[own],
+        layout.headings_rad[own],
+        cfg.uav.speed_m_s,
+        column("crossing_rad"),
+        column("speed_m_s"),
+        column("miss_m"),
+        column("tcpa_s"),
+    )
+    return pos, vel, appear_step(column("appear_s"), cfg.dt_s)
+
+
 def initial_sources(
     cfg: ScenarioConfig, rng: np.random.Generator, num_envs: int
 ) -> tuple[FieldSources, FloatArray]:
     """Field sources at the start of an episode, and the obstacle velocities (B, M, 2)."""
-    pos, vel = spawn_obstacles(cfg, rng, num_envs)
-    centre = np.broadcast_to(swarm_layout(cfg).centre_m, (num_envs, 2)).copy()
-    speed = np.full((num_envs, cfg.obstacles.count), cfg.obstacles.speed_m_s)
-    return FieldSources(pos, speed, centre, cfg.uav.speed_m_s), vel
+    ep = spawn_episodes(cfg, rng, num_envs)
+    return FieldSources(
+        ep.obstacle_pos_m,
+        obstacle_speeds(ep.obstacle_vel_m_s),
+        ep.centre_m,
+        cfg.uav.speed_m_s,
+        ep.obstacle_appear_step <= 0,
+    ), ep.obstacle_vel_m_s
+
+
+def obstacle_speeds(velocity_m_s: FloatArray) -> FloatArray:
+    """|v_o| of every obstacle, (B, M), from velocities (B, M, 2)."""
+    speed: FloatArray = np.hypot(velocity_m_s[..., 0], velocity_m_s[..., 1])
+    return speed

@@ -66,6 +66,8 @@ class SwarmState:
         reached: (B, N) UAVs that arrived at their target.
         start_m: (B, N, 2) spawn positions.  target_m: (B, N, 2).
         obstacle_pos_m, obstacle_vel_m_s: (B, M, 2).  obstacle_speed_m_s: (B, M).
+        obstacle_appear_step: (B, M) the decision step from which each obstacle can be sensed
+            (a late pop-up is hidden before it, though it is there and collides).
         centre_m: (B, 2) virtual centre p*.  swarm_vel_m_s: (B, 2) its constant velocity.
         levels: (B, N) contour levels φ_i.
         avoiding: (B,) whether avoidance has begun (levels were reassigned for it).
@@ -83,6 +85,7 @@ class SwarmState:
     obstacle_pos_m: FloatArray
     obstacle_vel_m_s: FloatArray
     obstacle_speed_m_s: FloatArray
+    obstacle_appear_step: IntArray
     centre_m: FloatArray
     swarm_vel_m_s: FloatArray
     levels: FloatArray
@@ -96,13 +99,23 @@ class SwarmState:
         """B."""
         return int(self.pos_m.shape[0])
 
+    @property
+    def obstacle_visible(self) -> BoolArray:
+        """(B, M) obstacles that can be sensed now (not hidden as a late pop-up)."""
+        visible: BoolArray = self.obstacle_appear_step <= self.steps[:, None]
+        return visible
+
     def sources(self, swarm_speed_m_s: float, dt_s: float = 0.0) -> FieldSources:
-        """Field sources, optionally advanced by ``dt_s`` (obstacles and p* move straight)."""
+        """Field sources, optionally advanced by ``dt_s`` (obstacles and p* move straight).
+
+        Hidden obstacles (`obstacle_visible`) are no sources: the field is what the UAVs know.
+        """
         return FieldSources(
             obstacle_pos_m=self.obstacle_pos_m + dt_s * self.obstacle_vel_m_s,
             obstacle_speed_m_s=self.obstacle_speed_m_s,
             centre_m=self.centre_m + dt_s * self.swarm_vel_m_s,
             swarm_speed_m_s=swarm_speed_m_s,
+            obstacle_mask=self.obstacle_visible,
         )
 
 

@@ -33,8 +33,8 @@ from sim.contour import ArcWindow
 from sim.kinematics import heading_velocity, scale_action
 from sim.metrics import substep_fractions
 from sim.observation import ObservationLayout, Observations, build_observations
-from sim.reward import assign_contour_levels
-from sim.spawn import spawn_obstacles, swarm_layout
+from sim.reward import RewardTerms, assign_contour_levels
+from sim.spawn import EpisodeStart, obstacle_speeds, spawn_episodes, swarm_layout
 from sim.state import EpisodeStats, StepResult, SwarmState, merge_where
 from sim.transition import (
     accumulate,
@@ -65,8 +65,17 @@ class SwarmSim:
     arrays derived from it (never modified), so one instance serves any number of batches.
     """
 
-    def __init__(self, cfg: ScenarioConfig) -> None:
+    def __init__(self, cfg: ScenarioConfig, *, scored: bool = True) -> None:
+        """The simulator of ``cfg``.
+
+        Args:
+            cfg: the scenario.
+            scored: compute the reward (contour windows, PSO levels). An evaluation that
+                reports no returns passes False: the flight, the collisions and every other
+                metric are the same, the returns stay 0, and a step costs a fraction.
+        """
         self.cfg = cfg
+        self.scored = scored
         self.layout = swarm_layout(cfg)
         self.obs_layout = ObservationLayout.from_scenario(cfg)
         self.fractions = substep_fractions(cfg.substeps)
@@ -74,29 +83,45 @@ class SwarmSim:
         self.difference_op = difference_operator(cfg.uav.count, cfg.obstacles.count)
 
     def initial_state(self, rng: np.random.Generator, num_envs: int) -> SwarmState:
-        """B new episodes: spawn, obstacles, virtual centre, and contour levels by PSO."""
-        cfg, layout = self.cfg, self.layout
-        b, n = num_envs, cfg.uav.count
-        obs_pos, obs_vel = spawn_obstacles(cfg, rng, b)
-        pos = np.broadcast_to(layout.positions_m, (b, n, 2)).copy()
+        """B new episodes of the scenario (`sim.spawn.spawn_episodes`), levels by PSO."""
+        return self.start(spawn_episodes(self.cfg, rng, num_envs), rng)
+
+    def start(self, episodes: EpisodeStart, rng: np.random.Generator) -> SwarmState:
+        """New episodes from given starts, targets and obstacles; contour levels by PSO.
+
+        Every UAV heads for its target. ``rng`` serves the PSO only.
+        """
+        cfg = self.cfg
+        b, n = episodes.num_envs, cfg.uav.count
+        m = cfg.obstacles.count
+        if episodes.start_m.shape != (b, n, 2) or episodes.obstacle_pos_m.shape != (b, m, 2):
+            raise ValueError(
+                f"episodes of {episodes.start_m.shape[1]} UAVs and "
+                f"{episodes.obstacle_pos_m.shape[1]} obstacles for a scenario of {n} and {m}"
+            )
+        pos = episodes.start_m.copy()
+        delta = episodes.target_m - pos
         state = SwarmState(
             pos_m=pos,
-            heading_rad=np.broadcast_to(layout.headings_rad, (b, n)).copy(),
+            heading_rad=np.arctan2(delta[..., 1], delta[..., 0]),
             active=np.ones((b, n), dtype=bool),
             reached=np.zeros((b, n), dtype=bool),
             start_m=pos.copy(),
-            target_m=np.broadcast_to(layout.targets_m, (b, n, 2)).copy(),
-            obstacle_pos_m=obs_pos,
-            obstacle_vel_m_s=obs_vel,
-            obstacle_speed_m_s=np.full((b, cfg.obstacles.count), cfg.obstacles.speed_m_s),
-            centre_m=np.broadcast_to(layout.centre_m, (b, 2)).copy(),
-            swarm_vel_m_s=np.broadcast_to(layout.velocity_m_s, (b, 2)).copy(),
+            target_m=episodes.target_m.copy(),
+            obstacle_pos_m=episodes.obstacle_pos_m.copy(),
+            obstacle_vel_m_s=episodes.obstacle_vel_m_s.copy(),
+            obstacle_speed_m_s=obstacle_speeds(episodes.obstacle_vel_m_s),
+            obstacle_appear_step=episodes.obstacle_appear_step.copy(),
+            centre_m=episodes.centre_m.copy(),
+            swarm_vel_m_s=episodes.swarm_vel_m_s.copy(),
             levels=np.zeros((b, n)),
             avoiding=np.zeros(b, dtype=bool),
             window=ArcWindow.empty(b, n, cfg.reward.window_steps),
             steps=np.zeros(b, dtype=np.int64),
             stats=EpisodeStats.fresh(b, n),
         )
+        if not self.scored:
+            return state
         levels, _ = assign_contour_levels(
             pos, state.sources(cfg.uav.speed_m_s), cfg.field, cfg.pso, rng
         )
@@ -129,6 +154,7 @@ class SwarmSim:
             state.centre_m[sel],
             state.obstacle_pos_m[sel],
             state.obstacle_vel_m_s[sel],
+            state.obstacle_visible[sel],
         )
 
     def step(
@@ -154,7 +180,10 @@ class SwarmSim:
         flight = fly(state, turn, acted, self.fractions, length, dt)
         near = closest_approaches(flight, state.target_m, acted, self.pairs, self.difference_op)
         out = outcome(state, acted, near, cfg.d_col_m, cfg.max_steps)
-        window, terms = score(state, flight, turn, acted, out.collided, cfg)
+        if self.scored:
+            window, terms = score(state, flight, turn, acted, out.collided, cfg)
+        else:
+            window, terms = state.window, _unscored(turn)
         moved = dataclasses.replace(
             state,
             pos_m=flight.pos_m,
@@ -168,7 +197,10 @@ class SwarmSim:
             stats=accumulate(state.stats, turn, length * acted, near, terms),
         )
         obs = self.observe(moved)
-        new_state, begin = begin_avoidance(moved, obs, out.over, cfg, rng)
+        if self.scored:
+            new_state, begin = begin_avoidance(moved, obs, out.over, cfg, rng)
+        else:
+            new_state, begin = moved, np.zeros(state.num_envs, dtype=bool)
         result = StepResult(
             obs=obs,
             reward=terms,
@@ -185,6 +217,11 @@ class SwarmSim:
             levels_assigned=begin,
         )
         return new_state, result
+
+
+def _unscored(like: NDArray[Any]) -> RewardTerms:
+    zero = np.zeros_like(like, dtype=np.float64)
+    return RewardTerms(zero, zero, zero, zero, zero)
 
 
 def initial_state(cfg: ScenarioConfig, rng: np.random.Generator, num_envs: int) -> SwarmState:

@@ -302,6 +302,7 @@ def begin_avoidance(
         state.obstacle_speed_m_s[begin],
         state.centre_m[begin],
         cfg.uav.speed_m_s,
+        state.obstacle_visible[begin],
     )
     levels, _ = assign_contour_levels(
         state.pos_m[begin], sub, cfg.field, cfg.pso, rng, active[begin]

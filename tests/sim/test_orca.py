@@ -37,6 +37,7 @@ def hand_state(pos, heading, target, obs_pos=(), obs_vel=None, active=None):
         obstacle_pos_m=obs_pos,
         obstacle_vel_m_s=np.asarray(obs_vel, dtype=float),
         obstacle_speed_m_s=np.linalg.norm(obs_vel, axis=-1),
+        obstacle_appear_step=np.zeros(obs_pos.shape[:2], np.int64),
         centre_m=np.zeros((1, 2)),
         swarm_vel_m_s=np.array([[SPEED, 0.0]]),
         levels=np.zeros((1, n)),
