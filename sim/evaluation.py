@@ -23,13 +23,14 @@ from sim.env import make_vector_env
 
 ActFn = Callable[[NDArray[np.float32]], NDArray[np.float32]]
 
-EvaluationSuite = Literal["run", "training", "zoo", "ablation"]
+EvaluationSuite = Literal["run", "training", "zoo", "ablation", "encounters"]
 
 EVALUATION_SEED_BASES: Mapping[EvaluationSuite, int] = {
     "training": 1_000_003,
     "run": 2_000_000,
     "zoo": 5_000_000,
     "ablation": 7_000_000,
+    "encounters": 9_000_000,
 }
 """First evaluation seed of each suite of evaluations (see `evaluation_seed`)."""
 
@@ -50,7 +51,9 @@ def evaluation_seed(run_seed: int = 0, *, suite: EvaluationSuite = "run", offset
     * ``"training"``: the evaluations during DDPG training that choose ``best.safetensors``
       (``offset``: the vectorised step; the same episodes whatever the run seed);
     * ``"zoo"``: the zoo's published ``.eval.json`` (`tools/train_zoo.py`);
-    * ``"ablation"``: `tools/ablation.py`.
+    * ``"ablation"``: `tools/ablation.py`;
+    * ``"encounters"``: the benchmark suites' episodes (`sim.suite`; each episode then has its
+      own generator, `sim.encounters.episode_rng`).
 
     >>> evaluation_seed()  # remarl-fc eval
     2000000

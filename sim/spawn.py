@@ -276,7 +276,7 @@ def encounter_tracks(
     ([200.0, 0.0], [-10.0, 0.0])
     """
     own_vel = heading_velocity(own_course_rad, own_speed_m_s)
-    vel = heading_velocity(own_course_rad + crossing_rad, speed_m_s)
+    vel = heading_velocity(own_course_rad + crossing_rad, np.asarray(speed_m_s)[..., None])
     rel = own_vel - vel
     rel_norm = np.linalg.norm(rel, axis=-1, keepdims=True)
     course = heading_velocity(own_course_rad, 1.0)

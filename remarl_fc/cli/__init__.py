@@ -5,6 +5,7 @@ module                       commands
 ===========================  ====================================================
 `remarl_fc.cli.scenario`     ``scenarios``, ``field``, ``rollout``
 `remarl_fc.cli.learn`        ``train``, ``eval``, ``export``, ``compare``
+`remarl_fc.cli.suite`        ``suite list|show|label``, ``eval --suite``
 `remarl_fc.cli.bench`        ``bench pso``, ``bench sim`` (and wires the others)
 `remarl_fc.cli.sitl`         ``sitl``, ``bench sitl``
 `remarl_fc.cli.fly`          ``fly``, ``demo``, ``plot-flight``, ``bench fly``, ``bench bus``
@@ -25,7 +26,7 @@ import sys
 from collections.abc import Sequence
 
 from remarl_fc._version import __version__
-from remarl_fc.cli import bench, fly, learn, scenario, sitl
+from remarl_fc.cli import bench, fly, learn, scenario, sitl, suite
 from remarl_fc.cli.common import EXIT_BROKEN_PIPE, EXIT_USAGE, Handler
 from remarl_fc.errors import RemarlError
 
@@ -45,6 +46,7 @@ def build_parser() -> argparse.ArgumentParser:
     scenario.add_field(sub)
     learn.add_train(sub)
     learn.add_eval(sub)
+    suite.add_suite(sub)
     learn.add_export(sub)
     scenario.add_rollout(sub)
     bench.add_bench(sub)

@@ -23,8 +23,12 @@ from remarl_fc.cli.common import (
     positive_int,
     progress_bar,
 )
+from remarl_fc.cli.suite import add_eval_suite_flags, cmd_eval_suite
 from remarl_fc.errors import ConfigError
 from sim.evaluation import evaluation_seed
+
+DEFAULT_EVAL_EPISODES = 1000
+"""Episodes of ``eval --policy`` on one scenario."""
 
 
 def add_train(sub: Any) -> None:
@@ -64,12 +68,25 @@ TRAIN_FLAGS = {
 
 def add_eval(sub: Any) -> None:
     """Add ``eval``."""
-    p = sub.add_parser("eval", help="evaluate a policy file (numpy inference)")
-    p.add_argument("--policy", required=True, help="zoo name (e.g. 3u2o) or .safetensors path")
+    p = sub.add_parser(
+        "eval", help="evaluate a policy file (numpy inference), or methods on a benchmark suite"
+    )
+    p.add_argument("--policy", default=None, help="zoo name (e.g. 3u2o) or .safetensors path")
     p.add_argument("--scenario", default=None, help="default: the policy's own scenario")
-    p.add_argument("--episodes", type=positive_int, default=1000)
+    p.add_argument(
+        "--episodes",
+        type=positive_int,
+        default=None,
+        help="episodes (default 1000; with --suite, per family, default the suite's)",
+    )
     add_seed(p, default=evaluation_seed(), help="first evaluation seed")
-    p.add_argument("--plot", default=None, help="also draw one episode and its Q-values here")
+    p.add_argument(
+        "--plot",
+        default=None,
+        help="draw one episode and its Q-values to this file; with --suite, a folder for the "
+        "heatmap and every family's worst episode",
+    )
+    add_eval_suite_flags(p)
     finish(p, cmd_eval)
 
 
@@ -154,9 +171,14 @@ def cmd_train(args: argparse.Namespace) -> int:
 
 def cmd_eval(args: argparse.Namespace) -> int:
     """Evaluate a policy file with numpy inference; optionally draw one episode."""
+    if args.suite:
+        return cmd_eval_suite(args)
+    if not args.policy:
+        raise ConfigError("eval: give --policy NAME|PATH (or --suite NAME with --method/--policy)")
     from remarl_fc.offline.evaluate import evaluate_policy, plot_episode
 
-    policy, result = evaluate_policy(args.policy, args.scenario, args.episodes, args.seed)
+    episodes = args.episodes or DEFAULT_EVAL_EPISODES
+    policy, result = evaluate_policy(args.policy, args.scenario, episodes, args.seed)
     if args.plot:
         plot_episode(policy, args.scenario, args.seed, Path(args.plot))
         result["plot"] = args.plot
