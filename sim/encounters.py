@@ -362,9 +362,12 @@ def _swarm(
             targets.append(slots @ rot.T + (ahead + half) * d)
         return np.concatenate(starts), np.concatenate(targets)
     if enc.paths in ("converging", "diverging"):
-        # A fan of routes: the arc's neighbours stay at least the spawn gap apart.
-        radius = max(route, (n - 1) * gap / (2 * MAX_FAN_RAD))
-        half = min(MAX_FAN_RAD, max((n - 1) * gap / radius / 2, MIN_FAN_RAD))
+        # A fan of routes whose neighbours start (or end) at least the spawn gap apart.
+        radius, step = route, 2 * math.asin(min(1.0, gap / (2 * route)))
+        if n > 1 and (n - 1) * step / 2 > MAX_FAN_RAD:
+            step = 2 * MAX_FAN_RAD / (n - 1)
+            radius = gap / (2 * math.sin(step / 2))
+        half = max((n - 1) * step / 2, MIN_FAN_RAD)
         angles = _spread(n, half)
         arc = radius * np.stack([-np.cos(angles), np.sin(angles)], axis=-1)
         tight = _slots("grid", n, gap, gap, rng)
