@@ -5,7 +5,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any
 
 from policies.compare.methods import run_job
-from sim.errors import ConfigError
+from sim.parallel import run_on_ray as run_jobs_on_ray
 
 if TYPE_CHECKING:
     from policies.compare.grid import Job
@@ -17,10 +17,4 @@ def run_on_ray(todo: list[Job], address: str) -> list[dict[str, Any]]:
     Raises:
         ConfigError: Ray is not installed.
     """
-    try:
-        import ray
-    except ImportError as exc:
-        raise ConfigError("--ray-address needs Ray: pip install 'ray[default]'") from exc
-    ray.init(address=address)
-    remote = ray.remote(run_job)
-    return list(ray.get([remote.remote(j) for j in todo]))
+    return run_jobs_on_ray(run_job, todo, address)

@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from policies.compare.methods import run_job
+from policies.e2coop import E2CoopConfig
 from sim.errors import ConfigError
 
 METHODS = ("remarl", "coma", "mappo", "iql", "vdn", "qmix", "e2coop")
@@ -37,7 +38,8 @@ class CompareConfig:
         out: the results folder. n_actions: the discrete heading set of the MARL baselines.
         eval_episodes: evaluation episodes per run (E2Coop: `e2coop_episodes`).
         workers: parallel cells (local process pool).
-        e2coop_particles, e2coop_iterations: the planner's PSO budget (the original's 200×100).
+        e2coop_particles, e2coop_iterations: the planner's PSO budget (by default
+            `E2CoopConfig`'s: the original's 200×100).
     """
 
     scenarios: tuple[str, ...]
@@ -49,8 +51,8 @@ class CompareConfig:
     eval_episodes: int = 200
     e2coop_episodes: int = 50
     workers: int = 2
-    e2coop_particles: int = 200
-    e2coop_iterations: int = 100
+    e2coop_particles: int = E2CoopConfig.particles
+    e2coop_iterations: int = E2CoopConfig.iterations
     quick: bool = False
 
     def __post_init__(self) -> None:

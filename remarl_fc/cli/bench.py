@@ -12,6 +12,19 @@ from typing import Any
 from remarl_fc.cli import fly, sitl
 from remarl_fc.cli.common import SCENARIO_HELP, add_choice, add_seed, emit, finish, positive_int
 
+PSO_SUMMARY = (
+    "PSO, {uavs} UAVs x {envs} env(s): {ms_per_call:.2f} ms per call (p90 {ms_p90:.2f}), "
+    "{evaluations} cost evaluations; feasible {feasible_fraction:.0%}, "
+    "mean max shift {mean_max_shift_m:.2f} m"
+)
+"""``bench pso``'s line for people, filled from its result."""
+
+SIM_SUMMARY = (
+    "{scenario}, batch {batch}, {actions} actions: "
+    "{agent_steps_per_s:,.0f} agent-steps/s ({ms_per_step:.2f} ms/step)"
+)
+"""``bench sim``'s line for people, filled from its result."""
+
 
 def add_bench(sub: Any) -> None:
     """Add ``bench`` and its subcommands: pso, sim, sitl, fly, bus."""
@@ -58,13 +71,7 @@ def cmd_bench_pso(args: argparse.Namespace) -> int:
     result = bench_pso(
         uavs=args.uavs, envs=args.envs, repeats=args.repeats, seed=args.seed, cfg=cfg
     )
-    human = (
-        f"PSO, {result['uavs']} UAVs x {result['envs']} env(s): "
-        f"{result['ms_per_call']:.2f} ms per call (p90 {result['ms_p90']:.2f}), "
-        f"{result['evaluations']} cost evaluations; feasible {result['feasible_fraction']:.0%}, "
-        f"mean max shift {result['mean_max_shift_m']:.2f} m"
-    )
-    emit(args, result, human)
+    emit(args, result, PSO_SUMMARY.format_map(result))
     return 0
 
 
@@ -73,9 +80,5 @@ def cmd_bench_sim(args: argparse.Namespace) -> int:
     from remarl_fc.bench.sim import bench_sim
 
     result = bench_sim(args.scenario, args.batch, args.actions, args.seconds, args.seed)
-    human = (
-        f"{result['scenario']}, batch {result['batch']}, {result['actions']} actions: "
-        f"{result['agent_steps_per_s']:,.0f} agent-steps/s ({result['ms_per_step']:.2f} ms/step)"
-    )
-    emit(args, result, human)
+    emit(args, result, SIM_SUMMARY.format_map(result))
     return 0

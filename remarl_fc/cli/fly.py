@@ -19,6 +19,7 @@ from remarl_fc.cli.common import (
     EXIT_NOT_ALL_REACHED,
     FLAVOURS,
     add_choice,
+    emit,
     finish,
 )
 
@@ -35,6 +36,21 @@ FLY_FLAGS = {
     "bus_prefix": "bus_prefix",
 }
 """`FlyConfig` settings that ``fly`` takes from its flags as they are: setting → flag (its dest)."""
+
+BENCH_FLY_SUMMARY = (
+    "{vehicles} vehicles, {seconds} s: setpoint tick p50 {tick_ms_p50:.3f} ms, "
+    "p99 {tick_ms_p99:.3f} ms ({tick_us_per_vehicle_p50:.1f} µs per vehicle); "
+    "decision p50 {decide_ms_p50:.3f} ms, p99 {decide_ms_p99:.3f} ms; "
+    "missed setpoint deadlines {setpoint_deadline_misses}; "
+    "setpoint rate per vehicle {setpoints_per_vehicle_hz:.2f} Hz"
+)
+"""``bench fly``'s line for people, filled from its result."""
+
+BENCH_BUS_SUMMARY = (
+    "{vehicles} vehicles at {rate_hz:g} Hz, {observers} observers: state latency "
+    "p50 {latency_ms_p50} ms, p99 {latency_ms_p99} ms; delivered {delivered_fraction:.1%}"
+)
+"""``bench bus``'s line for people, filled from its result."""
 
 
 def add_parsers(sub: Any) -> None:
@@ -329,17 +345,7 @@ def cmd_bench_fly(args: argparse.Namespace) -> int:
     from remarl_fc.bench.fly import bench_fly
 
     result = asyncio.run(bench_fly(args.vehicles, args.seconds))
-    if args.json:
-        print(json.dumps(result))
-    else:
-        print(
-            f"{result['vehicles']} vehicles, {result['seconds']} s: setpoint tick "
-            f"p50 {result['tick_ms_p50']:.3f} ms, p99 {result['tick_ms_p99']:.3f} ms "
-            f"({result['tick_us_per_vehicle_p50']:.1f} µs per vehicle); decision p50 "
-            f"{result['decide_ms_p50']:.3f} ms, p99 {result['decide_ms_p99']:.3f} ms; "
-            f"missed setpoint deadlines {result['setpoint_deadline_misses']}; "
-            f"setpoint rate per vehicle {result['setpoints_per_vehicle_hz']:.2f} Hz"
-        )
+    emit(args, result, BENCH_FLY_SUMMARY.format_map(result))
     return 0
 
 
@@ -353,12 +359,5 @@ def cmd_bench_bus(args: argparse.Namespace) -> int:
         settings = MqttSettings.from_url(args.bus)
         host, port = settings.host, settings.port
     result = asyncio.run(bench_bus(args.vehicles, args.seconds, port, host))
-    if args.json:
-        print(json.dumps(result))
-    else:
-        print(
-            f"{result['vehicles']} vehicles at {result['rate_hz']:g} Hz, {result['observers']} "
-            f"observers: state latency p50 {result['latency_ms_p50']} ms, p99 "
-            f"{result['latency_ms_p99']} ms; delivered {result['delivered_fraction']:.1%}"
-        )
+    emit(args, result, BENCH_BUS_SUMMARY.format_map(result))
     return 0

@@ -68,6 +68,8 @@ class Admission:
 
     verdict: Verdict
     system_id: int
+    reason: str | None = None
+    """Why a dropped frame was dropped."""
     bound: bool = False
     """This frame bound the vehicle: reply to its address from now on."""
     alarm: str | None = None
@@ -75,8 +77,6 @@ class Admission:
     identity_claim: bool = False
     """A HEARTBEAT from another source than the bound one: someone else claims to be the
     vehicle (before take-off `fly` then refuses to fly: `SpoofingDetected`)."""
-    reason: str | None = None
-    """Why a dropped frame was dropped."""
 
 
 @dataclass(frozen=True)

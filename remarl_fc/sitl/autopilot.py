@@ -102,10 +102,6 @@ class Autopilot(ABC, Generic[P]):
         """The current mode's row of the flavour's mode table."""
 
     @abstractmethod
-    def resting_status(self) -> MavState:
-        """HEARTBEAT.system_status when neither booting nor in failsafe: STANDBY or ACTIVE."""
-
-    @abstractmethod
     def request_mode(self, cmd: Command, now_s: float) -> Result:
         """MAV_CMD_DO_SET_MODE whose p1 has CUSTOM_MODE_ENABLED: decode the mode, enter it."""
 
@@ -128,6 +124,10 @@ class Autopilot(ABC, Generic[P]):
     @abstractmethod
     def on_setpoint(self, sp: Setpoint, now_s: float) -> bool:
         """Take a setpoint; True if it now drives the vehicle."""
+
+    @abstractmethod
+    def resting_status(self) -> MavState:
+        """HEARTBEAT.system_status when neither booting nor in failsafe: STANDBY or ACTIVE."""
 
     @abstractmethod
     def mode_timers(self, now_s: float) -> None:
@@ -308,7 +308,6 @@ class Autopilot(ABC, Generic[P]):
 
     def ignore_setpoint(self, reason: str) -> bool:
         """Count a setpoint that changes nothing; returns False."""
-        self.counters.setpoints_ignored += 1
         self.counters.ignored_reasons[reason] += 1
         return False
 

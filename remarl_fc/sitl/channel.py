@@ -24,13 +24,18 @@ class Counters:
 
     setpoints_received: int = 0
     setpoints_applied: int = 0
-    setpoints_ignored: int = 0
+    ignored_reasons: Counter[str] = field(default_factory=Counter)
+    """Setpoints ignored, by reason."""
     commands: Counter[str] = field(default_factory=Counter)
     results: Counter[str] = field(default_factory=Counter)
-    ignored_reasons: Counter[str] = field(default_factory=Counter)
     params_set: Counter[str] = field(default_factory=Counter)
     params_refused: Counter[str] = field(default_factory=Counter)
     params_unknown: Counter[str] = field(default_factory=Counter)
+
+    @property
+    def setpoints_ignored(self) -> int:
+        """Setpoints ignored, for any reason."""
+        return self.ignored_reasons.total()
 
     def as_dict(self) -> dict[str, Any]:
         """JSON-ready form."""

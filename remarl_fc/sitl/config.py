@@ -20,17 +20,17 @@ Transport = Literal["udp", "tcp"]
 DEFAULT_HOME = GeoPoint(47.397742, 8.545594, 488.0)
 """Home of the arena origin: the PX4 SITL default location (Zurich), lat/lon degrees, AMSL m."""
 
-ARDUPILOT_BASE_PORT = 14550
-"""ArduPilot SITL layout: instance i listens on 14550 + 10·i (every port +10 per instance)."""
+SITL_PORTS: dict[tuple[Transport, Flavour], tuple[int, int]] = {
+    ("udp", "ardupilot"): (14550, 10),
+    ("udp", "px4"): (18570, 1),
+    ("tcp", "ardupilot"): (5760, 10),
+    ("tcp", "px4"): (5760, 10),
+}
+"""The real SITLs' port layouts, (base, step): instance i listens on base + step·i.
 
-ARDUPILOT_PORT_STEP = 10
-PX4_BASE_PORT = 18570
-"""PX4 SITL layout: instance i's GCS link listens on 18570 + i and sends to 14540 + i."""
-
-PX4_PORT_STEP = 1
-
-ARDUPILOT_TCP_BASE_PORT = 5760
-"""ArduPilot SITL's SERIAL0 as a TCP server: instance i listens on 5760 + 10·i."""
+ArduPilot SITL: 14550 + 10·i over UDP (every port +10 per instance); its SERIAL0 as a TCP
+server: 5760 + 10·i (the mock's TCP vehicles use that layout for either flavour). PX4 SITL:
+instance i's GCS link listens on 18570 + i (and sends to 14540 + i)."""
 
 
 @dataclass(frozen=True)
@@ -198,15 +198,11 @@ class SitlConfig:
         """UDP port vehicle ``index`` binds (0 = any free port for every vehicle)."""
         if self.base_port == 0:
             return 0
-        base = self.base_port
-        ten_per_instance = self.transport == "tcp" or self.flavour == "ardupilot"
-        if base is None and self.transport == "tcp":
-            base = ARDUPILOT_TCP_BASE_PORT
-        elif base is None:
-            base = ARDUPILOT_BASE_PORT if self.flavour == "ardupilot" else PX4_BASE_PORT
-        step = self.port_step
-        if step is None:
-            step = ARDUPILOT_PORT_STEP if ten_per_instance else PX4_PORT_STEP
+        base, step = SITL_PORTS[self.transport, self.flavour]
+        if self.base_port is not None:
+            base = self.base_port
+        if self.port_step is not None:
+            step = self.port_step
         return base + step * index
 
     def out_address(self, index: int) -> tuple[str, int] | None:

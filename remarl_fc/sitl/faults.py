@@ -15,10 +15,20 @@ import numpy as np
 
 
 @dataclass(frozen=True)
-class Window:
-    """A time window [start_s, end_s) on one vehicle (index) or all (None)."""
+class Targeted:
+    """A fault on one vehicle (its index) or on every vehicle (None)."""
 
     vehicle: int | None
+
+    def targets(self, vehicle: int) -> bool:
+        """Whether the fault is on ``vehicle`` (an index)."""
+        return self.vehicle is None or self.vehicle == vehicle
+
+
+@dataclass(frozen=True)
+class Window(Targeted):
+    """A time window [start_s, end_s) on one vehicle (index) or all (None)."""
+
     start_s: float
     end_s: float
 
@@ -26,11 +36,14 @@ class Window:
         if not self.end_s > self.start_s >= 0:
             raise ValueError(f"window {self.start_s}..{self.end_s} s must have 0 ≤ start < end")
 
+    @classmethod
+    def lasting(cls, vehicle: int | None, start_s: float, duration_s: float) -> Window:
+        """The window [start_s, start_s + duration_s) on ``vehicle``."""
+        return cls(vehicle, start_s, start_s + duration_s)
+
     def covers(self, vehicle: int, now_s: float) -> bool:
         """Whether the window applies to ``vehicle`` at ``now_s``."""
-        return (self.vehicle is None or self.vehicle == vehicle) and (
-            self.start_s <= now_s < self.end_s
-        )
+        return self.targets(vehicle) and self.start_s <= now_s < self.end_s
 
 
 @dataclass(frozen=True)
@@ -42,10 +55,9 @@ class GpsGlitch:
 
 
 @dataclass(frozen=True)
-class PilotSwitch:
+class PilotSwitch(Targeted):
     """At ``at_s`` the pilot switches vehicle ``vehicle`` (None: all) to ``mode``."""
 
-    vehicle: int | None
     at_s: float
     mode: str
 
@@ -79,19 +91,17 @@ class Faults:
 
     def cut_link(self, vehicle: int | None, start_s: float, duration_s: float) -> None:
         """No datagram to or from ``vehicle`` during [start_s, start_s + duration_s)."""
-        self.link_cuts.append(Window(vehicle, start_s, start_s + duration_s))
+        self.link_cuts.append(Window.lasting(vehicle, start_s, duration_s))
 
     def drop_heartbeats(self, vehicle: int | None, start_s: float, duration_s: float) -> None:
         """``vehicle`` sends no HEARTBEAT during the window (other messages still flow)."""
-        self.heartbeat_dropouts.append(Window(vehicle, start_s, start_s + duration_s))
+        self.heartbeat_dropouts.append(Window.lasting(vehicle, start_s, duration_s))
 
     def glitch_gps(
         self, vehicle: int | None, start_s: float, duration_s: float, offset_m: float
     ) -> None:
         """Reported position jumps ``offset_m`` north during the window."""
-        self.gps_glitches.append(
-            GpsGlitch(Window(vehicle, start_s, start_s + duration_s), offset_m)
-        )
+        self.gps_glitches.append(GpsGlitch(Window.lasting(vehicle, start_s, duration_s), offset_m))
 
     def switch_mode(self, vehicle: int | None, at_s: float, mode: str) -> None:
         """The pilot takes ``vehicle`` into ``mode`` at ``at_s``."""

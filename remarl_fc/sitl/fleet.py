@@ -293,9 +293,8 @@ class SitlFleet(StackOwner):
         for k, sw in enumerate(self.faults.pilot_switches):
             if k not in self._pilot_done and now >= sw.at_s:
                 self._pilot_done.add(k)
-                targets = range(self.n) if sw.vehicle is None else [sw.vehicle]
-                for i in targets:
-                    if i < self.n and not self.vehicles[i].pilot_mode(sw.mode, now):
+                for i in range(self.n):
+                    if sw.targets(i) and not self.vehicles[i].pilot_mode(sw.mode, now):
                         raise ValueError(
                             f"pilot mode {sw.mode!r} is not a {self.cfg.flavour} mode the "
                             "mock models"

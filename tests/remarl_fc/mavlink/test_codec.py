@@ -49,6 +49,7 @@ def test_corrupt_crc_is_counted_and_dropped():
     frame[-1] ^= 0xFF
     assert b.decode(bytes(frame), "x") == []
     assert b.stats.bad_frames == 1
+    assert b.stats.bad_frames == sum(b.stats.reasons.values())  # the total of the reasons
 
 
 def test_signing_accepts_signed_and_rejects_unsigned_except_allowed():

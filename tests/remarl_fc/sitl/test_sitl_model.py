@@ -11,8 +11,9 @@ import pytest
 from remarl_fc.frames import GeoPoint
 from remarl_fc.mavlink.codec import Codec
 from remarl_fc.mavlink.consts import TYPE_MASK_VELOCITY_YAW, MavFrame, TypeMask
+from remarl_fc.sitl.channel import Counters
 from remarl_fc.sitl.config import SitlConfig, VehicleModelConfig
-from remarl_fc.sitl.faults import parse_glitch, parse_pilot_switch, parse_window
+from remarl_fc.sitl.faults import Faults, Window, parse_glitch, parse_pilot_switch, parse_window
 from remarl_fc.sitl.groundtruth import GroundTruth, write_json_atomic
 from remarl_fc.sitl.setpoints import parse_setpoint
 from remarl_fc.sitl.vehicle import Airframes, Guidance, YawMode, step
@@ -166,6 +167,24 @@ def test_fault_specs(parser, text, expected):
     for key, value in vars(expected).items():
         assert getattr(got, key) == value
     assert parse_glitch("0:1:2:30").offset_m == 30.0
+
+
+def test_faults_on_one_vehicle_or_all():
+    faults = Faults()
+    faults.cut_link(1, 10.0, 5.0)
+    faults.drop_heartbeats(None, 0.0, 1.0)
+    assert faults.link_cuts == [Window(1, 10.0, 15.0)]
+    assert [faults.link_down(v, 12.0) for v in range(3)] == [False, True, False]
+    assert not faults.link_down(1, 15.0)  # the end is open
+    assert all(faults.heartbeat_muted(v, 0.5) for v in range(3))
+    assert [parse_pilot_switch("all:1:LOITER").targets(v) for v in range(2)] == [True, True]
+    assert [parse_pilot_switch("1:1:LOITER").targets(v) for v in range(2)] == [False, True]
+
+
+def test_ignored_setpoints_are_the_total_of_their_reasons():
+    counters = Counters()
+    counters.ignored_reasons.update({"not in GUIDED": 2, "on the ground": 1})
+    assert counters.setpoints_ignored == counters.as_dict()["setpoints_ignored"] == 3
 
 
 @pytest.mark.parametrize("text", ["1:2", "x:1:2", "0:5:1", "0:a:b", "-1:0:1"])
