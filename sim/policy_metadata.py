@@ -150,6 +150,8 @@ def _convert(value: Any, hint: Any, key: str, check: Checker) -> tuple[bool, Any
     elif get_origin(hint) is typing.Literal:
         choices = get_args(hint)
         ok, expected = value in choices and isinstance(value, str), f"one of {', '.join(choices)}"
+    elif get_origin(hint) is tuple and get_args(hint)[-1:] == (Ellipsis,):
+        return _convert_list(value, get_args(hint)[0], key, check)
     elif get_origin(hint) is tuple:
         args = get_args(hint)
         expected = f"a list of {len(args)} numbers"
@@ -162,6 +164,18 @@ def _convert(value: Any, hint: Any, key: str, check: Checker) -> tuple[bool, Any
     if not ok:
         check.add(key, f"must be {expected}, got {show(value)}")
     return ok, value
+
+
+def _convert_list(value: Any, item: Any, key: str, check: Checker) -> tuple[bool, Any]:
+    """(ok, tuple) for a list of any length (per-UAV points, ``[[intruders]]`` tables)."""
+    if not isinstance(value, list | tuple):
+        check.add(key, f"must be a list, got {show(value)}")
+        return False, value
+    if isinstance(item, type) and dataclasses.is_dataclass(item):
+        built = [_build(item, v, f"{key}[{k}].", check) for k, v in enumerate(value)]
+        return all(b is not None for b in built), tuple(built)
+    items = [_convert(v, item, f"{key}[{k}]", check) for k, v in enumerate(value)]
+    return all(ok for ok, _ in items), tuple(v for _, v in items)
 
 
 _FIELDS: dict[type[Any], tuple[dict[str, Any], dict[str, dataclasses.Field[Any]]]] = {}

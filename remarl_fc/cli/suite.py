@@ -145,7 +145,7 @@ def cmd_suite_label(args: argparse.Namespace) -> int:
 def cmd_eval_suite(args: argparse.Namespace) -> int:
     """Evaluate methods and/or a policy on a suite: a table (or JSON), optionally pictures."""
     from remarl_fc.offline.suite import MethodSpec, evaluate_suite
-    from remarl_fc.offline.suite_report import draw_heatmap, draw_worst, table
+    from remarl_fc.offline.suite_report import draw_suite, table
     from sim.suite import load_suite
 
     s = load_suite(args.suite)
@@ -169,14 +169,8 @@ def cmd_eval_suite(args: argparse.Namespace) -> int:
         "results": [_json_ready(r) for r in results],
     }
     if args.plot:
-        folder = Path(args.plot)
-        draw_heatmap(results, folder / "heatmap.png", f"suite {s.name} v{s.version}")
-        for r in results:
-            if r.get("applicable"):
-                spec = next(p for p in specs if p.label == r["method"])
-                name = r["method"].replace(":", "-").replace("/", "-")
-                draw_worst(s, r, spec, folder / "worst" / name / f"{r['family']}.png")
-        payload["plot"] = str(folder)
+        draw_suite(s, results, specs, Path(args.plot))
+        payload["plot"] = args.plot
     emit(args, payload, table(results))
     return 0
 

@@ -33,6 +33,7 @@ from sim.encounters import Family, sample_family
 from sim.env import episode_metrics
 from sim.errors import ConfigError
 from sim.evaluation import summarize
+from sim.parallel import run_on_ray
 from sim.spawn import EpisodeStart
 from sim.state import SwarmState
 from sim.suite import Suite, family_labels
@@ -208,7 +209,7 @@ def evaluate_suite(
         family_labels(suite, family, count)
     jobs = [(suite, f, spec, count) for spec in specs for f in chosen]
     if ray_address is not None:
-        results = _on_ray(jobs, ray_address)
+        results = run_on_ray(_job, jobs, ray_address)
     elif workers > 1:
         with ProcessPoolExecutor(workers, mp_context=get_context("spawn")) as pool:
             results = []
@@ -228,13 +229,3 @@ def evaluate_suite(
         if on_result:
             on_result(r)
     return results
-
-
-def _on_ray(jobs: list[Any], address: str) -> list[dict[str, Any]]:
-    try:
-        import ray
-    except ImportError as exc:
-        raise ConfigError("--ray-address needs Ray: pip install 'ray[default]'") from exc
-    ray.init(address=address)
-    remote = ray.remote(_job)
-    return list(ray.get([remote.remote(j) for j in jobs]))

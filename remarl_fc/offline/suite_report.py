@@ -124,6 +124,21 @@ def draw_worst(suite: Suite, result: dict[str, Any], spec: MethodSpec, out: Path
     _save(fig, out)
 
 
+def draw_suite(
+    suite: Suite, results: list[dict[str, Any]], specs: list[MethodSpec], folder: Path
+) -> None:
+    """The heatmap and every cell's worst episode, under ``folder``.
+
+    Files: ``heatmap.png`` and ``worst/METHOD/FAMILY.png``.
+    """
+    draw_heatmap(results, folder / "heatmap.png", f"suite {suite.name} v{suite.version}")
+    for r in results:
+        if r.get("applicable"):
+            spec = next(p for p in specs if p.label == r["method"])
+            name = r["method"].replace(":", "-").replace("/", "-")
+            draw_worst(suite, r, spec, folder / "worst" / name / f"{r['family']}.png")
+
+
 def _save(fig: Any, out: Path) -> None:
     import matplotlib.pyplot as plt
 

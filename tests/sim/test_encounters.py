@@ -64,8 +64,9 @@ def test_miss_sign_is_the_side_of_the_relative_velocity():
     assert vel.tolist() == pytest.approx([-10.0, 0.0])
 
 
-def test_scenario_file_with_per_uav_starts_targets_and_intruders():
-    cfg = scenario_from_dict(
+def custom_scenario():
+    """Two UAVs whose routes cross, a crossing intruder and a static one that pops up late."""
+    return scenario_from_dict(
         {
             "uav": {
                 "count": 2,
@@ -80,6 +81,10 @@ def test_scenario_file_with_per_uav_starts_targets_and_intruders():
         name="custom",
         source="test",
     )
+
+
+def test_scenario_file_with_per_uav_starts_targets_and_intruders():
+    cfg = custom_scenario()
     assert cfg.obstacles.count == 2
     assert cfg.intruders[0].crossing_rad == pytest.approx(math.pi / 2)
     ep = spawn_episodes(cfg, np.random.default_rng(0), 3)
@@ -203,3 +208,20 @@ def test_step_limit_leaves_room_for_detours():
     _, ep = sample_family(family, SEED, range(10))
     longest = np.linalg.norm(ep.target_m - ep.start_m, axis=-1).max()
     assert cfg.max_steps * cfg.step_length_m >= 1.5 * longest
+
+
+def test_a_policy_file_keeps_per_uav_routes_and_intruders():
+    import json
+
+    from sim.policy_metadata import build_metadata, scenario_config
+
+    cfg = custom_scenario()
+    meta = build_metadata(
+        cfg,
+        shared=False,
+        hidden=4,
+        reward="remarl",
+        training={"commit": "x", "steps": 1, "seed": 0},
+        metrics={},
+    )
+    assert scenario_config(json.loads(json.dumps(meta))) == cfg  # through JSON, as in a file
