@@ -204,6 +204,8 @@ class EpisodeStart:
         obstacle_pos_m, obstacle_vel_m_s: (B, M, 2) obstacle positions and velocities.
         obstacle_appear_step: (B, M) the decision step from which each obstacle can be sensed
             (0: from the start).
+        heading_rad: (B, N) initial headings; None: every UAV heads for its target (a restart
+            in mid-flight, as the oracle's, gives them).
     """
 
     start_m: FloatArray
@@ -213,22 +215,41 @@ class EpisodeStart:
     obstacle_pos_m: FloatArray
     obstacle_vel_m_s: FloatArray
     obstacle_appear_step: IntArray
+    heading_rad: FloatArray | None = None
 
     @property
     def num_envs(self) -> int:
         """B."""
         return int(self.start_m.shape[0])
 
+    def headings(self) -> FloatArray:
+        """(B, N) initial headings: given, or toward each UAV's target."""
+        if self.heading_rad is not None:
+            return self.heading_rad
+        delta = self.target_m - self.start_m
+        heading: FloatArray = np.arctan2(delta[..., 1], delta[..., 0])
+        return heading
+
     def take(self, envs: IntArray | BoolArray | slice) -> EpisodeStart:
         """The episodes selected by ``envs`` (indices, a (B,) mask or a slice)."""
-        return EpisodeStart(*(getattr(self, f.name)[envs] for f in dataclasses.fields(self)))
+        fields: dict[str, Any] = {
+            f.name: None if (v := getattr(self, f.name)) is None else v[envs] for f in _fields(self)
+        }
+        return EpisodeStart(**fields)
 
     @classmethod
     def concat(cls, parts: list[EpisodeStart]) -> EpisodeStart:
-        """The episodes of ``parts``, in order (same N and M)."""
-        return cls(
-            *(np.concatenate([getattr(p, f.name) for p in parts]) for f in dataclasses.fields(cls))
-        )
+        """The episodes of ``parts``, in order (same N and M; all or none with headings)."""
+        given = [p.heading_rad is not None for p in parts]
+        if any(given) and not all(given):
+            parts = [dataclasses.replace(p, heading_rad=p.headings()) for p in parts]
+        fields: dict[str, Any] = {
+            f.name: None
+            if getattr(parts[0], f.name) is None
+            else np.concatenate([getattr(p, f.name) for p in parts])
+            for f in _fields(cls)
+        }
+        return cls(**fields)
 
     @classmethod
     def of_swarm(
@@ -252,6 +273,10 @@ class EpisodeStart:
             obstacle_vel_m_s,
             obstacle_appear_step,
         )
+
+
+def _fields(obj: Any) -> tuple[dataclasses.Field[Any], ...]:
+    return dataclasses.fields(obj)
 
 
 def encounter_tracks(

@@ -192,9 +192,16 @@ def _family(table: dict[str, Any], path: Path) -> Family:
 
 
 def family_digest(suite: Suite, family: Family) -> str:
-    """What decides a family's episodes, hashed: its parameters, the seed, the generator."""
+    """What decides a family's labels, hashed: parameters, seed, generator and oracle."""
+    from sim.oracle import ORACLE_VERSION
+
     blob = json.dumps(
-        {"family": family.parameters(), "seed": suite.seed, "generator": GENERATOR_VERSION},
+        {
+            "family": family.parameters(),
+            "seed": suite.seed,
+            "generator": GENERATOR_VERSION,
+            "oracle": ORACLE_VERSION,
+        },
         sort_keys=True,
     )
     return hashlib.sha256(blob.encode()).hexdigest()[:16]

@@ -89,7 +89,8 @@ class SwarmSim:
     def start(self, episodes: EpisodeStart, rng: np.random.Generator) -> SwarmState:
         """New episodes from given starts, targets and obstacles; contour levels by PSO.
 
-        Every UAV heads for its target. ``rng`` serves the PSO only.
+        Every UAV heads for its target unless ``episodes`` gives headings. ``rng`` serves the
+        PSO only.
         """
         cfg = self.cfg
         b, n = episodes.num_envs, cfg.uav.count
@@ -100,10 +101,9 @@ class SwarmSim:
                 f"{episodes.obstacle_pos_m.shape[1]} obstacles for a scenario of {n} and {m}"
             )
         pos = episodes.start_m.copy()
-        delta = episodes.target_m - pos
         state = SwarmState(
             pos_m=pos,
-            heading_rad=np.arctan2(delta[..., 1], delta[..., 0]),
+            heading_rad=episodes.headings().copy(),
             active=np.ones((b, n), dtype=bool),
             reached=np.zeros((b, n), dtype=bool),
             start_m=pos.copy(),

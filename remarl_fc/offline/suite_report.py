@@ -79,7 +79,8 @@ def draw_heatmap(results: list[dict[str, Any]], out: Path, title: str) -> None:
     ax.set_xticks(range(len(methods)), methods, rotation=20, ha="right")
     ax.set_yticks(range(len(families)), families, fontsize=7)
     ax.set_title(title, fontsize=9)
-    fig.colorbar(image, ax=ax, label="success over solvable episodes", shrink=0.6)
+    bar = fig.colorbar(image, ax=ax, shrink=0.6)
+    bar.set_label("success, solvable episodes", fontsize=8)
     _save(fig, out)
 
 
