@@ -297,7 +297,7 @@ def encounter_tracks(
 
     >>> p, v = encounter_tracks(np.zeros(2), np.array(0.0), 10.0, np.array(np.pi),
     ...                         np.array(10.0), np.array(0.0), np.array(10.0))
-    >>> np.round(p, 6).tolist(), np.round(v, 6).tolist()  # head-on, 200 m ahead
+    >>> (np.round(p, 6) + 0.0).tolist(), (np.round(v, 6) + 0.0).tolist()  # head-on, 200 m ahead
     ([200.0, 0.0], [-10.0, 0.0])
     """
     own_vel = heading_velocity(own_course_rad, own_speed_m_s)

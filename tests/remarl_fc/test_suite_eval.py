@@ -1,0 +1,173 @@
+"""``remarl-fc suite`` and ``remarl-fc eval --suite``: the yardstick, end to end."""
+
+import json
+
+import pytest
+
+from remarl_fc.cli import main
+
+VOLATILE = {"seconds", "reaction_time_median_ms", "reaction_time_p99_ms"}
+
+
+def run_json(capsys, argv):
+    assert main([*argv, "--json"]) == 0
+    return json.loads(capsys.readouterr().out)
+
+
+def steady(results):
+    return [{k: v for k, v in r.items() if k not in VOLATILE} for r in results]
+
+
+def test_suite_list_and_show(capsys):
+    listed = run_json(capsys, ["suite", "list"])
+    by_name = {s["name"]: s for s in listed["suites"]}
+    assert by_name["standard"]["episodes"] == 200 and len(by_name["standard"]["families"]) >= 30
+    shown = run_json(capsys, ["suite", "show", "smoke"])
+    family = next(f for f in shown["families"] if f["name"] == "crossing-fast-5u")
+    assert family["distribution"] == "crossing" and family["speed_m_s"] == [12.0, 20.0]
+    assert family["uavs"] == 5 and family["intruders"] == 1
+    assert 0.0 <= family["solvable"] <= 1.0
+
+
+def test_eval_suite_is_reproducible_and_complete(capsys):
+    argv = [
+        "eval",
+        "--suite",
+        "smoke",
+        "--method",
+        "straight,orca",
+        "--families",
+        "head-on-1u,paper-3u2o,near-miss-3u",
+    ]
+    first = run_json(capsys, argv)
+    assert [(r["method"], r["family"]) for r in first["results"]] == [
+        (m, f) for m in ("straight", "orca") for f in ("head-on-1u", "paper-3u2o", "near-miss-3u")
+    ]
+    for r in first["results"]:
+        assert r["applicable"] and r["episodes"] == 3
+        for key in (
+            "success_rate",
+            "success_rate_solvable",
+            "collision_rate_u2o",
+            "collision_rate_u2u",
+            "min_d_u2o_m",
+            "mean_min_d_u2u_m",
+            "energy_rad",
+            "path_length_ratio",
+            "reaction_time_median_ms",
+            "solvable_episodes",
+        ):
+            assert key in r
+    cells = {(r["method"], r["family"]): r for r in first["results"]}
+    assert cells[("straight", "head-on-1u")]["success_rate"] == 0.0  # on a collision course
+    assert cells[("straight", "head-on-1u")]["collision_rate_u2o"] == 1.0
+    assert cells[("orca", "paper-3u2o")]["success_rate"] == 1.0
+    again = run_json(capsys, argv)
+    assert steady(again["results"]) == steady(first["results"])
+
+
+def test_policies_run_only_where_they_fit(capsys):
+    out = run_json(
+        capsys,
+        [
+            "eval",
+            "--suite",
+            "smoke",
+            "--method",
+            "zoo",
+            "--policy",
+            "3u2o",
+            "--families",
+            "paper-3u2o,head-on-1u,paper-5u2o",
+        ],
+    )
+    cells = {(r["method"], r["family"]): r for r in out["results"]}
+    assert cells[("zoo", "paper-3u2o")]["policy"] == "3u2o"
+    assert cells[("zoo", "paper-5u2o")]["policy"] == "5u2o"
+    assert cells[("zoo", "head-on-1u")] == {
+        "family": "head-on-1u",
+        "method": "zoo",
+        "uavs": 1,
+        "applicable": False,
+        "reason": "no zoo policy for 1 UAVs",
+    }
+    assert cells[("policy:3u2o", "paper-3u2o")]["success_rate"] == 1.0
+    refused = cells[("policy:3u2o", "paper-5u2o")]
+    assert not refused["applicable"] and "number of UAVs" in refused["reason"]
+
+
+def test_eval_suite_table_and_pictures(capsys, tmp_path):
+    argv = [
+        "eval",
+        "--suite",
+        "smoke",
+        "--method",
+        "straight,potential-field",
+        "--families",
+        "static-1u,crossing-3u",
+        "--plot",
+        str(tmp_path),
+    ]
+    assert main(argv) == 0
+    table = capsys.readouterr().out
+    assert "static-1u" in table and "potential-field" in table and "all solv" in table
+    assert (tmp_path / "heatmap.png").stat().st_size > 5_000
+    for method in ("straight", "potential-field"):
+        for family in ("static-1u", "crossing-3u"):
+            assert (tmp_path / "worst" / method / f"{family}.png").is_file()
+    assert not list(tmp_path.rglob("*.part"))
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["eval", "--suite", "smoke"], "--method NAME"),
+        (["eval", "--suite", "smoke", "--method", "magic"], "unknown method 'magic'"),
+        (
+            ["eval", "--suite", "smoke", "--method", "orca", "--families", "nope"],
+            "no family 'nope'",
+        ),
+        (["eval", "--suite", "weekly", "--method", "orca"], "unknown suite 'weekly'"),
+        (["eval"], "give --policy"),
+    ],
+)
+def test_bad_suite_requests_say_what_to_do(capsys, argv, message):
+    assert main(argv) == 2
+    assert message in capsys.readouterr().err
+
+
+def test_workers_give_the_same_results(capsys):
+    argv = [
+        "eval",
+        "--suite",
+        "smoke",
+        "--method",
+        "potential-field",
+        "--families",
+        "crossing-1u,static-5u,swarms-2x3",
+    ]
+    one = run_json(capsys, argv)
+    two = run_json(capsys, [*argv, "--workers", "2"])
+    assert steady(two["results"]) == steady(one["results"])
+
+
+def test_ray_address_without_ray_says_how_to_get_it(capsys):
+    try:
+        import ray  # noqa: F401
+    except ImportError:
+        pass
+    else:
+        pytest.skip("Ray is installed: the error path is not reachable")
+    argv = [
+        "eval",
+        "--suite",
+        "smoke",
+        "--method",
+        "straight",
+        "--families",
+        "crossing-1u",
+        "--ray-address",
+        "127.0.0.1:6379",
+    ]
+    assert main(argv) == 2
+    assert "pip install 'ray[default]'" in capsys.readouterr().err
