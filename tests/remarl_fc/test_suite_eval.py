@@ -171,3 +171,17 @@ def test_ray_address_without_ray_says_how_to_get_it(capsys):
     ]
     assert main(argv) == 2
     assert "pip install 'ray[default]'" in capsys.readouterr().err
+
+
+def test_the_whole_smoke_suite_for_one_method(capsys):
+    """CI's suite run: every smoke family, ORCA, the labels from the shipped cache."""
+    out = run_json(capsys, ["eval", "--suite", "smoke", "--method", "orca"])
+    from sim.suite import load_suite
+
+    families = [f.name for f in load_suite("smoke").families]
+    assert [r["family"] for r in out["results"]] == families
+    assert all(r["applicable"] and r["episodes"] == 3 for r in out["results"])
+    paper = [r for r in out["results"] if r["family"].startswith("paper-")]
+    assert all(r["success_rate"] == 1.0 for r in paper)  # ORCA's 100 % on the paper's scenarios
+    overtaken = next(r for r in out["results"] if r["family"] == "overtaken-3u")
+    assert overtaken["collision_rate_u2o"] == 1.0  # hit from behind, outside its aperture
