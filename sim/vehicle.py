@@ -1,0 +1,184 @@
+"""The multirotor's response to velocity and yaw setpoints, fitted to real autopilots.
+
+A vehicle flown through MAVLink velocity setpoints (what ``fly`` sends) does not turn on a
+perfect arc the moment a heading is decided, as the paper's simulator assumes (profile
+"ideal"). It follows its command late and smoothly: after a transport delay, its horizontal
+velocity tracks the commanded one to first order with a time constant, and its acceleration is
+capped; its yaw tracks the commanded yaw to first order with a rate cap. The parameters of each
+autopilot are fitted by least squares to traces of real firmware in SITL flown with our own
+setpoints (`tools/fit_vehicle.py`, figures in ``docs/MODEL.md`` §16), and shipped as data
+(``sim/vehicles/*.toml``).
+
+Batched like the simulator: velocities (..., 2), any batch dimensions first; one step updates
+every vehicle at once. Units: metres, seconds, radians; yaw counter-clockwise from +x in the
+simulator's frame (the trace tools convert from NED).
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, fields
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from sim.arrays import FloatArray
+from sim.errors import ConfigError
+from sim.kinematics import wrap_angle
+
+
+@dataclass(frozen=True)
+class VehicleProfile:
+    """How one kind of vehicle answers velocity and yaw setpoints.
+
+    ``ideal`` is the paper's model (no lag, any acceleration): velocity equals the command.
+    """
+
+    name: str
+    description: str = ""
+    ideal: bool = False
+    """True: the command is flown exactly and at once (the simulator's arcs)."""
+
+    delay_s: float = 0.0
+    """Transport delay between a setpoint and the start of the response, seconds."""
+
+    velocity_tau_s: float = 0.5
+    """Time constant of the first-order horizontal velocity tracking, seconds."""
+
+    max_accel_m_s2: float = 5.0
+    """Cap on the norm of the horizontal acceleration, m/s²."""
+
+    yaw_tau_s: float = 0.35
+    """Time constant of the first-order yaw tracking, seconds."""
+
+    max_yaw_rate_rad_s: float = math.radians(60.0)
+    """Cap on the yaw rate, rad/s (file key max_yaw_rate_deg_s)."""
+
+    fit_rms_m_s: float = 0.0
+    """RMS horizontal velocity error of the fit on its traces, m/s (a record, not a setting)."""
+
+    fitted_on: tuple[str, ...] = ()
+    """The trace files the parameters were fitted to (a record)."""
+
+    def __post_init__(self) -> None:
+        for name in ("velocity_tau_s", "max_accel_m_s2", "yaw_tau_s", "max_yaw_rate_rad_s"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise ConfigError(f"vehicle profile {self.name}: {name} must be > 0, got {value}")
+        if not (math.isfinite(self.delay_s) and self.delay_s >= 0):
+            raise ConfigError(f"vehicle profile {self.name}: delay_s must be >= 0")
+
+
+def profile_names() -> list[str]:
+    """The vehicle profiles shipped with the package."""
+    folder = resources.files("sim").joinpath("vehicles")
+    return sorted(
+        p.name.removesuffix(".toml") for p in folder.iterdir() if p.name.endswith(".toml")
+    )
+
+
+def load_profile(name_or_path: str | Path) -> VehicleProfile:
+    """A shipped profile by name ("ideal", "arducopter", "px4", ...) or a profile file by path.
+
+    Raises:
+        ConfigError: unknown name, unreadable file, unknown key or bad value.
+    """
+    text = str(name_or_path)
+    if text.endswith(".toml") or "/" in text:
+        path = Path(text)
+    elif text in profile_names():
+        path = Path(str(resources.files("sim").joinpath("vehicles", f"{text}.toml")))
+    else:
+        raise ConfigError(
+            f"unknown vehicle profile {text!r}; shipped: {', '.join(profile_names())} "
+            "(or pass the path of a .toml file)"
+        )
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except (OSError, tomllib.TOMLDecodeError) as exc:
+        raise ConfigError(f"{path}: cannot read the vehicle profile ({exc})") from exc
+    known = {f.name for f in fields(VehicleProfile)} - {"max_yaw_rate_rad_s"}
+    kwargs: dict[str, Any] = {"name": path.stem}
+    for key, value in data.items():
+        if key == "max_yaw_rate_deg_s":
+            kwargs["max_yaw_rate_rad_s"] = math.radians(float(value))
+        elif key in known:
+            kwargs[key] = tuple(value) if isinstance(value, list) else value
+        else:
+            raise ConfigError(f"{path}: unknown key {key!r}; allowed: {', '.join(sorted(known))}")
+    return VehicleProfile(**kwargs)
+
+
+def track_velocity(
+    velocity_m_s: FloatArray, command_m_s: FloatArray, profile: VehicleProfile, dt_s: float
+) -> FloatArray:
+    """The horizontal velocity after ``dt_s`` of first-order, acceleration-capped tracking.
+
+    Args:
+        velocity_m_s: (..., 2) current velocities.
+        command_m_s: (..., 2) the commands in force (already delayed by the caller).
+
+    The update is exact for the uncapped first-order response over ``dt_s`` (exponential
+    decay of the error); when the acceleration it needs exceeds the cap, the velocity moves
+    toward the command by at most ``max_accel_m_s2``·dt.
+    """
+    if profile.ideal:
+        return command_m_s.copy()
+    error = command_m_s - velocity_m_s
+    step = error * -math.expm1(-dt_s / profile.velocity_tau_s)
+    norm = np.hypot(step[..., 0], step[..., 1])[..., None]
+    cap = profile.max_accel_m_s2 * dt_s
+    scale = np.where(norm > cap, cap / np.maximum(norm, 1e-300), 1.0)
+    new: FloatArray = velocity_m_s + step * scale
+    return new
+
+
+def track_yaw(
+    yaw_rad: FloatArray, command_rad: FloatArray, profile: VehicleProfile, dt_s: float
+) -> FloatArray:
+    """The yaw after ``dt_s`` of first-order, rate-capped tracking of ``command_rad`` (...)."""
+    if profile.ideal:
+        return command_rad.copy()
+    error = wrap_angle(command_rad - yaw_rad)
+    step = error * -math.expm1(-dt_s / profile.yaw_tau_s)
+    cap = profile.max_yaw_rate_rad_s * dt_s
+    new: FloatArray = wrap_angle(yaw_rad + np.clip(step, -cap, cap))
+    return new
+
+
+def respond(
+    profile: VehicleProfile,
+    times_s: FloatArray,
+    command_m_s: FloatArray,
+    velocity0_m_s: FloatArray,
+    dt_s: float = 0.01,
+) -> FloatArray:
+    """Replay a recorded command sequence: the model's velocity at each of ``times_s``.
+
+    Args:
+        times_s: (T,) increasing sample times; the command ``command_m_s`` (T, 2) holds from its
+            sample until the next (zero-order hold, as setpoints do), delayed by the profile's
+            ``delay_s``.
+        velocity0_m_s: (2,) the velocity at ``times_s[0]``.
+        dt_s: integration step.
+
+    Returns:
+        (T, 2) velocities at the sample times (the commands themselves for the ideal profile).
+    """
+    if profile.ideal:
+        return np.asarray(command_m_s, dtype=np.float64).copy()
+    grid = np.arange(times_s[0], times_s[-1] + dt_s, dt_s)
+    held = np.searchsorted(times_s, grid - profile.delay_s, side="right") - 1
+    cmd = np.where((held >= 0)[:, None], command_m_s[np.maximum(held, 0)], command_m_s[0])
+    vel = np.empty((len(grid), 2))
+    v = np.asarray(velocity0_m_s, dtype=np.float64)
+    for k in range(len(grid)):
+        vel[k] = v
+        v = track_velocity(v, cmd[k], profile, dt_s)
+    out = np.empty((len(times_s), 2))
+    for axis in range(2):
+        out[:, axis] = np.interp(times_s, grid, vel[:, axis])
+    return out
