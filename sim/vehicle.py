@@ -182,3 +182,25 @@ def respond(
     for axis in range(2):
         out[:, axis] = np.interp(times_s, grid, vel[:, axis])
     return out
+
+
+class DelayLine:
+    """Commands delayed by a whole number of fixed steps: what a vehicle acts on now.
+
+    The caller owns it and steps at a fixed ``dt_s`` (the mock's physics rate); the delay is
+    rounded to whole steps (0.33 s at 50 Hz: 16 steps, 0.32 s). Until it has filled, the first
+    command pushed is what comes out.
+    """
+
+    def __init__(self, delay_s: float, dt_s: float) -> None:
+        self.steps = max(0, round(delay_s / dt_s))
+        self._queue: list[FloatArray] = []
+
+    def push(self, command: FloatArray) -> FloatArray:
+        """Add this step's command; the one from ``steps`` steps ago comes back."""
+        if self.steps == 0:
+            return command
+        self._queue.append(command.copy())
+        if len(self._queue) > self.steps + 1:
+            self._queue.pop(0)
+        return self._queue[0]

@@ -98,6 +98,12 @@ def add_sitl_parser(sub: Any) -> None:
     p.add_argument("--signing-key", default=None, help="MAVLink 2 signing key file (32 bytes)")
     p.add_argument("--gps-noise", type=float, default=0.0, help="position noise σ, m")
     p.add_argument("--gust", type=float, default=0.0, help="gust velocity σ, m/s")
+    p.add_argument(
+        "--vehicle",
+        default="responsive",
+        help="vehicle profile: responsive (default), flavour (fitted to the flavour's real "
+        "SITL traces), arducopter, px4, px4-sluggish, ideal, or a .toml path",
+    )
     _repeatable(
         p,
         "--param",
@@ -145,7 +151,9 @@ def cmd_sitl(args: argparse.Namespace) -> int:
 
     scenario = load_scenario(args.scenario) if args.scenario else None
     try:
-        model = VehicleModelConfig(gps_noise_m=args.gps_noise, gust_m_s=args.gust)
+        model = VehicleModelConfig(
+            gps_noise_m=args.gps_noise, gust_m_s=args.gust, profile=args.vehicle
+        )
         ardupilot, px4 = ArduPilotParams(), Px4Params()
         if args.flavour == "px4":
             px4 = with_overrides(px4, PX4_PARAMS, args.param)

@@ -97,6 +97,7 @@ ARDUCOPTER = FlavourSpec[ArduPilotParams](
     initial_mode=int(CopterMode.STABILIZE),
     land_mode=int(CopterMode.LAND),
     rtl_mode=int(CopterMode.RTL),
+    vehicle_profile="arducopter",
     pilot_modes=PILOT_MODE_NAMES,
     set_mode_not_custom=MavResult.FAILED,
     arm_without_position=(MavResult.FAILED, "PreArm: Need Position Estimate"),

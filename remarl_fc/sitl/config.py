@@ -7,7 +7,6 @@ The named ones are also served over MAVLink's parameter protocol (`remarl_fc.sit
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -94,27 +93,25 @@ class Px4Params:
 
 @dataclass(frozen=True)
 class VehicleModelConfig:
-    """The simulated multirotor: first-order velocity and yaw tracking with limits.
+    """The simulated multirotor beyond its horizontal response.
 
-    Time constants and limits are the mock's, tuned to the step responses measured on
-    ArduCopter SITL (90 % of a 3.6 m/s step after 1.85 s; a 90° yaw step within 5° after
-    1.65 s); ATC_SLEW_YAW (6000 cdeg/s) bounds the yaw rate.
+    Horizontal velocity and yaw follow a vehicle profile (`sim.vehicle`, the simulator's own
+    model): ``responsive`` by default, the mock's tuning before the SITL fits, until the zoo
+    policies are trained on the fitted dynamics; ``--vehicle flavour`` flies the profile fitted
+    to the flavour's real SITL traces (``arducopter`` or ``px4``). The vertical axis, the
+    limits, gusts and GPS noise are set here.
     """
 
+    profile: str = "responsive"
+    """Vehicle profile name or file (``sim/vehicles``); "flavour": the flavour's fitted one."""
     velocity_tau_s: float = 0.8
-    """Velocity tracking time constant."""
-    max_accel_m_s2: float = 5.0
-    """Horizontal acceleration limit."""
+    """Vertical velocity tracking time constant (the traces fit only the horizontal plane)."""
     max_vert_accel_m_s2: float = 2.5
     """Vertical acceleration limit."""
     max_speed_m_s: float = 20.0
     """Horizontal speed limit."""
     max_climb_m_s: float = 5.0
     """Vertical speed limit, up and down."""
-    yaw_tau_s: float = 0.35
-    """Yaw tracking time constant."""
-    max_yaw_rate_rad_s: float = math.radians(60.0)
-    """Yaw rate limit: ATC_SLEW_YAW, 6000 cdeg/s."""
     position_gain_1_s: float = 0.8
     """Position-target controller gain (m/s per m of error), capped by `max_speed_m_s`."""
     gust_m_s: float = 0.0
@@ -126,7 +123,7 @@ class VehicleModelConfig:
     """Standard deviation of the horizontal noise on reported positions (0 = exact)."""
 
     def __post_init__(self) -> None:
-        for name in ("velocity_tau_s", "yaw_tau_s", "gust_tau_s", "max_accel_m_s2"):
+        for name in ("velocity_tau_s", "gust_tau_s"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name} must be > 0, not {getattr(self, name)}")
         for name in ("gust_m_s", "gps_noise_m"):

@@ -90,6 +90,8 @@ class FlavourSpec(Generic[P]):
     """custom_mode that MAV_CMD_NAV_RETURN_TO_LAUNCH switches to."""
     pilot_modes: Mapping[str, int]
     """Mode names a pilot can select (the `pilot-mode` fault) → custom_mode."""
+    vehicle_profile: str
+    """The vehicle profile (`sim.vehicle`) fitted to this autopilot's SITL traces."""
     set_mode_not_custom: MavResult
     """DO_SET_MODE without CUSTOM_MODE_ENABLED in p1 is refused with this."""
     arm_without_position: Result

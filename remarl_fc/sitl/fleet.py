@@ -46,6 +46,7 @@ from remarl_fc.sitl.traffic import Traffic
 from remarl_fc.sitl.vehicle import Airframes, step
 from sim.config import ScenarioConfig
 from sim.spawn import SPAWN_SPACING_FACTOR, swarm_layout
+from sim.vehicle import DelayLine, load_profile
 
 FloatArray = NDArray[np.float64]
 
@@ -133,6 +134,11 @@ class SitlFleet(StackOwner):
             signing = SigningConfig(signing_key, allow_unsigned=unsigned)
         self._ticks = 0
         self._dt = 1.0 / cfg.physics_hz
+        fitted = FLAVOURS[cfg.flavour].spec.vehicle_profile
+        self.vehicle_profile = load_profile(
+            fitted if cfg.model.profile == "flavour" else cfg.model.profile
+        )
+        self._delay = DelayLine(self.vehicle_profile.delay_s, self._dt)
         self.links = FleetLinks(
             cfg, n, faults or Faults(), self.rng, self.now_s, self._on_message, signing
         )
@@ -264,7 +270,7 @@ class SitlFleet(StackOwner):
     ) -> None:
         f = self.frames
         self._apply_faults(now)
-        step(f, self.cfg.model, self._dt, self.rng)
+        step(f, self.cfg.model, self._dt, self.rng, self.vehicle_profile, self._delay)
         intruders = np.zeros((0, 3))
         if self.traffic is not None:
             self.traffic.maybe_start(now, f.vel_ned_m_s)

@@ -81,6 +81,7 @@ PX4 = FlavourSpec[Px4Params](
     initial_mode=POSCTL,
     land_mode=LAND,
     rtl_mode=RTL,
+    vehicle_profile="px4",
     pilot_modes={
         "POSCTL": POSCTL,
         "ALTCTL": px4_custom_mode(Px4MainMode.ALTCTL),

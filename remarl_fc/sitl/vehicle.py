@@ -19,6 +19,7 @@ from numpy.typing import NDArray
 
 from remarl_fc.sitl.config import VehicleModelConfig
 from sim.kinematics import wrap_angle
+from sim.vehicle import DelayLine, VehicleProfile, track_velocity
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -200,17 +201,30 @@ def commanded_velocity(a: Airframes, cfg: VehicleModelConfig) -> FloatArray:
     return cmd
 
 
-def step(a: Airframes, cfg: VehicleModelConfig, dt_s: float, rng: np.random.Generator) -> None:
-    """Advance every vehicle by ``dt_s`` seconds in place."""
+def step(
+    a: Airframes,
+    cfg: VehicleModelConfig,
+    dt_s: float,
+    rng: np.random.Generator,
+    profile: VehicleProfile,
+    delay: DelayLine | None = None,
+) -> None:
+    """Advance every vehicle by ``dt_s`` seconds in place.
+
+    Horizontally the vehicles answer their (``delay``-ed) velocity command as the fitted
+    ``profile`` says (`sim.vehicle`, the simulator's model); vertically to first order with
+    ``cfg``'s acceleration limit.
+    """
     cmd = commanded_velocity(a, cfg)
     cmd[:, :2] = _clip_norm(cmd[:, :2], cfg.max_speed_m_s)
     cmd[:, 2] = np.clip(cmd[:, 2], -cfg.max_climb_m_s, cfg.max_climb_m_s)
 
-    # first-order velocity tracking, acceleration-limited
-    accel = (cmd - a.vel_ned_m_s) / cfg.velocity_tau_s
-    accel[:, :2] = _clip_norm(accel[:, :2], cfg.max_accel_m_s2)
-    accel[:, 2] = np.clip(accel[:, 2], -cfg.max_vert_accel_m_s2, cfg.max_vert_accel_m_s2)
-    a.vel_ned_m_s += accel * dt_s
+    horizontal = cmd[:, :2] if delay is None else delay.push(cmd[:, :2])
+    a.vel_ned_m_s[:, :2] = track_velocity(a.vel_ned_m_s[:, :2], horizontal, profile, dt_s)
+    vert_accel = (cmd[:, 2] - a.vel_ned_m_s[:, 2]) / cfg.velocity_tau_s
+    a.vel_ned_m_s[:, 2] += (
+        np.clip(vert_accel, -cfg.max_vert_accel_m_s2, cfg.max_vert_accel_m_s2) * dt_s
+    )
 
     if cfg.gust_m_s > 0:  # Ornstein–Uhlenbeck gusts
         theta = dt_s / cfg.gust_tau_s
@@ -240,15 +254,15 @@ def step(a: Airframes, cfg: VehicleModelConfig, dt_s: float, rng: np.random.Gene
     angle = a.yaw_mode == YawMode.ANGLE
     hold = a.yaw_mode == YawMode.HOLD
     track = angle | hold
-    rate[track] = wrap_angle(a.yaw_target_rad[track] - a.yaw_rad[track]) / cfg.yaw_tau_s
+    rate[track] = wrap_angle(a.yaw_target_rad[track] - a.yaw_rad[track]) / profile.yaw_tau_s
     ratem = a.yaw_mode == YawMode.RATE
     rate[ratem] = a.yaw_rate_target_rad_s[ratem]
     travel = a.yaw_mode == YawMode.TRAVEL
     speed = np.hypot(a.vel_ned_m_s[:, 0], a.vel_ned_m_s[:, 1])
     moving = travel & (speed > 0.5)
     course = np.arctan2(a.vel_ned_m_s[:, 1], a.vel_ned_m_s[:, 0])
-    rate[moving] = wrap_angle(course[moving] - a.yaw_rad[moving]) / cfg.yaw_tau_s
-    rate = np.clip(rate, -cfg.max_yaw_rate_rad_s, cfg.max_yaw_rate_rad_s)
+    rate[moving] = wrap_angle(course[moving] - a.yaw_rad[moving]) / profile.yaw_tau_s
+    rate = np.clip(rate, -profile.max_yaw_rate_rad_s, profile.max_yaw_rate_rad_s)
     rate[a.landed & (a.guidance == Guidance.IDLE)] = 0.0
     a.yaw_rate_rad_s = rate
     a.yaw_rad = wrap_angle(a.yaw_rad + rate * dt_s)
