@@ -58,12 +58,8 @@ def plan_episodes(
     Raises:
         ValueError: the episodes do not have the scenario's N UAVs and M obstacles.
     """
-    b, s, n, m = episodes.num_envs, cfg.max_steps, cfg.uav.count, cfg.obstacles.count
-    if episodes.start_m.shape != (b, n, 2) or episodes.obstacle_pos_m.shape != (b, m, 2):
-        raise ValueError(
-            f"episodes of {episodes.start_m.shape[1]} UAVs and "
-            f"{episodes.obstacle_pos_m.shape[1]} obstacles for a scenario of {n} and {m}"
-        )
+    episodes.check(cfg)
+    b, s, n = episodes.num_envs, cfg.max_steps, cfg.uav.count
     oracle = oracle or OracleConfig()
     appear = episodes.obstacle_appear_step
     if not (appear > 0).any():

@@ -459,11 +459,7 @@ def plan_known(
         ValueError: the episodes do not have the scenario's N UAVs and M obstacles.
     """
     b, n, s, m = episodes.num_envs, cfg.uav.count, cfg.max_steps, cfg.obstacles.count
-    if episodes.start_m.shape != (b, n, 2) or episodes.obstacle_pos_m.shape != (b, m, 2):
-        raise ValueError(
-            f"episodes of {episodes.start_m.shape[1]} UAVs and "
-            f"{episodes.obstacle_pos_m.shape[1]} obstacles for a scenario of {n} and {m}"
-        )
+    episodes.check(cfg)
     ctx = _context(cfg, episodes, oracle)
     orders = _orders(cfg, episodes, oracle.orders, oracle.seed)
     actions = np.zeros((b, s, n), dtype=F32)

@@ -222,6 +222,15 @@ class EpisodeStart:
         """B."""
         return int(self.start_m.shape[0])
 
+    def check(self, cfg: ScenarioConfig) -> None:
+        """Raise ValueError unless these are episodes of ``cfg``'s N UAVs and M obstacles."""
+        b, n, m = self.num_envs, cfg.uav.count, cfg.obstacles.count
+        if self.start_m.shape != (b, n, 2) or self.obstacle_pos_m.shape != (b, m, 2):
+            raise ValueError(
+                f"episodes of {self.start_m.shape[1]} UAVs and "
+                f"{self.obstacle_pos_m.shape[1]} obstacles for a scenario of {n} and {m}"
+            )
+
     def headings(self) -> FloatArray:
         """(B, N) initial headings: given, or toward each UAV's target."""
         if self.heading_rad is not None:
@@ -233,7 +242,8 @@ class EpisodeStart:
     def take(self, envs: IntArray | BoolArray | slice) -> EpisodeStart:
         """The episodes selected by ``envs`` (indices, a (B,) mask or a slice)."""
         fields: dict[str, Any] = {
-            f.name: None if (v := getattr(self, f.name)) is None else v[envs] for f in _fields(self)
+            f.name: None if (v := getattr(self, f.name)) is None else v[envs]
+            for f in dataclasses.fields(self)
         }
         return EpisodeStart(**fields)
 
@@ -247,7 +257,7 @@ class EpisodeStart:
             f.name: None
             if getattr(parts[0], f.name) is None
             else np.concatenate([getattr(p, f.name) for p in parts])
-            for f in _fields(cls)
+            for f in dataclasses.fields(cls)
         }
         return cls(**fields)
 
@@ -273,10 +283,6 @@ class EpisodeStart:
             obstacle_vel_m_s,
             obstacle_appear_step,
         )
-
-
-def _fields(obj: Any) -> tuple[dataclasses.Field[Any], ...]:
-    return dataclasses.fields(obj)
 
 
 def encounter_tracks(

@@ -35,15 +35,14 @@ import hashlib
 import json
 import os
 import tempfile
-import tomllib
 from dataclasses import dataclass
-from importlib import resources
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from sim.arrays import BoolArray
+from sim.datafiles import read_toml, shipped_names
 from sim.encounters import DISTRIBUTIONS, GENERATOR_VERSION, Encounter, Family
 from sim.errors import ConfigError
 from sim.evaluation import evaluation_seed
@@ -83,10 +82,7 @@ class Suite:
 
 def suite_names() -> list[str]:
     """The suites shipped with the package."""
-    folder = resources.files("sim").joinpath("suites")
-    return sorted(
-        p.name.removesuffix(".toml") for p in folder.iterdir() if p.name.endswith(".toml")
-    )
+    return shipped_names("suites")
 
 
 def load_suite(name_or_path: str | Path) -> Suite:
@@ -95,22 +91,7 @@ def load_suite(name_or_path: str | Path) -> Suite:
     Raises:
         ConfigError: unknown name, unreadable or invalid file (the message says which key).
     """
-    text = str(name_or_path)
-    if text.endswith(".toml") or "/" in text:
-        path = Path(text)
-    elif text in suite_names():
-        path = Path(str(resources.files("sim").joinpath("suites").joinpath(f"{text}.toml")))
-    else:
-        raise ConfigError(
-            f"unknown suite {text!r}; shipped suites: {', '.join(suite_names())} "
-            "(or pass the path of a .toml file)"
-        )
-    try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise ConfigError(f"{path}: cannot read the suite file ({exc.strerror or exc})") from exc
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{path}: not valid TOML ({exc})") from exc
+    data, path = read_toml("suites", name_or_path, "suite")
     return _suite(data, path)
 
 

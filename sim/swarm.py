@@ -93,13 +93,8 @@ class SwarmSim:
         PSO only.
         """
         cfg = self.cfg
+        episodes.check(cfg)
         b, n = episodes.num_envs, cfg.uav.count
-        m = cfg.obstacles.count
-        if episodes.start_m.shape != (b, n, 2) or episodes.obstacle_pos_m.shape != (b, m, 2):
-            raise ValueError(
-                f"episodes of {episodes.start_m.shape[1]} UAVs and "
-                f"{episodes.obstacle_pos_m.shape[1]} obstacles for a scenario of {n} and {m}"
-            )
         pos = episodes.start_m.copy()
         state = SwarmState(
             pos_m=pos,

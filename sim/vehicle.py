@@ -17,15 +17,15 @@ simulator's frame (the trace tools convert from NED).
 from __future__ import annotations
 
 import math
-import tomllib
+from collections import deque
 from dataclasses import dataclass, fields
-from importlib import resources
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from sim.arrays import FloatArray
+from sim.datafiles import read_toml, shipped_names
 from sim.errors import ConfigError
 from sim.kinematics import wrap_angle
 
@@ -74,10 +74,7 @@ class VehicleProfile:
 
 def profile_names() -> list[str]:
     """The vehicle profiles shipped with the package."""
-    folder = resources.files("sim").joinpath("vehicles")
-    return sorted(
-        p.name.removesuffix(".toml") for p in folder.iterdir() if p.name.endswith(".toml")
-    )
+    return shipped_names("vehicles")
 
 
 def load_profile(name_or_path: str | Path) -> VehicleProfile:
@@ -86,20 +83,7 @@ def load_profile(name_or_path: str | Path) -> VehicleProfile:
     Raises:
         ConfigError: unknown name, unreadable file, unknown key or bad value.
     """
-    text = str(name_or_path)
-    if text.endswith(".toml") or "/" in text:
-        path = Path(text)
-    elif text in profile_names():
-        path = Path(str(resources.files("sim").joinpath("vehicles", f"{text}.toml")))
-    else:
-        raise ConfigError(
-            f"unknown vehicle profile {text!r}; shipped: {', '.join(profile_names())} "
-            "(or pass the path of a .toml file)"
-        )
-    try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except (OSError, tomllib.TOMLDecodeError) as exc:
-        raise ConfigError(f"{path}: cannot read the vehicle profile ({exc})") from exc
+    data, path = read_toml("vehicles", name_or_path, "vehicle profile")
     known = {f.name for f in fields(VehicleProfile)} - {"max_yaw_rate_rad_s"}
     kwargs: dict[str, Any] = {"name": path.stem}
     for key, value in data.items():
@@ -194,13 +178,11 @@ class DelayLine:
 
     def __init__(self, delay_s: float, dt_s: float) -> None:
         self.steps = max(0, round(delay_s / dt_s))
-        self._queue: list[FloatArray] = []
+        self._queue: deque[FloatArray] = deque(maxlen=self.steps + 1)
 
     def push(self, command: FloatArray) -> FloatArray:
         """Add this step's command; the one from ``steps`` steps ago comes back."""
         if self.steps == 0:
             return command
         self._queue.append(command.copy())
-        if len(self._queue) > self.steps + 1:
-            self._queue.pop(0)
         return self._queue[0]

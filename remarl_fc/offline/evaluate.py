@@ -8,6 +8,7 @@ measured on observations from the evaluation itself.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -25,11 +26,17 @@ REACTION_SAMPLES = 2000
 
 def reaction_time_ms(policy: Policy, observations: NDArray[np.float32]) -> dict[str, float]:
     """Median and p99 wall time (ms) of one decision for a whole swarm (N, D)."""
-    times = np.empty(REACTION_SAMPLES)
-    for k in range(REACTION_SAMPLES):
-        obs = observations[k % len(observations)]
+    return timed_decisions(
+        lambda k: policy.act(observations[k % len(observations)]), REACTION_SAMPLES
+    )
+
+
+def timed_decisions(decide: Callable[[int], object], samples: int) -> dict[str, float]:
+    """Median and p99 wall time (ms) of ``decide(k)`` for k = 0 … samples − 1."""
+    times = np.empty(samples)
+    for k in range(samples):
         t0 = time.perf_counter()
-        policy.act(obs)
+        decide(k)
         times[k] = time.perf_counter() - t0
     return {
         "reaction_time_median_ms": float(np.median(times) * 1e3),

@@ -26,8 +26,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from remarl_fc.errors import PolicyError
+from remarl_fc.offline.evaluate import timed_decisions
 from remarl_fc.offline.rollout import policy_by_name
 from remarl_fc.policy_io import load_policy, zoo_names
+from sim.arrays import FloatArray
 from sim.config import ScenarioConfig
 from sim.encounters import Family, sample_family
 from sim.env import episode_metrics
@@ -109,7 +111,7 @@ def run_family(
     if act is None:
         return {**head, "applicable": False, "reason": note}
     t0 = time.perf_counter()
-    rows = fly_episodes(cfg, batch, act)
+    rows = fly_episodes(cfg, batch, act).rows
     elapsed = time.perf_counter() - t0
     solvable = family_labels(suite, family, count)
     success = np.array([bool(r["success"]) for r in rows])
@@ -132,30 +134,35 @@ def run_family(
     }
 
 
-def fly_episodes(
-    cfg: ScenarioConfig,
-    batch: EpisodeStart,
-    act: Act,
-    trails: list[Any] | None = None,
-    final: list[SwarmState] | None = None,
-) -> list[dict[str, Any]]:
-    """Fly every episode of ``batch`` to its end; per-episode metrics in episode order.
+@dataclass(frozen=True)
+class Flown:
+    """Episodes flown to their end.
 
-    Args:
-        trails: if given, receives the UAV positions (B, N, 2) after the start and each step.
-        final: if given, receives the last state.
+    Attributes:
+        rows: per-episode metrics (`sim.env.episode_metrics`), in episode order.
+        final: the last state.
+        trail_m: (T + 1, B, N, 2) UAV positions at the start and after each step (with
+            ``trail=True``), else None.
     """
+
+    rows: list[dict[str, Any]]
+    final: SwarmState
+    trail_m: FloatArray | None
+
+
+def fly_episodes(
+    cfg: ScenarioConfig, batch: EpisodeStart, act: Act, *, trail: bool = False
+) -> Flown:
+    """Fly every episode of ``batch`` to its end in the unscored simulator."""
     sim = SwarmSim(cfg, scored=False)
     rng = np.random.default_rng(0)  # unused when unscored (no PSO); kept for the signature
     state = sim.start(batch, rng)
     rows: list[dict[str, Any] | None] = [None] * batch.num_envs
-    if trails is not None:
-        trails.append(state.pos_m.copy())
+    positions = [state.pos_m.copy()]
     for _ in range(cfg.max_steps):
-        actions = act(sim.observe(state).flat(), state, cfg)
-        state, result = sim.step(state, actions, rng)
-        if trails is not None:
-            trails.append(state.pos_m.copy())
+        state, result = sim.step(state, act(sim.observe(state).flat(), state, cfg), rng)
+        if trail:
+            positions.append(state.pos_m.copy())
         done = result.terminated | result.truncated
         if done.any():
             metrics = episode_metrics(state, result, done)
@@ -163,9 +170,9 @@ def fly_episodes(
                 rows[env] = {key: value[k] for key, value in metrics.items()}
         if all(r is not None for r in rows):
             break
-    if final is not None:
-        final.append(state)
-    return [r for r in rows if r is not None]
+    return Flown(
+        [r for r in rows if r is not None], state, np.asarray(positions) if trail else None
+    )
 
 
 def reaction_time(cfg: ScenarioConfig, one: EpisodeStart, act: Act) -> dict[str, float]:
@@ -173,15 +180,7 @@ def reaction_time(cfg: ScenarioConfig, one: EpisodeStart, act: Act) -> dict[str,
     sim = SwarmSim(cfg, scored=False)
     state = sim.start(one, np.random.default_rng(0))
     obs = sim.observe(state).flat()
-    times = np.empty(REACTION_SAMPLES)
-    for k in range(REACTION_SAMPLES):
-        t0 = time.perf_counter()
-        act(obs, state, cfg)
-        times[k] = time.perf_counter() - t0
-    return {
-        "reaction_time_median_ms": float(np.median(times) * 1e3),
-        "reaction_time_p99_ms": float(np.percentile(times, 99) * 1e3),
-    }
+    return timed_decisions(lambda _: act(obs, state, cfg), REACTION_SAMPLES)
 
 
 def _job(job: tuple[Suite, Family, MethodSpec, int | None]) -> dict[str, Any]:
@@ -196,7 +195,6 @@ def evaluate_suite(
     episodes: int | None = None,
     workers: int = 1,
     ray_address: str | None = None,
-    on_result: Callable[[dict[str, Any]], None] | None = None,
 ) -> list[dict[str, Any]]:
     """Every (method, family) cell; results in (method, family) order.
 
@@ -209,23 +207,8 @@ def evaluate_suite(
         family_labels(suite, family, count)
     jobs = [(suite, f, spec, count) for spec in specs for f in chosen]
     if ray_address is not None:
-        results = run_on_ray(_job, jobs, ray_address)
-    elif workers > 1:
+        return run_on_ray(_job, jobs, ray_address)
+    if workers > 1:
         with ProcessPoolExecutor(workers, mp_context=get_context("spawn")) as pool:
-            results = []
-            for r in pool.map(_job, jobs):
-                results.append(r)
-                if on_result:
-                    on_result(r)
-        return results
-    else:
-        results = []
-        for job in jobs:
-            results.append(_job(job))
-            if on_result:
-                on_result(results[-1])
-        return results
-    for r in results:
-        if on_result:
-            on_result(r)
-    return results
+            return list(pool.map(_job, jobs))
+    return [_job(job) for job in jobs]

@@ -99,11 +99,9 @@ def draw_worst(suite: Suite, result: dict[str, Any], spec: MethodSpec, out: Path
     act, _ = resolve_method(spec, family, cfg)
     if act is None:
         return
-    trails: list[Any] = []
-    states: list[Any] = []
-    fly_episodes(cfg, batch, act, trails=trails, final=states)
-    trail = np.asarray(trails)[:, 0]  # (T, N, 2)
-    state = states[0]
+    flown = fly_episodes(cfg, batch, act, trail=True)
+    assert flown.trail_m is not None
+    trail, state = flown.trail_m[:, 0], flown.final  # (T, N, 2)
     points = np.concatenate(
         [trail.reshape(-1, 2), state.target_m[0], state.obstacle_pos_m[0], batch.obstacle_pos_m[0]]
     )

@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sim.encounters import DISTRIBUTIONS, Family, family_scenario, sample_family
+from sim.encounters import DISTRIBUTIONS, Encounter, Family, family_scenario, sample_family
 from sim.errors import ConfigError, ScenarioError
 from sim.metrics import swept_min_distance
 from sim.scenarios import load_scenario, scenario_from_dict
@@ -194,9 +194,7 @@ def test_a_family_that_cannot_be_placed_says_so():
         name="x",
         distribution="static",
         uavs=1,
-        encounter=DISTRIBUTIONS["static"].__class__(
-            speed_m_s=(0.0, 0.0), intruders=1, tcpa_fraction=(0.001, 0.001)
-        ),
+        encounter=Encounter(speed_m_s=(0.0, 0.0), intruders=1, tcpa_fraction=(0.001, 0.001)),
     )
     with pytest.raises(ConfigError, match="starting on a UAV"):
         sample_family(crowded, SEED, range(1))
