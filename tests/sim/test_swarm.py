@@ -164,3 +164,31 @@ def test_rewards_include_both_parts_and_inactive_agents_get_zero():
         r.reward.internal, (np.array([[0.5, 0.5, 0.0], [1.0, 0.0, 1.0]])) ** 2
     )
     assert (r.reward.external > 0).all()
+
+
+def test_the_unscored_simulator_flies_the_same_episodes_without_the_reward():
+    from sim.heuristics import potential_field_actions
+    from sim.scenarios import load_scenario
+    from sim.spawn import spawn_episodes
+    from sim.swarm import SwarmSim
+
+    cfg = load_scenario("5u2o")
+    episodes = spawn_episodes(cfg, np.random.default_rng(3), 16)
+    runs = []
+    for scored in (True, False):
+        sim, rng = SwarmSim(cfg, scored=scored), np.random.default_rng(0)
+        state, outcomes = sim.start(episodes, rng), []
+        for _ in range(cfg.max_steps):
+            obs = sim.observe(state).flat()
+            act = potential_field_actions(obs, cfg.sensing.max_obstacles, cfg.uav.max_turn_rad)
+            state, result = sim.step(state, act, rng)
+            outcomes.append((result.success, result.collided_u2o, result.collided_u2u))
+        runs.append((state, outcomes))
+    (scored, out_s), (unscored, out_u) = runs
+    np.testing.assert_array_equal(scored.pos_m, unscored.pos_m)
+    np.testing.assert_array_equal(scored.stats.min_u2o_m, unscored.stats.min_u2o_m)
+    for a, b in zip(out_s, out_u, strict=True):
+        for x, y in zip(a, b, strict=True):
+            np.testing.assert_array_equal(x, y)
+    assert np.abs(scored.stats.total_return).sum() > 0
+    assert not unscored.stats.total_return.any() and not unscored.levels.any()
