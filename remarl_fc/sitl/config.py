@@ -92,6 +92,25 @@ class Px4Params:
 
 
 @dataclass(frozen=True)
+class VerticalAxis:
+    """The mock's vertical response: first order, capped.
+
+    The SITL traces fit only the horizontal plane, which follows the vehicle profile.
+    """
+
+    tau_s: float = 0.8
+    """Vertical velocity tracking time constant."""
+    max_accel_m_s2: float = 2.5
+    """Vertical acceleration limit."""
+    max_climb_m_s: float = 5.0
+    """Vertical speed limit, up and down."""
+
+    def __post_init__(self) -> None:
+        if not self.tau_s > 0:
+            raise ValueError(f"tau_s must be > 0, not {self.tau_s}")
+
+
+@dataclass(frozen=True)
 class VehicleModelConfig:
     """The simulated multirotor beyond its horizontal response.
 
@@ -104,14 +123,9 @@ class VehicleModelConfig:
 
     profile: str = "responsive"
     """Vehicle profile name or file (``sim/vehicles``); "flavour": the flavour's fitted one."""
-    velocity_tau_s: float = 0.8
-    """Vertical velocity tracking time constant (the traces fit only the horizontal plane)."""
-    max_vert_accel_m_s2: float = 2.5
-    """Vertical acceleration limit."""
     max_speed_m_s: float = 20.0
     """Horizontal speed limit."""
-    max_climb_m_s: float = 5.0
-    """Vertical speed limit, up and down."""
+    vertical: VerticalAxis = field(default_factory=VerticalAxis)
     position_gain_1_s: float = 0.8
     """Position-target controller gain (m/s per m of error), capped by `max_speed_m_s`."""
     gust_m_s: float = 0.0
@@ -123,7 +137,7 @@ class VehicleModelConfig:
     """Standard deviation of the horizontal noise on reported positions (0 = exact)."""
 
     def __post_init__(self) -> None:
-        for name in ("velocity_tau_s", "gust_tau_s"):
+        for name in ("gust_tau_s",):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name} must be > 0, not {getattr(self, name)}")
         for name in ("gust_m_s", "gps_noise_m"):

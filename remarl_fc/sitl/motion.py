@@ -64,7 +64,8 @@ class Motion:
 
     def drop(self) -> None:
         """Motors stopped in the air: fall to the ground at the model's climb limit."""
-        self.land(self.model.max_climb_m_s, self.model.max_climb_m_s, 0.0)
+        climb = self.model.vertical.max_climb_m_s
+        self.land(climb, climb, 0.0)
 
     def climb(self, height_m: float, rate_m_s: float) -> None:
         """Climb vertically to ``height_m`` above the ground at ``rate_m_s``."""

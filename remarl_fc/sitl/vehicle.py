@@ -217,13 +217,13 @@ def step(
     """
     cmd = commanded_velocity(a, cfg)
     cmd[:, :2] = _clip_norm(cmd[:, :2], cfg.max_speed_m_s)
-    cmd[:, 2] = np.clip(cmd[:, 2], -cfg.max_climb_m_s, cfg.max_climb_m_s)
+    cmd[:, 2] = np.clip(cmd[:, 2], -cfg.vertical.max_climb_m_s, cfg.vertical.max_climb_m_s)
 
     horizontal = cmd[:, :2] if delay is None else delay.push(cmd[:, :2])
     a.vel_ned_m_s[:, :2] = track_velocity(a.vel_ned_m_s[:, :2], horizontal, profile, dt_s)
-    vert_accel = (cmd[:, 2] - a.vel_ned_m_s[:, 2]) / cfg.velocity_tau_s
+    vert_accel = (cmd[:, 2] - a.vel_ned_m_s[:, 2]) / cfg.vertical.tau_s
     a.vel_ned_m_s[:, 2] += (
-        np.clip(vert_accel, -cfg.max_vert_accel_m_s2, cfg.max_vert_accel_m_s2) * dt_s
+        np.clip(vert_accel, -cfg.vertical.max_accel_m_s2, cfg.vertical.max_accel_m_s2) * dt_s
     )
 
     if cfg.gust_m_s > 0:  # Ornstein–Uhlenbeck gusts
