@@ -6,8 +6,8 @@ values that differ per scenario (counts, geometry) and may override any other fi
 (keys ending in ``_deg``), converted once at load time.
 
 Where the paper gives no number, the default is our choice; `docs/MODEL.md` gives the reason.
-One module over the usual 400 lines on purpose: every default in one place, each with its unit
-and reason, is the point of it.
+One module over the usual 400 lines (about 540) on purpose: every default in one place, each
+with its unit and reason, is the point of it.
 """
 
 from __future__ import annotations
@@ -19,9 +19,15 @@ from typing import Literal
 
 ExternalTerm = Literal["gradient", "level-edge"]
 Formation = Literal["line", "wedge", "grid"]
+TargetLayout = Literal["line", "formation"]
+SensorModel = Literal["exact", "adsb"]
+Arrival = Literal["hover", "leave"]
 
 EXTERNAL_TERMS: tuple[ExternalTerm, ...] = ("gradient", "level-edge")
 FORMATIONS: tuple[Formation, ...] = ("line", "wedge", "grid")
+TARGET_LAYOUTS: tuple[TargetLayout, ...] = ("line", "formation")
+SENSOR_MODELS: tuple[SensorModel, ...] = ("exact", "adsb")
+ARRIVALS: tuple[Arrival, ...] = ("hover", "leave")
 
 
 class FieldValueError(ValueError):
@@ -218,7 +224,13 @@ class UAVConfig:
     Given, they replace ``formation``, ``spacing_m``, ``rows`` and ``center_m``."""
 
     targets_m: tuple[tuple[float, float], ...] = ()
-    """Per-UAV targets [x, y], metres, one per UAV; empty: ``target_x_m`` on each UAV's line."""
+    """Per-UAV targets [x, y], metres, one per UAV; empty: from ``target_layout``."""
+
+    target_layout: TargetLayout = "line"
+    """Where the targets lie when ``targets_m`` is empty: "line" (the paper: every target at
+    x = ``target_x_m``, on its UAV's spawn y) or "formation" (the spawn formation moved along x
+    so that its centre lies at ``target_x_m``; the targets are then as far apart as the spawn
+    slots, which arrival as hovering needs when slots share a y, as rows of a grid do)."""
 
     def __post_init__(self) -> None:
         _integer(self, "count")
@@ -246,6 +258,11 @@ class UAVConfig:
             f"must be one of {', '.join(FORMATIONS)}, got {self.formation!r}",
         )
         _integer(self, "rows")
+        _require(
+            self.target_layout in TARGET_LAYOUTS,
+            "target_layout",
+            f"must be one of {', '.join(TARGET_LAYOUTS)}, got {self.target_layout!r}",
+        )
         _require(len(self.center_m) == 2, "center_m", "must be [x, y]")
         _require(
             self.target_x_m > self.center_m[0],
@@ -353,6 +370,102 @@ class SensingConfig:
         _integer(self, "max_obstacles")
 
 
+def _range(obj: object, *names: str, minimum: float = 0.0) -> None:
+    for name in names:
+        lo, hi = getattr(obj, name)
+        _require(
+            math.isfinite(lo) and math.isfinite(hi) and minimum <= lo <= hi,
+            name,
+            f"must be [low, high] with {minimum:g} <= low <= high, got {[lo, hi]!r}",
+        )
+
+
+@dataclass(frozen=True)
+class DynamicsRandomisation:
+    """Per-vehicle randomisation of the vehicle response, drawn at each episode start.
+
+    Each UAV of each episode draws a profile from ``profiles`` (uniformly; empty: the scenario's
+    ``dynamics``), then multiplies its delay, velocity time constant and acceleration cap by
+    factors drawn uniformly from the ranges below. The defaults change nothing. Seeded by the
+    generator of the episode start, so a run is reproducible.
+    """
+
+    profiles: tuple[str, ...] = ()
+    """Vehicle profiles to draw from (shipped names or paths); empty: the scenario's one."""
+
+    delay_scale: tuple[float, float] = (1.0, 1.0)
+    """Factor range on the profile's transport delay."""
+
+    velocity_tau_scale: tuple[float, float] = (1.0, 1.0)
+    """Factor range on the profile's velocity time constant."""
+
+    max_accel_scale: tuple[float, float] = (1.0, 1.0)
+    """Factor range on the profile's acceleration cap."""
+
+    def __post_init__(self) -> None:
+        _range(self, "delay_scale")
+        _range(self, "velocity_tau_scale", "max_accel_scale", minimum=1e-3)
+
+    @property
+    def randomised(self) -> bool:
+        """Whether anything is drawn at all."""
+        return bool(self.profiles) or any(
+            lo != hi for lo, hi in (self.delay_scale, self.velocity_tau_scale, self.max_accel_scale)
+        )
+
+
+@dataclass(frozen=True)
+class SensorConfig:
+    """How the UAVs learn where the intruders and the vehicles of the swarm are.
+
+    "exact": every position and velocity is true and current (the paper). "adsb": intruders are
+    known only from ADS-B reports, each intruder reporting at its own rate with its own latency
+    and accuracy, some reports lost, and tracked between reports by the runtime's extrapolation
+    (`sim.sensors`); every UAV position (own and the swarm's) carries GPS noise. The ranges are
+    drawn per intruder and episode.
+    """
+
+    model: SensorModel = "exact"
+    """"exact" or "adsb"."""
+
+    adsb_rate_hz: tuple[float, float] = (1.0, 2.0)
+    """Report rate range, Hz: 1090ES transponders broadcast the airborne position twice a
+    second, and what a receiver forwards after losses and its own decimation is 1–2 Hz."""
+
+    adsb_latency_s: tuple[float, float] = (0.2, 1.5)
+    """Age of a report when it reaches the runtime, seconds: the transponder's own latency
+    plus the receiver and the telemetry link that relays it."""
+
+    adsb_epu_m: tuple[float, float] = (10.0, 30.0)
+    """95% horizontal position error (EPU) range, metres: NACp 10 (< 10 m) to NACp 9 (< 30 m),
+    the classes of GNSS-equipped transponders."""
+
+    adsb_nacv_m_s: float = 3.0
+    """95% horizontal velocity error, m/s: NACv 2 (< 3 m/s)."""
+
+    adsb_drop_probability: float = 0.1
+    """Probability that a report is lost (garbled, out of range, receiver busy)."""
+
+    gps_sigma_m: float = 1.0
+    """One-sigma GPS error per horizontal axis of every UAV position, metres (consumer GNSS
+    with SBAS, about 1.5 m 95%), re-drawn at every decision."""
+
+    def __post_init__(self) -> None:
+        _require(
+            self.model in SENSOR_MODELS,
+            "model",
+            f"must be one of {', '.join(SENSOR_MODELS)}, got {self.model!r}",
+        )
+        _range(self, "adsb_latency_s", "adsb_epu_m")
+        _range(self, "adsb_rate_hz", minimum=1e-3)
+        _non_negative(self, "adsb_nacv_m_s", "gps_sigma_m")
+        _require(
+            0.0 <= self.adsb_drop_probability < 1.0,
+            "adsb_drop_probability",
+            f"must be in [0, 1), got {self.adsb_drop_probability!r}",
+        )
+
+
 @dataclass(frozen=True)
 class ScenarioConfig:
     """A complete scenario: geometry, agents, timing, sensing, field, reward and PSO."""
@@ -389,6 +502,19 @@ class ScenarioConfig:
     field: FieldConfig = dataclasses.field(default_factory=FieldConfig)
     reward: RewardConfig = dataclasses.field(default_factory=RewardConfig)
     pso: PSOConfig = dataclasses.field(default_factory=PSOConfig)
+    arrival: Arrival = "hover"
+    """What a UAV does once within d_col of its target: "hover" (it stops there and stays in
+    every separation check until the episode ends, as ``fly`` holds a vehicle that arrived) or
+    "leave" (the paper's rule: it leaves the episode)."""
+
+    dynamics: str = "ideal"
+    """The vehicle profile every UAV flies (`sim.vehicle`: "ideal" is the paper's arcs,
+    "arducopter", "px4", ... are fitted to real autopilots), a shipped name or a file path."""
+
+    dynamics_randomisation: DynamicsRandomisation = dataclasses.field(
+        default_factory=DynamicsRandomisation
+    )
+    sensors: SensorConfig = dataclasses.field(default_factory=SensorConfig)
     intruders: tuple[IntruderConfig, ...] = ()
     """Obstacles placed by their encounter geometry (``[[intruders]]`` tables in a file)
     instead of the random spawn line of `ObstacleConfig`; one per obstacle."""
@@ -402,6 +528,11 @@ class ScenarioConfig:
             f"must divide substeps ({self.substeps}), got {self.reward.quadrature_intervals}",
         )
         _integer(self, "max_steps")
+        _require(
+            self.arrival in ARRIVALS,
+            "arrival",
+            f"must be one of {', '.join(ARRIVALS)}, got {self.arrival!r}",
+        )
         _require(
             self.uav.target_x_m <= self.arena_length_m,
             "uav.target_x_m",

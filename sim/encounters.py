@@ -29,7 +29,7 @@ from typing import Any, Literal
 import numpy as np
 
 from sim.arrays import FloatArray
-from sim.config import ObstacleConfig, ScenarioConfig, UAVConfig
+from sim.config import Arrival, ObstacleConfig, ScenarioConfig, UAVConfig
 from sim.errors import ConfigError
 from sim.spawn import (
     SPAWN_SPACING_FACTOR,
@@ -40,8 +40,16 @@ from sim.spawn import (
     spawn_episodes,
 )
 
-GENERATOR_VERSION = 1
-"""Bumped whenever a change here draws different episodes (cached oracle labels depend on it)."""
+GENERATOR_VERSION = 2
+"""Bumped whenever a change here, or in a shipped scenario a family is built on, draws
+different episodes (cached oracle labels depend on it). 2: the grid scenarios' targets keep the
+spawn formation (``target_layout = "formation"``)."""
+
+SUITE_ARRIVAL: Arrival = "leave"
+"""The arrival rule every family is flown with: the paper's (an arrived UAV leaves the
+episode). The oracle's search plans each UAV up to its arrival only; until it also plans around
+vehicles hovering where they arrived, the suite keeps the rule its labels prove solvable under.
+A family's ``overrides`` may still set ``arrival``."""
 
 Formation = Literal["line", "wedge", "grid", "random"]
 FORMATIONS: tuple[Formation, ...] = ("line", "wedge", "grid", "random")
@@ -218,7 +226,7 @@ def family_scenario(family: Family) -> ScenarioConfig:
     """
     from sim.scenarios import load_scenario
 
-    base = load_scenario(family.scenario, **family.overrides)
+    base = load_scenario(family.scenario, **{"arrival": SUITE_ARRIVAL, **family.overrides})
     enc = family.encounter
     if enc is None:
         return dataclasses.replace(base, name=family.name)

@@ -298,7 +298,7 @@ def neighbour_violation(
     blocked: BoolArray,
     priority: float,
 ) -> FloatArray:
-    """(B, N, C) largest violation of the ORCA half-planes of the other active UAVs, m/s.
+    """(B, N, C) largest violation of the ORCA half-planes of the other UAVs, m/s.
 
     Args:
         turn_rad: (B, N, C) the candidates.
@@ -337,12 +337,16 @@ def orca_lines(
         point: (B, N, N, 2) v_A + share·u, a point on the boundary line, m/s.
         direction: (B, N, N, 2) the line's unit direction; admissible velocities v lie on its
             left: det(direction, point − v) ≤ 0.
-        counts: (B, N, N) pairs that count (both active, A ≠ B).
+        counts: (B, N, N) pairs that count (A active, B active or hovering where it arrived,
+            A ≠ B); A takes the whole responsibility for a hovering B.
     """
     pos, heading, active = state.pos_m, state.heading_rad, state.active
+    hovering = state.hovering(cfg.arrival)  # arrived: stays put, takes no share
     n = heading.shape[1]
     speed, dt = cfg.uav.speed_m_s, cfg.dt_s
     vel = speed * np.stack([np.cos(heading), np.sin(heading)], axis=-1)  # (B, N, 2)
+    vel = np.where(hovering[..., None], 0.0, vel)
+    share = np.where(hovering[:, None, :], 1.0, share)
     rel_pos = pos[:, None] - pos[:, :, None]  # [b, a, o] = p_o − p_a
     rel_vel = vel[:, :, None] - vel[:, None]  # [b, a, o] = v_a − v_o
     px, py = rel_pos[..., 0], rel_pos[..., 1]
@@ -377,7 +381,7 @@ def orca_lines(
     )
     u = np.where(apart[..., None], np.where(on_disc[..., None], disc_u, leg_u), over_u)
     point = vel[:, :, None] + share[..., None] * u
-    counts = active[:, :, None] & active[:, None, :] & ~np.eye(n, dtype=bool)
+    counts = active[:, :, None] & (active | hovering)[:, None, :] & ~np.eye(n, dtype=bool)
     return point, direction, counts
 
 

@@ -46,8 +46,15 @@ from typing import Any, get_args, get_origin, get_type_hints
 import numpy as np
 
 from sim.config import FieldValueError, IntruderConfig, ScenarioConfig
-from sim.errors import ScenarioError
-from sim.spawn import SPAWN_SPACING_FACTOR, min_pairwise_distance, swarm_layout
+from sim.dynamics import longest_delay_s
+from sim.errors import ConfigError, ScenarioError
+from sim.spawn import (
+    SPAWN_SPACING_FACTOR,
+    min_pairwise_distance,
+    swarm_layout,
+    target_spacing_problem,
+)
+from sim.vehicle import load_profile
 
 SECTIONS: dict[str, type[Any]] = {
     name: hint
@@ -147,7 +154,25 @@ def scenario_from_dict(data: dict[str, Any], *, name: str, source: str) -> Scena
         extra=sections,
     )
     _check_geometry(top, source)
+    _check_dynamics(top, source)
     return top
+
+
+def _check_dynamics(cfg: ScenarioConfig, source: str) -> None:
+    named = [("dynamics", cfg.dynamics)]
+    named += [("dynamics_randomisation.profiles", p) for p in cfg.dynamics_randomisation.profiles]
+    for key, name in named:
+        try:
+            load_profile(name)
+        except ConfigError as exc:
+            raise ScenarioError(str(exc), source=source, key=key) from exc
+    if longest_delay_s(cfg) >= cfg.dt_s:
+        raise ScenarioError(
+            f"the longest vehicle delay it can draw, {longest_delay_s(cfg):.2f} s, reaches the "
+            f"decision step dt_s = {cfg.dt_s} s; lower it",
+            source=source,
+            key="dynamics_randomisation.delay_scale",
+        )
 
 
 def _intruders(raw: Any, source: str) -> tuple[IntruderConfig, ...]:
@@ -253,6 +278,11 @@ def _check_geometry(cfg: ScenarioConfig, source: str) -> None:
             source=source,
             key="uav.spacing_m",
         )
+    problem = target_spacing_problem(layout.targets_m, cfg.d_col_m)
+    if problem is not None:
+        key = "uav.targets_m" if cfg.uav.targets_m else "uav.target_layout"
+        hint = "" if cfg.uav.targets_m else ' (target_layout = "formation" keeps the spawn spacing)'
+        raise ScenarioError(problem + hint, source=source, key=key)
     pos = layout.positions_m
     inside = (
         (pos[:, 0] >= 0)

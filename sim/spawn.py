@@ -22,6 +22,11 @@ from sim.kinematics import heading_velocity
 SPAWN_SPACING_FACTOR = 1.5
 """Minimum spawn distance between two UAVs, in units of d_col (SPEC §3)."""
 
+TARGET_SPACING_FACTOR = SPAWN_SPACING_FACTOR
+"""Minimum distance between two UAVs' targets, in units of d_col: d_col plus a half-d_col
+margin, as for the spawn. A UAV that arrives stops and hovers near its target until the
+episode (or the flight) ends, and the others must keep d_col from it."""
+
 DEGENERATE_DIRECTION = 1e-6
 """Below this length the mean of the UAVs' unit directions to their targets has no direction."""
 
@@ -95,6 +100,9 @@ def swarm_layout(cfg: ScenarioConfig) -> SwarmLayout:
         positions = np.asarray(uav.center_m, dtype=np.float64) + formation_offsets(uav)
     if uav.targets_m:
         targets = np.asarray(uav.targets_m, dtype=np.float64)
+    elif uav.target_layout == "formation":
+        centre_x = float(positions[:, 0].mean()) if uav.starts_m else uav.center_m[0]
+        targets = positions + np.array([uav.target_x_m - centre_x, 0.0])
     else:
         targets = np.stack([np.full(uav.count, uav.target_x_m), positions[:, 1]], axis=-1)
     delta = targets - positions
@@ -387,3 +395,25 @@ def obstacle_speeds(velocity_m_s: FloatArray) -> FloatArray:
     """|v_o| of every obstacle, (B, M), from velocities (B, M, 2)."""
     speed: FloatArray = np.hypot(velocity_m_s[..., 0], velocity_m_s[..., 1])
     return speed
+
+
+def target_spacing_problem(targets_m: FloatArray, d_col_m: float) -> str | None:
+    """Why the targets (N, 2) are too close for vehicles that hover at them, or None.
+
+    Two targets must lie `TARGET_SPACING_FACTOR`·d_col apart: vehicles that arrive hover there
+    while the others still fly, and every separation counts until the end.
+    """
+    targets = np.asarray(targets_m, dtype=np.float64).reshape(-1, 2)
+    if len(targets) < 2:
+        return None
+    gaps = np.hypot(*(targets[:, None] - targets[None]).transpose(2, 0, 1))
+    gaps[np.diag_indices(len(targets))] = np.inf
+    i, j = np.unravel_index(int(np.argmin(gaps)), gaps.shape)
+    need = TARGET_SPACING_FACTOR * d_col_m
+    if gaps[i, j] >= need:
+        return None
+    return (
+        f"the targets of vehicles {min(i, j)} and {max(i, j)} are {gaps[i, j]:.1f} m apart, below "
+        f"{TARGET_SPACING_FACTOR}·d_col = {need:.1f} m: vehicles that arrive hover at their "
+        "targets and must keep d_col from each other; move the targets apart"
+    )

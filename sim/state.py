@@ -15,10 +15,13 @@ from typing import TypeVar
 import numpy as np
 
 from sim.arrays import BoolArray, FloatArray, IntArray
+from sim.config import Arrival
 from sim.contour import ArcWindow
+from sim.dynamics import Response
 from sim.field import FieldSources
 from sim.observation import Observations
 from sim.reward import RewardTerms
+from sim.sensors import AdsbTracks
 
 T = TypeVar("T")
 
@@ -74,6 +77,14 @@ class SwarmState:
         window: the contour windows (B, N, K).
         steps: (B,) decision steps taken in the current episode.
         stats: the episode accumulators.
+        vel_m_s: (B, N, 2) UAV velocities (the commanded ones for the ideal vehicle; 0 while
+            hovering).
+        speed_m_s: (B, N) speed of each UAV's last commanded arc (0 once arrived).
+        last_turn_rad: (B, N) heading change of each UAV's last commanded arc.
+        response: each UAV's vehicle response (`sim.dynamics`), None for the ideal vehicle.
+        tracks: the ADS-B tracks of the obstacles (`sim.sensors`), None when sensing is exact.
+        gps_error_m: (B, N, 2) the GPS error of each UAV's position at this decision (0 when
+            sensing is exact).
     """
 
     pos_m: FloatArray
@@ -93,11 +104,28 @@ class SwarmState:
     window: ArcWindow
     steps: IntArray
     stats: EpisodeStats
+    vel_m_s: FloatArray
+    speed_m_s: FloatArray
+    last_turn_rad: FloatArray
+    response: Response | None
+    tracks: AdsbTracks | None
+    gps_error_m: FloatArray
 
     @property
     def num_envs(self) -> int:
         """B."""
         return int(self.pos_m.shape[0])
+
+    def hovering(self, arrival: Arrival) -> BoolArray:
+        """(B, N) UAVs that arrived and hover where they stopped, while the episode goes on.
+
+        None under the paper's rule (``arrival`` "leave"): they left.
+        """
+        if arrival == "leave":
+            return np.zeros_like(self.reached)
+        running = self.active.any(axis=-1, keepdims=True)
+        hover: BoolArray = self.reached & running
+        return hover
 
     @property
     def obstacle_visible(self) -> BoolArray:
@@ -126,11 +154,13 @@ class StepResult:
     Attributes:
         obs: observations after the step (for the next decision).
         reward: every reward term, (B, N); zero for UAVs that did not fly this step.
-        acted: (B, N) UAVs that flew this step.
+        acted: (B, N) UAVs that flew this step (not those hovering where they arrived).
         turn_rad: (B, N) the heading change flown.
-        collided_u2o, collided_u2u: (B, N) collisions during the step, by kind.
+        collided_u2o, collided_u2u: (B, N) collisions during the step, by kind (a hovering UAV
+            that is run into counts).
         arrived: (B, N) UAVs that reached their target during this step.
-        min_u2o_m, min_u2u_m: (B, N) swept closest approach this step (+inf if none).
+        min_u2o_m, min_u2u_m: (B, N) swept closest approach this step (+inf if none), hovering
+            UAVs included.
         terminated: (B,) collision, or every UAV arrived.
         truncated: (B,) step limit reached without termination.
         success: (B,) every UAV arrived and nothing collided.

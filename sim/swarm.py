@@ -3,13 +3,17 @@
 ``step(state, actions, rng, cfg) -> (state, StepResult)`` advances B environments of N UAVs and
 M obstacles by one decision step, with no per-agent Python loop:
 
-1. every active UAV flies the constant-turn-rate arc of its action; obstacles fly straight;
-   the virtual centre keeps the swarm's initial velocity;
+1. every active UAV flies the constant-turn-rate arc of its action (with the "ideal" vehicle
+   of the paper), or follows it as a command with its vehicle's fitted lag and limits
+   (`sim.dynamics`); obstacles fly straight; the virtual centre keeps the swarm's initial
+   velocity;
 2. swept checks find the closest approach, *during* the step, of every UAV to every obstacle,
    to every other UAV and to its target (`sim.metrics`);
 3. collisions (closer than d_col) end the episode; a UAV that comes within d_col of its target
-   has arrived and leaves the episode (masked); all arrived is a success; the step limit
-   truncates;
+   has arrived: it stops acting and hovers where its step ends (brakes, with a fitted
+   vehicle), and stays in every separation check until the episode ends, as ``fly`` holds it
+   (``arrival = "leave"``: the paper's rule, it leaves the episode); all arrived is a
+   success; the step limit truncates;
 4. every UAV's new arc is scored against the field at mid-step and pushed into its contour
    window; the full reMARL reward and its Swarming part are computed for all agents at once;
 5. contour levels are (re)assigned by PSO where SPEC §6 says: at episode start (`reset`) and on
@@ -30,10 +34,13 @@ from numpy.typing import NDArray
 from sim.arrays import BoolArray
 from sim.config import ScenarioConfig
 from sim.contour import ArcWindow
+from sim.dynamics import draw_response, is_ideal
 from sim.kinematics import heading_velocity, scale_action
 from sim.metrics import substep_fractions
 from sim.observation import ObservationLayout, Observations, build_observations
 from sim.reward import RewardTerms, assign_contour_levels
+from sim.sensors import AdsbTracks, gps_noise, picture
+from sim.sensors import update as sensor_update
 from sim.spawn import EpisodeStart, obstacle_speeds, spawn_episodes, swarm_layout
 from sim.state import EpisodeStats, StepResult, SwarmState, merge_where
 from sim.transition import (
@@ -42,6 +49,7 @@ from sim.transition import (
     closest_approaches,
     difference_operator,
     fly,
+    fly_with_response,
     outcome,
     score,
 )
@@ -81,6 +89,7 @@ class SwarmSim:
         self.fractions = substep_fractions(cfg.substeps)
         self.pairs = np.triu_indices(cfg.uav.count, k=1)
         self.difference_op = difference_operator(cfg.uav.count, cfg.obstacles.count)
+        self.ideal = is_ideal(cfg)
 
     def initial_state(self, rng: np.random.Generator, num_envs: int) -> SwarmState:
         """B new episodes of the scenario (`sim.spawn.spawn_episodes`), levels by PSO."""
@@ -89,16 +98,18 @@ class SwarmSim:
     def start(self, episodes: EpisodeStart, rng: np.random.Generator) -> SwarmState:
         """New episodes from given starts, targets and obstacles; contour levels by PSO.
 
-        Every UAV heads for its target unless ``episodes`` gives headings. ``rng`` serves the
-        PSO only.
+        Every UAV heads for its target unless ``episodes`` gives headings, in flight at the
+        UAV speed. ``rng`` serves the randomised vehicle responses (only where the scenario
+        randomises them) and the PSO.
         """
         cfg = self.cfg
         episodes.check(cfg)
         b, n = episodes.num_envs, cfg.uav.count
         pos = episodes.start_m.copy()
+        heading = episodes.headings().copy()
         state = SwarmState(
             pos_m=pos,
-            heading_rad=episodes.headings().copy(),
+            heading_rad=heading,
             active=np.ones((b, n), dtype=bool),
             reached=np.zeros((b, n), dtype=bool),
             start_m=pos.copy(),
@@ -114,7 +125,14 @@ class SwarmSim:
             window=ArcWindow.empty(b, n, cfg.reward.window_steps),
             steps=np.zeros(b, dtype=np.int64),
             stats=EpisodeStats.fresh(b, n),
+            vel_m_s=heading_velocity(heading, cfg.uav.speed_m_s),
+            speed_m_s=np.full((b, n), cfg.uav.speed_m_s),
+            last_turn_rad=np.zeros((b, n)),
+            response=draw_response(cfg, b, n, rng),
+            tracks=None,
+            gps_error_m=np.zeros((b, n, 2)),
         )
+        state = self._sense(state, rng)
         if not self.scored:
             return state
         levels, _ = assign_contour_levels(
@@ -131,8 +149,36 @@ class SwarmSim:
             return state
         return merge_where(state, self.initial_state(rng, count), mask)
 
+    def _sense(self, state: SwarmState, rng: np.random.Generator) -> SwarmState:
+        """What the UAVs know at this decision: new ADS-B reports and GPS errors.
+
+        Exact sensing (the paper) draws nothing. With "adsb" (`sim.sensors`) every obstacle's
+        track takes the reports that arrived by now (a pop-up transmits from when it appears,
+        the others all along), and every UAV position gets a fresh GPS error.
+        """
+        sensors = self.cfg.sensors
+        if sensors.model == "exact":
+            return state
+        b, m = state.obstacle_pos_m.shape[:2]
+        tracks = state.tracks
+        if tracks is None:
+            tracks = AdsbTracks.fresh(b, m, sensors, rng)
+        dt = self.cfg.dt_s
+        hidden = state.obstacle_appear_step > 0
+        since = np.where(hidden, state.obstacle_appear_step * dt, -np.inf)
+        now = (state.steps * dt).astype(np.float64)[:, None]
+        tracks = sensor_update(
+            tracks, state.obstacle_pos_m, state.obstacle_vel_m_s, now, since, sensors, rng
+        )
+        error = gps_noise(np.zeros_like(state.pos_m), sensors.gps_sigma_m, rng)
+        return dataclasses.replace(state, tracks=tracks, gps_error_m=error)
+
     def observe(self, state: SwarmState, envs: BoolArray | None = None) -> Observations:
         """Every UAV's observation of the current state (the shared builder).
+
+        With exact sensing the obstacles are where they are; with ADS-B they are the tracks'
+        picture (late, noisy, extrapolated; lost tracks are not seen), and the UAV positions
+        carry their GPS errors.
 
         Args:
             envs: (B,) observe only these environments (the result has their count first).
@@ -140,20 +186,34 @@ class SwarmSim:
         sel: slice | BoolArray = slice(None) if envs is None else envs
         heading = state.heading_rad[sel]
         velocity = heading_velocity(heading, self.cfg.uav.speed_m_s)
+        if state.tracks is None:
+            obstacle_pos = state.obstacle_pos_m[sel]
+            obstacle_vel = state.obstacle_vel_m_s[sel]
+            seen = state.obstacle_visible[sel]
+        else:
+            now = (state.steps[sel] * self.cfg.dt_s).astype(np.float64)[:, None]
+            picked = _select(state.tracks, sel)
+            pos, vel, seen = picture(picked, now)
+            obstacle_pos = np.where(seen[..., None], pos, 0.0)
+            obstacle_vel = np.where(seen[..., None], vel, 0.0)
         return build_observations(
             self.obs_layout,
-            state.pos_m[sel],
+            state.pos_m[sel] + state.gps_error_m[sel],
             heading,
             velocity,
             state.target_m[sel],
             state.centre_m[sel],
-            state.obstacle_pos_m[sel],
-            state.obstacle_vel_m_s[sel],
-            state.obstacle_visible[sel],
+            obstacle_pos,
+            obstacle_vel,
+            seen,
         )
 
     def step(
-        self, state: SwarmState, actions: NDArray[Any], rng: np.random.Generator
+        self,
+        state: SwarmState,
+        actions: NDArray[Any],
+        rng: np.random.Generator,
+        speeds_m_s: NDArray[Any] | None = None,
     ) -> tuple[SwarmState, StepResult]:
         """Advance every environment by one decision step (the module docstring's steps 1–5).
 
@@ -162,18 +222,34 @@ class SwarmSim:
             actions: (B, N) normalised heading changes in [−1, 1] (clipped); ignored for UAVs that
                 are not active.
             rng: the caller's generator (PSO when avoidance begins).
+            speeds_m_s: (B, N) commanded speeds, clipped to [0, the UAV speed]; None: the UAV
+                speed (the paper's policies command headings only; a multirotor may also slow
+                down and stop, which later policies and the safety shield use).
 
         Returns:
             (the next state, what happened). Environments whose episode ended stay ended (their
             UAVs are inactive) until `reset_where` starts a new one.
         """
         cfg = self.cfg
-        dt, length = cfg.dt_s, cfg.step_length_m
+        dt = cfg.dt_s
         acted = state.active
+        present = acted | state.hovering(cfg.arrival)
         commanded = scale_action(np.asarray(actions, dtype=np.float64), cfg.uav.max_turn_rad)
         turn = np.where(acted, commanded, 0.0)
-        flight = fly(state, turn, acted, self.fractions, length, dt)
-        near = closest_approaches(flight, state.target_m, acted, self.pairs, self.difference_op)
+        cruise = cfg.uav.speed_m_s
+        speed = (
+            np.full(acted.shape, cruise)
+            if speeds_m_s is None
+            else np.clip(np.asarray(speeds_m_s, dtype=np.float64), 0.0, cruise)
+        )
+        speed = np.where(acted, speed, 0.0)
+        if self.ideal:
+            flight = fly(state, turn, acted, self.fractions, speed * dt, dt)
+        else:
+            flight = fly_with_response(state, turn, speed, acted, present, self.fractions, dt)
+        near = closest_approaches(
+            flight, state.target_m, acted, present, self.pairs, self.difference_op
+        )
         out = outcome(state, acted, near, cfg.d_col_m, cfg.max_steps)
         if self.scored:
             window, terms = score(state, flight, turn, acted, out.collided, cfg)
@@ -189,8 +265,12 @@ class SwarmSim:
             centre_m=state.centre_m + dt * state.swarm_vel_m_s,
             window=window,
             steps=out.steps,
-            stats=accumulate(state.stats, turn, length * acted, near, terms),
+            stats=accumulate(state.stats, turn, flight.flown_m, near, terms),
+            vel_m_s=flight.vel_m_s,
+            speed_m_s=np.where(present, speed, state.speed_m_s),
+            last_turn_rad=np.where(present, turn, state.last_turn_rad),
         )
+        moved = self._sense(moved, rng)
         obs = self.observe(moved)
         if self.scored:
             new_state, begin = begin_avoidance(moved, obs, out.over, cfg, rng)
@@ -212,6 +292,11 @@ class SwarmSim:
             levels_assigned=begin,
         )
         return new_state, result
+
+
+def _select(tracks: AdsbTracks, sel: slice | BoolArray) -> AdsbTracks:
+    """The tracks of the selected environments."""
+    return AdsbTracks(**{f.name: getattr(tracks, f.name)[sel] for f in dataclasses.fields(tracks)})
 
 
 def _unscored(like: NDArray[Any]) -> RewardTerms:

@@ -1,26 +1,27 @@
 """One transition of the swarm simulator, as pure batched functions (`sim.swarm.SwarmSim.step`).
 
-Each function is one stage of the step described in `sim.swarm`: `fly` (1: arcs and straight
-lines at the sub-step instants), `closest_approaches` (2: swept distances), `outcome` (3:
-collisions, arrivals, the end of episodes), `score` and `accumulate` (4: the contour windows,
-the reward and the episode accumulators), `begin_avoidance` (5: contour levels by PSO). None
-keeps state or loops over agents; arrays are batch first, sub-step samples time first.
+Each function is one stage of the step described in `sim.swarm`: `fly` or `fly_with_response`
+(1: arcs, or the vehicles' response to them, and straight lines at the sub-step instants),
+`closest_approaches` (2: swept distances), `outcome` (3: collisions, arrivals, the end of
+episodes), `score` and `accumulate` (4: the contour windows, the reward and the episode
+accumulators), `begin_avoidance` (5: contour levels by PSO). None keeps state or loops over
+agents; arrays are batch first, sub-step samples time first.
 """
 
 from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
-from typing import Any, cast
+from typing import cast
 
 import numpy as np
-from numpy.typing import NDArray
 
 from sim.arrays import BoolArray, Float32Array, FloatArray, IntArray
 from sim.config import ScenarioConfig
 from sim.contour import ArcWindow, arc_external_xy
+from sim.dynamics import Commands, fly_response
 from sim.field import FieldSources
-from sim.kinematics import sinc_series, wrap_angle
+from sim.kinematics import heading_velocity, sinc_series, wrap_angle
 from sim.metrics import swept_min_distance_xy
 from sim.observation import Observations
 from sim.reward import RewardTerms, assign_contour_levels, reward
@@ -54,7 +55,9 @@ class Flight:
             first (the grid of the swept checks and of the reward's quadrature).
         obstacle_x, obstacle_y: (T + 1, B, M) obstacle coordinates at the same instants.
         pos_m: (B, N, 2) UAV positions at the end of the step (float64).
-        heading_rad: (B, N) UAV headings at the end of the step.
+        heading_rad: (B, N) UAV (commanded) headings at the end of the step.
+        vel_m_s: (B, N, 2) UAV velocities at the end of the step.
+        flown_m: (B, N) distance each UAV flew in the step.
     """
 
     uav_x: Float32Array
@@ -63,6 +66,8 @@ class Flight:
     obstacle_y: Float32Array
     pos_m: FloatArray
     heading_rad: FloatArray
+    vel_m_s: FloatArray
+    flown_m: FloatArray
 
 
 def fly(
@@ -70,35 +75,76 @@ def fly(
     turn: FloatArray,
     acted: BoolArray,
     fractions: FloatArray,
-    length_m: float,
+    length_m: FloatArray,
     dt_s: float,
 ) -> Flight:
-    """Fly one step (step 1): the UAVs' arcs, the obstacles' straight lines.
+    """Fly one step (step 1) with the paper's ideal vehicle: arcs, and obstacles' straight lines.
 
-    Every UAV that ``acted`` (B, N) flies the arc of heading change ``turn`` (B, N), sampled at
-    the sub-step ``fractions`` (T + 1,) of the step; the others stay put (zero length).
+    Every UAV that ``acted`` (B, N) flies the arc of heading change ``turn`` (B, N) and length
+    ``length_m`` (B, N: its commanded speed × dt), sampled at the sub-step ``fractions``
+    (T + 1,) of the step; the others stay put (zero length, zero velocity at the end).
     The sub-step grid is float32 (millimetres at kilometre range, for the collision checks and
     the reward quadrature); the state itself advances in float64.
     """
     f32 = np.float32
     u = fractions.astype(f32)[:, None, None]  # time first: (T + 1, B, N) slices are contiguous
     half = (f32(0.5) * u) * turn.astype(f32)
-    chord = (f32(length_m) * u) * acted * sinc_series(half)  # |half| ≤ a_max/2 ≤ π/4
+    length = np.where(acted, length_m, 0.0)
+    chord = (length.astype(f32) * u) * sinc_series(half)  # |half| ≤ a_max/2 ≤ π/4
     direction = state.heading_rad.astype(f32) + half
     px = state.pos_m[..., 0].astype(f32) + chord * np.cos(direction)  # (T + 1, B, N)
     py = state.pos_m[..., 1].astype(f32) + chord * np.sin(direction)
     end_half = 0.5 * turn
-    end_chord = length_m * acted * sinc_series(end_half)
+    end_chord = length * sinc_series(end_half)
     end_dir = state.heading_rad + end_half
     new_pos = state.pos_m + end_chord[..., None] * np.stack(
         [np.cos(end_dir), np.sin(end_dir)], axis=-1
     )
     new_heading = np.where(acted, wrap_angle(state.heading_rad + turn), state.heading_rad)
+    vel = heading_velocity(new_heading, (length / dt_s)[..., None])
+    ox, oy = obstacles_flown(state, fractions, dt_s)
+    return Flight(px, py, ox, oy, new_pos, new_heading, vel, length)
+
+
+def obstacles_flown(
+    state: SwarmState, fractions: FloatArray, dt_s: float
+) -> tuple[Float32Array, Float32Array]:
+    """Obstacle coordinates (T + 1, B, M) at the sub-step instants: straight, constant speed."""
+    f32 = np.float32
     tdt = (dt_s * fractions).astype(f32)[:, None, None]
     obs_pos, obs_vel = state.obstacle_pos_m.astype(f32), state.obstacle_vel_m_s.astype(f32)
     ox = obs_pos[..., 0] + tdt * obs_vel[..., 0]  # (T + 1, B, M)
     oy = obs_pos[..., 1] + tdt * obs_vel[..., 1]
-    return Flight(px, py, ox, oy, new_pos, new_heading)
+    return ox, oy
+
+
+def fly_with_response(
+    state: SwarmState,
+    turn: FloatArray,
+    speed_m_s: FloatArray,
+    acted: BoolArray,
+    present: BoolArray,
+    fractions: FloatArray,
+    dt_s: float,
+) -> Flight:
+    """Fly one step (step 1) with each UAV's fitted response (`sim.dynamics`).
+
+    The UAVs that ``acted`` are commanded along the arc of ``turn`` at ``speed_m_s``; the
+    others still ``present`` (arrived, hovering) are commanded to stop; the rest stay put.
+    """
+    assert state.response is not None
+    cmd = Commands(
+        heading_rad=state.heading_rad,
+        turn_rad=turn,
+        speed_m_s=np.where(acted, speed_m_s, 0.0),
+        last_turn_rad=state.last_turn_rad,
+        last_speed_m_s=state.speed_m_s,
+    )
+    substeps = len(fractions) - 1
+    track = fly_response(state.pos_m, state.vel_m_s, cmd, state.response, present, substeps, dt_s)
+    new_heading = np.where(acted, wrap_angle(state.heading_rad + turn), state.heading_rad)
+    ox, oy = obstacles_flown(state, fractions, dt_s)
+    return Flight(track.x, track.y, ox, oy, track.pos_m, new_heading, track.vel_m_s, track.flown_m)
 
 
 @dataclass(frozen=True)
@@ -120,6 +166,7 @@ def closest_approaches(
     flight: Flight,
     target_m: FloatArray,
     acted: BoolArray,
+    present: BoolArray,
     pairs: tuple[IntArray, IntArray],
     difference_op: Float32Array,
 ) -> Approaches:
@@ -127,7 +174,9 @@ def closest_approaches(
 
     UAV–obstacle (N·M), UAV–UAV pairs (P, ``pairs`` i < j), UAV–own target (N): the relative
     positions of all of them come from one matrix product with ``difference_op``
-    (`difference_operator`).
+    (`difference_operator`). Separations count for every UAV ``present`` (flying, or hovering
+    where it arrived) — a pair of UAVs when at least one of them flies; the approach to the
+    target only for the UAVs that ``acted``.
     """
     i, j = pairs
     steps, b, n = flight.uav_x.shape
@@ -144,14 +193,15 @@ def closest_approaches(
         rel.append(r)
     swept = swept_min_distance_xy(*rel).astype(np.float64)  # (B, N·M + P + N)
     d_uo = swept[:, :k_uo].reshape(b, n, m)
-    d_pair = np.where(acted[:, i] & acted[:, j], swept[:, k_uo : k_uo + k_uu], np.inf)
+    counted = present[:, i] & present[:, j] & (acted[:, i] | acted[:, j])
+    d_pair = np.where(counted, swept[:, k_uo : k_uo + k_uu], np.inf)
     d_uu = np.full((b, n, n), np.inf)
     d_uu[:, i, j] = d_pair
     d_uu[:, j, i] = d_pair
     return Approaches(
-        min_u2o_m=np.where(acted, d_uo.min(axis=-1, initial=np.inf), np.inf),
+        min_u2o_m=np.where(present, d_uo.min(axis=-1, initial=np.inf), np.inf),
         min_u2u_m=d_uu.min(axis=-1),
-        target_m=swept[:, k_uo + k_uu :],
+        target_m=np.where(acted, swept[:, k_uo + k_uu :], np.inf),
     )
 
 
@@ -195,9 +245,13 @@ class Outcome:
 def outcome(
     state: SwarmState, acted: BoolArray, near: Approaches, d_col_m: float, max_steps: int
 ) -> Outcome:
-    """Collisions, arrivals and the end of episodes (step 3 of the module docstring)."""
-    collided_u2o = acted & (near.min_u2o_m < d_col_m)
-    collided_u2u = acted & (near.min_u2u_m < d_col_m)
+    """Collisions, arrivals and the end of episodes (step 3 of the module docstring).
+
+    A collision counts for every UAV whose separation counted (`closest_approaches`): a
+    hovering UAV that is run into has collided too.
+    """
+    collided_u2o = near.min_u2o_m < d_col_m
+    collided_u2u = near.min_u2u_m < d_col_m
     collided = collided_u2o | collided_u2u
     arrived = acted & ~collided & (near.target_m <= d_col_m)
     any_collision = cast(BoolArray, collided.any(axis=-1))
@@ -263,7 +317,7 @@ def score(
 def accumulate(
     stats: EpisodeStats,
     turn: FloatArray,
-    flown_m: NDArray[Any],
+    flown_m: FloatArray,
     near: Approaches,
     terms: RewardTerms,
 ) -> EpisodeStats:

@@ -111,12 +111,29 @@ def track_velocity(
     """
     if profile.ideal:
         return command_m_s.copy()
+    return follow_velocity(
+        velocity_m_s, command_m_s, profile.velocity_tau_s, profile.max_accel_m_s2, dt_s
+    )
+
+
+def follow_velocity(
+    velocity_m_s: FloatArray,
+    command_m_s: FloatArray,
+    tau_s: float | FloatArray,
+    max_accel_m_s2: float | FloatArray,
+    dt_s: float,
+) -> FloatArray:
+    """`track_velocity` with the time constant and the cap as numbers or arrays (...).
+
+    The one implementation of the response, for a profile (the mock) or per vehicle (the
+    simulator, where each UAV may draw its own).
+    """
     error = command_m_s - velocity_m_s
-    step = error * -math.expm1(-dt_s / profile.velocity_tau_s)
-    norm = np.hypot(step[..., 0], step[..., 1])[..., None]
-    cap = profile.max_accel_m_s2 * dt_s
-    scale = np.where(norm > cap, cap / np.maximum(norm, 1e-300), 1.0)
-    new: FloatArray = velocity_m_s + step * scale
+    step = error * -np.expm1(-dt_s / np.asarray(tau_s))[..., None]
+    norm = np.hypot(step[..., 0], step[..., 1])
+    cap = np.asarray(max_accel_m_s2) * dt_s
+    scale = np.minimum(1.0, cap / np.maximum(norm, 1e-300))
+    new: FloatArray = velocity_m_s + step * scale[..., None]
     return new
 
 

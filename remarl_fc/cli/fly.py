@@ -204,7 +204,7 @@ def cmd_fly(args: argparse.Namespace) -> int:
     policy = load_policy(args.policy)
     mission = load_mission(args.mission)
     spec = ControlSpec.from_policy_meta(policy.meta)
-    mission.check_policy(policy.agents, spec.speed_m_s, spec.dt_s)
+    mission.check_policy(policy.agents, spec.speed_m_s, spec.dt_s, spec.arrival_m)
     signing = SigningConfig(load_signing_key(args.signing_key)) if args.signing_key else None
     by_mission = args.takeoff is not None and math.isnan(args.takeoff)
     try:

@@ -41,7 +41,7 @@ from numpy.typing import NDArray
 from remarl_fc.errors import ConfigError, PolicySpecMismatch
 from remarl_fc.frames import GeoPoint, geodetic_to_ned, heading_to_yaw, sim_to_ne
 from sim.config import ScenarioConfig
-from sim.spawn import swarm_layout
+from sim.spawn import swarm_layout, target_spacing_problem
 
 FloatArray = NDArray[np.float64]
 
@@ -130,8 +130,12 @@ class Mission:
         """(N, 2) targets in slot order."""
         return np.array([v.target_ne_m for v in self.by_slot()], dtype=np.float64)
 
-    def check_policy(self, agents: int, speed_m_s: float, dt_s: float) -> None:
-        """Refuse a mission that does not fit the policy; the error names the value."""
+    def check_policy(self, agents: int, speed_m_s: float, dt_s: float, d_col_m: float) -> None:
+        """Refuse a mission that does not fit the policy; the error names the value.
+
+        Also refuses targets closer together than the policy's d_col plus a margin
+        (`sim.spawn.target_spacing_problem`): arrived vehicles hold at their targets.
+        """
         checks = [
             ("number of vehicles", agents, len(self.vehicles)),
             ("speed_m_s", speed_m_s, self.speed_m_s),
@@ -148,6 +152,9 @@ class Mission:
                 source=self.source,
                 key="vehicle.slot",
             )
+        problem = target_spacing_problem(self.targets_ne_m(), d_col_m)
+        if problem is not None:
+            raise MissionError(problem, source=self.source, key="vehicle.target")
 
     @classmethod
     def from_scenario(

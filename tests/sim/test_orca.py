@@ -9,7 +9,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from sim.contour import ArcWindow
-from sim.kinematics import arc_points, wrap_angle
+from sim.kinematics import arc_points, heading_velocity, wrap_angle
 from sim.orca import MARGIN_M, orca_actions, orca_plan
 from sim.scenarios import load_scenario
 from sim.state import EpisodeStats, SwarmState
@@ -45,6 +45,12 @@ def hand_state(pos, heading, target, obs_pos=(), obs_vel=None, active=None):
         window=ArcWindow.empty(1, n, 3),
         steps=np.zeros(1, np.int64),
         stats=EpisodeStats.fresh(1, n),
+        vel_m_s=heading_velocity(np.asarray(heading, dtype=float)[None], SPEED),
+        speed_m_s=np.full((1, n), SPEED),
+        last_turn_rad=np.zeros((1, n)),
+        response=None,
+        tracks=None,
+        gps_error_m=np.zeros((1, n, 2)),
     )
 
 
@@ -202,6 +208,7 @@ def test_permuting_uavs_and_obstacles_permutes_the_actions():
         pos_m=state.pos_m[:, p],
         heading_rad=state.heading_rad[:, p],
         active=state.active[:, p],
+        reached=state.reached[:, p],
         target_m=state.target_m[:, p],
         obstacle_pos_m=state.obstacle_pos_m[:, q],
         obstacle_vel_m_s=state.obstacle_vel_m_s[:, q],
@@ -286,10 +293,25 @@ def episodes(cfg, act, num, seed):
     return success.mean()
 
 
-@pytest.mark.parametrize("scenario", ["3u2o", "5u2o", "10u1o"])
-def test_orca_succeeds_where_straight_flight_fails(scenario):
-    cfg = load_scenario(scenario)
+@pytest.mark.parametrize(
+    ("scenario", "arrival", "least"),
+    [
+        # Measured (50 episodes, seed 11): ORCA 100% on all three under the paper's rule;
+        # with arrived UAVs hovering, 3u2o 100%, 5u2o 72% (the apex stops 20 m short of its
+        # target, in the way of a neighbour that avoided an obstacle toward the centre, too
+        # late to turn clear), 10u1o 92%. Straight flight: 0% in every case.
+        ("3u2o", "leave", 0.9),
+        ("5u2o", "leave", 0.9),
+        ("10u1o", "leave", 0.9),
+        ("3u2o", "hover", 0.9),
+        ("5u2o", "hover", 0.6),
+        ("10u1o", "hover", 0.8),
+    ],
+)
+def test_orca_succeeds_where_straight_flight_fails(scenario, arrival, least):
+    cfg = load_scenario(scenario, arrival=arrival)
     orca = episodes(cfg, orca_actions, 50, seed=11)
     straight = episodes(cfg, lambda s, c: np.zeros(s.heading_rad.shape), 50, seed=11)
-    # Measured (50 episodes, seed 11): ORCA 100% on all three, straight 0%.
-    assert orca >= 0.9 and orca - straight >= 0.8, f"ORCA {orca:.0%}, straight {straight:.0%}"
+    assert orca >= least and orca - straight >= least - 0.1, (
+        f"ORCA {orca:.0%}, straight {straight:.0%}"
+    )

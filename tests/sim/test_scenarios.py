@@ -115,6 +115,38 @@ def test_user_file_by_path_with_degrees(tmp_path):
             "field.continuous",
             "true or false",
         ),
+        (
+            "[uav]\ncount = 4\nformation = 'grid'\n[obstacles]\ncount = 1\n",
+            "uav.target_layout",
+            "hover",
+        ),
+        (
+            "[uav]\ncount = 2\nformation = 'line'\ntargets_m = [[270, 150], [270, 175]]\n"
+            "[obstacles]\ncount = 1\n",
+            "uav.targets_m",
+            "25.0 m apart",
+        ),
+        (
+            "[uav]\ncount = 3\ntarget_layout = 'column'\n[obstacles]\ncount = 1\n",
+            "uav.target_layout",
+            "line, formation",
+        ),
+        (
+            "dynamics = 'glider'\n[uav]\ncount = 3\n[obstacles]\ncount = 1\n",
+            "dynamics",
+            "unknown vehicle profile",
+        ),
+        (
+            "[uav]\ncount = 3\n[obstacles]\ncount = 1\n[sensors]\nadsb_latency_s = [2, 1]\n",
+            "sensors.adsb_latency_s",
+            "low <= high",
+        ),
+        (
+            "[uav]\ncount = 3\n[obstacles]\ncount = 1\n[dynamics_randomisation]\n"
+            "profiles = ['glider']\n",
+            "dynamics_randomisation.profiles",
+            "unknown vehicle profile",
+        ),
     ],
 )
 def test_bad_values_name_file_and_key(tmp_path, body, key, fragment):

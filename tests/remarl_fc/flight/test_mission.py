@@ -331,7 +331,7 @@ def test_mission_error_is_a_value_error():
 
 
 def test_check_policy_accepts_a_fitting_policy(tmp_path):
-    load_mission(write(tmp_path, VALID)).check_policy(2, 10.0, 2.0)
+    load_mission(write(tmp_path, VALID)).check_policy(2, 10.0, 2.0, 20.0)
 
 
 @pytest.mark.parametrize(
@@ -347,7 +347,7 @@ def test_check_policy_names_the_conflicting_value(
 ):
     m = load_mission(write(tmp_path, VALID))
     with pytest.raises(PolicySpecMismatch) as info:
-        m.check_policy(agents, speed, dt)
+        m.check_policy(agents, speed, dt, 20.0)
     err = info.value
     assert err.field == field and err.expected == expected and err.actual == actual
     assert err.source == m.source
@@ -356,7 +356,7 @@ def test_check_policy_names_the_conflicting_value(
 
 def test_check_policy_without_dt_does_not_check_dt(tmp_path):
     m = load_mission(write(tmp_path, replace("dt_s = 2.0\n", "")))
-    m.check_policy(2, 10.0, 0.5)
+    m.check_policy(2, 10.0, 0.5, 20.0)
 
 
 @pytest.mark.parametrize(("first", "second"), [(0, 0), (1, 2), (1, 1)])
@@ -365,7 +365,7 @@ def test_check_policy_refuses_bad_slots(tmp_path, first, second):
     text = replace("system_id = 3\nslot = 0", f"system_id = 3\nslot = {second}", text)
     m = load_mission(write(tmp_path, text))
     with pytest.raises(MissionError) as info:
-        m.check_policy(2, 10.0, 2.0)
+        m.check_policy(2, 10.0, 2.0, 20.0)
     assert info.value.key == "vehicle.slot"
     assert "0..1" in str(info.value)
     assert not isinstance(info.value, PolicySpecMismatch)
@@ -390,7 +390,7 @@ def test_from_scenario_3u2o():
     np.testing.assert_array_equal(m.targets_ne_m(), expected)
     np.testing.assert_array_equal(m.targets_ne_m(), sim_to_ne(layout.targets_m))
     assert np.all(m.targets_ne_m()[:, 1] == cfg.uav.target_x_m)  # every target 270 m east
-    m.check_policy(cfg.uav.count, cfg.uav.speed_m_s, cfg.dt_s)
+    m.check_policy(cfg.uav.count, cfg.uav.speed_m_s, cfg.dt_s, cfg.d_col_m)
 
 
 def test_from_scenario_alt_and_initial_yaw():
@@ -412,7 +412,7 @@ def test_example_mission_file_is_the_3u2o_scenario():
     ]
     np.testing.assert_allclose(example.targets_ne_m(), scenario.targets_ne_m(), atol=0.01)
     assert example.geofence == Geofence(radius_m=600.0, polygon_ne_m=None, max_alt_m=60.0)
-    example.check_policy(3, 10.0, 2.0)
+    example.check_policy(3, 10.0, 2.0, 20.0)
     # the whole flight (spawns and targets, at cruise height) lies inside the fence
     fence = example.geofence
     assert fence is not None
@@ -490,3 +490,13 @@ def test_polygon_fence_matches_a_rectangle(n, e):
     on_edge = n in (-50.0, 80.0) or e in (-120.0, 30.0)
     if not on_edge:
         assert Geofence(polygon_ne_m=rect).inside(np.array([n, e])) is expected
+
+
+def test_check_policy_refuses_targets_closer_than_d_col_plus_margin(tmp_path):
+    m = load_mission(write(tmp_path, VALID))
+    gap = float(np.hypot(*(m.targets_ne_m()[0] - m.targets_ne_m()[1])))
+    m.check_policy(2, 10.0, 2.0, gap / 1.5)  # exactly at the margin: accepted
+    with pytest.raises(MissionError) as info:
+        m.check_policy(2, 10.0, 2.0, gap / 1.4)
+    assert info.value.key == "vehicle.target"
+    assert "apart" in str(info.value) and "hover" in str(info.value)

@@ -1,0 +1,263 @@
+"""What the UAVs sense of the intruders: ADS-B reports, tracked as the runtime tracks them.
+
+The simulator knows every intruder's true track; a UAV knows only the ADS-B reports that reached
+it. This module turns the one into the other, batch first, and holds the pieces the runtime's
+tracker (`remarl_fc.flight.traffic`) uses itself, so that a policy trains on the picture `fly`
+will give it:
+
+* `report_time` — the time a report is taken to describe: its receive time less its age as
+  ADSB_VEHICLE.tslc states it (whole seconds).
+* `extrapolate` — a report carried to ``now`` at constant velocity, never backwards.
+* `is_fresh` and `TRACK_MAX_AGE_S` — a track is used while ``now − report time ≤ 5 s``.
+
+Each intruder (`AdsbTracks`, per environment b and intruder m) transmits at its own rate from a
+random phase; each report reaches the runtime after its own latency, or is lost. The newest
+report that arrived replaces the one held; between reports the track is extrapolated. Like the
+runtime, the tracker does not know the latency: it stamps a report with its receive time less
+`ADSB_TSLC_S`, so the picture lags the truth by about the intruder's speed times its latency,
+as in flight. `docs/MODEL.md` gives the numbers and what the model leaves out.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import overload
+
+import numpy as np
+
+from sim.arrays import BoolArray, FloatArray
+from sim.config import SensorConfig
+
+TRACK_MAX_AGE_S = 5.0
+"""A track whose report time is older than this (s) is no longer used, here and in flight.
+
+Long enough to ride out lost reports: at the slowest rate (1 Hz) a track expires only when five
+reports in a row are lost, once in 10⁵ reports at the 10% loss rate. Short enough that a track
+still says where the aircraft is: at 3 m/s velocity error (NACv 2) the extrapolation drifts 15 m in
+5 s, within the 10–30 m of the position itself, and an aircraft at 50 m/s in a standard-rate
+turn (3°/s) leaves the straight extrapolation by ½·v·ω·t² ≈ 33 m in that time.
+"""
+
+ADSB_TSLC_S = 0.0
+"""The ADSB_VEHICLE.tslc (s) of a simulated report: the whole seconds of its age the forwarding
+receiver or autopilot counts, from when *it* heard the aircraft. At 1–2 Hz a live track was
+heard within the last second, and tslc truncates to whole seconds: 0 (the SITL mock sends 0
+too). The transponder's and the link's latency are not counted: the runtime cannot correct
+for them, and neither does the simulated tracker."""
+
+POSITION_95_TO_SIGMA = 2.448
+"""95% radius of a circular 2-D Gaussian in units of its per-axis σ: √(−2 ln 0.05) = 2.4477.
+EPU and NACv are 95% horizontal radii, so σ per axis = EPU / 2.448 (NACv likewise)."""
+
+
+@overload
+def report_time(receive_s: float, tslc_s: float) -> float: ...
+@overload
+def report_time(receive_s: FloatArray, tslc_s: float | FloatArray) -> FloatArray: ...
+def report_time(receive_s: float | FloatArray, tslc_s: float | FloatArray) -> float | FloatArray:
+    """The time (s) a report describes as the tracker takes it: receive time less its tslc.
+
+    >>> report_time(10.0, 3.0)
+    7.0
+    """
+    return receive_s - tslc_s
+
+
+@overload
+def is_fresh(t_report_s: float, now_s: float, max_age_s: float = ...) -> bool: ...
+@overload
+def is_fresh(
+    t_report_s: FloatArray, now_s: float | FloatArray, max_age_s: float = ...
+) -> BoolArray: ...
+def is_fresh(
+    t_report_s: float | FloatArray, now_s: float | FloatArray, max_age_s: float = TRACK_MAX_AGE_S
+) -> bool | BoolArray:
+    """Whether a track with report time ``t_report_s`` is still used at ``now_s`` (age ≤ max).
+
+    >>> is_fresh(0.0, 5.0), is_fresh(0.0, 5.5), is_fresh(-math.inf, 0.0)
+    (True, False, False)
+    """
+    return now_s - t_report_s <= max_age_s
+
+
+def extrapolate(
+    pos: FloatArray, vel: FloatArray, t_report: float | FloatArray, now: float | FloatArray
+) -> FloatArray:
+    """``pos + vel · max(0, now − t_report)``: a report carried at constant velocity to ``now``.
+
+    Shapes: ``pos``, ``vel`` (..., 2); ``t_report``, ``now`` (...) or scalars (broadcast). A
+    report time after ``now`` (clock skew of a shared detection) is not extrapolated backwards.
+
+    >>> extrapolate(np.array([1.0, 2.0]), np.array([3.0, 0.0]), 1.0, 3.0).tolist()
+    [7.0, 2.0]
+    """
+    dt = np.maximum(0.0, np.subtract(now, t_report, dtype=np.float64))  # (...)
+    out: FloatArray = pos + vel * dt[..., np.newaxis]
+    return out
+
+
+def gps_noise(pos: FloatArray, sigma_m: float, rng: np.random.Generator) -> FloatArray:
+    """``pos`` (..., 2) plus Gaussian noise of ``sigma_m`` per axis; zero σ: ``pos``, no draw."""
+    if sigma_m == 0.0:
+        return pos
+    out: FloatArray = pos + sigma_m * rng.standard_normal(pos.shape)
+    return out
+
+
+@dataclass(frozen=True)
+class AdsbTracks:
+    """ADS-B of M intruders in B environments, and the report each UAV's tracker holds.
+
+    Intruder (b, m) transmits at ``t_k = phase + k · period`` for whole k; report k arrives at
+    ``t_k + latency``. Every array is batch first, so `sim.state.merge_where` restarts
+    environments. Before the first report: indices and times −inf, position and velocity NaN.
+
+    Attributes:
+        period_s: (B, M) time between transmissions, s (1 / rate).
+        phase_s: (B, M) time of report 0, in [0, period), s.
+        latency_s: (B, M) transmission to arrival, s.
+        pos_sigma_m: (B, M) position error σ per axis, m (EPU / 2.448).
+        vel_sigma_m_s: (B, M) velocity error σ per axis, m/s (NACv / 2.448).
+        last_index: (B, M) k of the newest report that has arrived, lost or not (whole
+            numbers as float64, so −inf can mean none): each report's loss is drawn once.
+        t_valid_s: (B, M) time of validity t_k of the report held, s.
+        t_report_s: (B, M) its time as the tracker takes it (`report_time` of its arrival), s.
+        pos_m: (B, M, 2) its position (at ``t_valid_s``, with its error), m.
+        vel_m_s: (B, M, 2) its velocity (with its error), m/s.
+    """
+
+    period_s: FloatArray
+    phase_s: FloatArray
+    latency_s: FloatArray
+    pos_sigma_m: FloatArray
+    vel_sigma_m_s: FloatArray
+    last_index: FloatArray
+    t_valid_s: FloatArray
+    t_report_s: FloatArray
+    pos_m: FloatArray
+    vel_m_s: FloatArray
+
+    @classmethod
+    def fresh(cls, b: int, m: int, cfg: SensorConfig, rng: np.random.Generator) -> AdsbTracks:
+        """New tracks holding no report; rate, phase, latency and EPU drawn per intruder.
+
+        Rate, latency and EPU are uniform in their `SensorConfig` ranges; the phase is uniform
+        in [0, period). Draws, in order: rate, phase, latency, EPU, each (b, m).
+        """
+        rate = rng.uniform(*cfg.adsb_rate_hz, size=(b, m))
+        period = 1.0 / rate
+        phase = period * rng.random((b, m))  # [0, period)
+        latency = rng.uniform(*cfg.adsb_latency_s, size=(b, m))
+        epu = rng.uniform(*cfg.adsb_epu_m, size=(b, m))
+        return cls(
+            period_s=period,
+            phase_s=phase,
+            latency_s=latency,
+            pos_sigma_m=epu / POSITION_95_TO_SIGMA,
+            vel_sigma_m_s=np.full((b, m), cfg.adsb_nacv_m_s / POSITION_95_TO_SIGMA),
+            last_index=np.full((b, m), -math.inf),
+            t_valid_s=np.full((b, m), -math.inf),
+            t_report_s=np.full((b, m), -math.inf),
+            pos_m=np.full((b, m, 2), math.nan),
+            vel_m_s=np.full((b, m, 2), math.nan),
+        )
+
+
+def _newest_lost(shape: tuple[int, ...], p: float, rng: np.random.Generator) -> FloatArray:
+    """How many of the newest reports are lost before one gets through, (shape).
+
+    Each report is lost independently with probability ``p``, so the count is geometric:
+    P(≥ j lost) = pʲ, drawn by inversion from one uniform each (always drawn, so the stream
+    does not depend on the data). Which of the older reports are lost never matters: they are
+    older than the one kept.
+    """
+    u = rng.random(shape)  # [0, 1)
+    if p == 0.0:
+        return np.zeros(shape)
+    out: FloatArray = np.floor(np.log1p(-u) / math.log(p))  # log(1 − u) ∈ (−inf, 0]
+    return out
+
+
+def update(
+    tracks: AdsbTracks,
+    true_pos: FloatArray,
+    true_vel: FloatArray,
+    now_s: float | FloatArray,
+    visible_since_s: FloatArray,
+    cfg: SensorConfig,
+    rng: np.random.Generator,
+) -> AdsbTracks:
+    """Take the reports that arrived since the last update; the newest one that got through wins.
+
+    Args:
+        tracks: the tracks after the previous update (or `AdsbTracks.fresh`).
+        true_pos: (B, M, 2) true intruder positions at ``now_s``, m.
+        true_vel: (B, M, 2) true intruder velocities, m/s (constant: the intruders fly
+            straight, so the position at ``t_k`` is ``true_pos − true_vel · (now − t_k)``).
+        now_s: the episode time, s (non-decreasing from one update to the next); a number, or
+            (B, 1) for environments at different times.
+        visible_since_s: (B, M) when each intruder starts transmitting, s: reports before it
+            do not exist (0 from the episode start, later for a pop-up, +inf never, −inf for one
+            that has been transmitting all along).
+        cfg: the sensor model (``adsb_drop_probability`` is used here).
+        rng: draws the losses (B, M) and the errors (B, M, 2) twice, always, in that order.
+
+    Returns:
+        The tracks at ``now_s``. The reports considered are those with ``t_k ≥
+        visible_since_s`` that have arrived (``t_k + latency ≤ now_s``) and were not considered
+        before; their number needs no bound: how many of the newest are lost is drawn at once
+        (`_newest_lost`). The report taken is never older than the one held.
+    """
+    period, phase, latency = tracks.period_s, tracks.phase_s, tracks.latency_s
+    newest = np.floor((now_s - latency - phase) / period)  # (B, M) newest arrived k
+    # the quotients may round across a whole number: one step back or forward puts k exactly
+    newest -= phase + newest * period + latency > now_s  # never one from the future
+    newest += phase + (newest + 1.0) * period + latency <= now_s  # nor one left behind
+    first = np.ceil((visible_since_s - phase) / period)  # (B, M) first transmitted k
+    first += phase + first * period < visible_since_s  # never one before it
+    first -= phase + (first - 1.0) * period >= visible_since_s  # nor one left out
+    oldest = np.maximum(tracks.last_index + 1.0, first)  # oldest new candidate
+    count = np.maximum(newest - oldest + 1.0, 0.0)  # new candidates (may be +inf)
+    lost = _newest_lost(period.shape, cfg.adsb_drop_probability, rng)
+    pos_err = rng.standard_normal(tracks.pos_m.shape)
+    vel_err = rng.standard_normal(tracks.vel_m_s.shape)
+
+    take = lost < count  # (B, M) a new report got through
+    k = np.where(take, newest - lost, 0.0)
+    t_k = np.where(take, phase + k * period, tracks.t_valid_s)
+    age = np.where(take, now_s - t_k, 0.0)[..., np.newaxis]  # (B, M, 1)
+    pos = true_pos - true_vel * age + tracks.pos_sigma_m[..., np.newaxis] * pos_err
+    vel = true_vel + tracks.vel_sigma_m_s[..., np.newaxis] * vel_err
+    keep = take[..., np.newaxis]
+    return AdsbTracks(
+        period_s=period,
+        phase_s=phase,
+        latency_s=latency,
+        pos_sigma_m=tracks.pos_sigma_m,
+        vel_sigma_m_s=tracks.vel_sigma_m_s,
+        last_index=np.where(count > 0, newest, tracks.last_index),
+        t_valid_s=t_k,
+        t_report_s=np.where(take, report_time(t_k + latency, ADSB_TSLC_S), tracks.t_report_s),
+        pos_m=np.where(keep, pos, tracks.pos_m),
+        vel_m_s=np.where(keep, vel, tracks.vel_m_s),
+    )
+
+
+def picture(
+    tracks: AdsbTracks, now_s: float | FloatArray
+) -> tuple[FloatArray, FloatArray, BoolArray]:
+    """What the tracker shows at ``now_s``: (pos (B, M, 2), vel (B, M, 2), valid (B, M)).
+
+    Positions are the held reports extrapolated to ``now_s`` (`extrapolate`, from their report
+    time); valid = a report is held and `is_fresh` — its age counted from its report time
+    (receive time less tslc), exactly as `remarl_fc.flight.traffic` counts it, not from its time
+    of validity. Invalid entries are NaN.
+    """
+    valid = is_fresh(tracks.t_report_s, now_s)  # (B, M); False before the first report
+    since = np.where(valid, tracks.t_report_s, now_s)  # no inf − inf for the invalid
+    pos = np.where(
+        valid[..., np.newaxis], extrapolate(tracks.pos_m, tracks.vel_m_s, since, now_s), math.nan
+    )
+    vel = np.where(valid[..., np.newaxis], tracks.vel_m_s, math.nan)
+    return pos, vel, valid

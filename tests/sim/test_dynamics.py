@@ -1,0 +1,200 @@
+"""The simulator's vehicles with a fitted response: lag, limits, hovering after arrival."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from sim.dynamics import INTEGRATION_STEP_S, draw_response, integration_grid, is_ideal
+from sim.errors import ScenarioError
+from sim.scenarios import load_scenario
+from sim.swarm import SwarmSim
+from sim.vehicle import load_profile, respond
+
+
+def run(cfg, actions, steps, seed=0, envs=4):
+    sim, rng = SwarmSim(cfg, scored=False), np.random.default_rng(seed)
+    state = sim.initial_state(rng, envs)
+    out = []
+    for k in range(steps):
+        state, result = sim.step(state, actions(k, state), rng)
+        out.append((state, result))
+    return out
+
+
+def test_ideal_is_the_default_and_draws_nothing():
+    cfg = load_scenario("3u2o")
+    assert cfg.dynamics == "ideal" and is_ideal(cfg)
+    rng = np.random.default_rng(0)
+    assert draw_response(cfg, 2, 3, rng) is None
+    assert rng.random() == np.random.default_rng(0).random()  # nothing consumed
+
+
+def test_straight_flight_at_cruise_is_the_same_with_any_profile():
+    """In steady straight flight the command never changes: no lag shows."""
+    zero = lambda k, s: np.zeros(s.heading_rad.shape)  # noqa: E731
+    ideal = run(load_scenario("3u1o"), zero, 3)
+    lagged = run(load_scenario("3u1o", dynamics="arducopter"), zero, 3)
+    for (a, _), (b, _) in zip(ideal, lagged, strict=True):
+        np.testing.assert_allclose(a.pos_m, b.pos_m, atol=1e-9)
+
+
+def test_a_turn_is_flown_late_and_wide_as_the_fitted_model_says():
+    """One UAV, one full turn, then straight: the sim's track matches `sim.vehicle.respond`."""
+    cfg = load_scenario("2u1o", dynamics="arducopter")
+    prof = load_profile("arducopter")
+    sim, rng = SwarmSim(cfg, scored=False), np.random.default_rng(0)
+    state = sim.initial_state(rng, 1)
+    turn = np.array([[1.0, 0.0]])
+    h0 = float(state.heading_rad[0, 0])
+    vel = [state.vel_m_s[0, 0].copy()]
+    for k in range(3):
+        state, _ = sim.step(state, turn if k == 0 else np.zeros_like(turn), rng)
+        vel.append(state.vel_m_s[0, 0].copy())
+    # The same command stream replayed through the fitted model at 10 ms
+    dt, v = cfg.dt_s, cfg.uav.speed_m_s
+    times = np.arange(0, 3 * dt + 1e-9, 0.01)
+    heading = h0 + cfg.uav.max_turn_rad * np.clip(times / dt, 0, 1)
+    cmd = v * np.stack([np.cos(heading), np.sin(heading)], axis=-1)
+    ref = respond(prof, times, cmd, cmd[0])
+    at = [round(k * dt / 0.01) for k in range(4)]
+    np.testing.assert_allclose(np.array(vel), ref[at], atol=0.15)
+    # and the ideal vehicle would already fly the new heading at the end of step 1
+    assert abs(math.atan2(vel[1][1], vel[1][0]) - (h0 + cfg.uav.max_turn_rad)) > math.radians(10)
+
+
+def test_randomisation_is_seeded_and_within_its_ranges():
+    cfg = load_scenario(
+        "3u2o",
+        dynamics="arducopter",
+        dynamics_randomisation={
+            "profiles": ["arducopter", "px4"],
+            "delay_scale": [0.5, 2.0],
+            "velocity_tau_scale": [0.8, 1.5],
+            "max_accel_scale": [0.7, 1.2],
+        },
+    )
+    a = draw_response(cfg, 64, 3, np.random.default_rng(5))
+    b = draw_response(cfg, 64, 3, np.random.default_rng(5))
+    assert a is not None and b is not None
+    np.testing.assert_array_equal(a.tau_s, b.tau_s)
+    ardu, px4 = load_profile("arducopter"), load_profile("px4")
+    lo_d, hi_d = 0.5 * min(ardu.delay_s, px4.delay_s), 2.0 * max(ardu.delay_s, px4.delay_s)
+    assert (a.delay_s >= lo_d).all() and (a.delay_s <= hi_d).all()
+    assert len(np.unique(a.accel_m_s2.round(3))) > 100  # per UAV, not per batch
+    lo_a, hi_a = 0.7 * ardu.max_accel_m_s2, 1.2 * px4.max_accel_m_s2
+    assert (a.accel_m_s2 >= lo_a - 1e-9).all() and (a.accel_m_s2 <= hi_a + 1e-9).all()
+
+
+def test_a_delay_reaching_the_decision_step_is_refused():
+    with pytest.raises(ScenarioError, match="decision step") as err:
+        load_scenario(
+            "3u2o", dynamics="arducopter", dynamics_randomisation={"delay_scale": [7.0, 7.0]}
+        )
+    assert err.value.key == "dynamics_randomisation.delay_scale"
+    fixed = load_scenario(
+        "3u2o", dynamics="arducopter", dynamics_randomisation={"delay_scale": [2.0, 2.0]}
+    )
+    response = draw_response(fixed, 1, 3, np.random.default_rng(0))
+    assert response is not None
+    np.testing.assert_allclose(response.delay_s, 2.0 * load_profile("arducopter").delay_s)
+
+
+def test_integration_grid_is_fine_enough():
+    assert integration_grid(8, 2.0) * 8 * INTEGRATION_STEP_S >= 2.0 - 1e-9
+    assert integration_grid(8, 0.5) == 1
+
+
+def in_file(arrival, dynamics):
+    """One UAV stopping at its target on the line of a second one (no obstacle near)."""
+    cfg = load_scenario(
+        "2u1o",
+        arrival=arrival,
+        dynamics=dynamics,
+        uav={
+            "starts_m": [[100.0, 150.0], [40.0, 150.0]],
+            "targets_m": [[160.0, 150.0], [270.0, 150.0]],
+        },
+    )
+    sim, rng = SwarmSim(cfg, scored=False), np.random.default_rng(0)
+    state = sim.initial_state(rng, 1)
+    state = dataclasses.replace(state, obstacle_pos_m=np.array([[[10_000.0, 0.0]]]))
+    results = []
+    for _ in range(20):
+        state, result = sim.step(state, np.zeros((1, 2)), rng)
+        results.append(result)
+        if result.terminated.any() or result.truncated.any():
+            break
+    return cfg, state, results
+
+
+@pytest.mark.parametrize("dynamics", ["ideal", "arducopter"])
+def test_arrived_uavs_hover_and_stay_in_the_separation_checks(dynamics):
+    cfg, state, results = in_file("hover", dynamics)
+    assert any(r.collided_u2u.any() for r in results), "flew through the hovering UAV"
+    assert state.reached[0, 0] and not state.reached[0, 1]
+    assert np.isfinite(state.stats.min_u2u_m[0]) and state.stats.min_u2u_m[0] < cfg.d_col_m
+
+
+def test_under_the_paper_rule_arrived_uavs_leave():
+    _, _, results = in_file("leave", "ideal")
+    assert results[-1].success.all()
+
+
+def test_a_speed_command_slows_the_ideal_and_the_fitted_vehicle():
+    for dynamics in ("ideal", "px4"):
+        cfg = load_scenario("3u1o", dynamics=dynamics)
+        sim, rng = SwarmSim(cfg, scored=False), np.random.default_rng(0)
+        state = sim.initial_state(rng, 2)
+        start = state.pos_m.copy()
+        for _ in range(3):
+            state, _ = sim.step(state, np.zeros((2, 3)), rng, speeds_m_s=np.full((2, 3), 2.0))
+        flown = np.hypot(*(state.pos_m - start).transpose(2, 0, 1))
+        assert (flown < 3 * 2.0 * cfg.dt_s + 20.0).all()
+        np.testing.assert_allclose(np.hypot(*state.vel_m_s.transpose(2, 0, 1)), 2.0, atol=0.3)
+
+
+def test_adsb_sensing_shows_late_noisy_intruders_and_is_seeded():
+    exact_cfg = load_scenario("3u1o")
+    adsb_cfg = load_scenario("3u1o", sensors={"model": "adsb"})
+    pictures = []
+    for cfg in (exact_cfg, adsb_cfg, adsb_cfg):
+        sim, rng = SwarmSim(cfg, scored=False), np.random.default_rng(7)
+        state = sim.initial_state(rng, 64)
+        for _ in range(4):
+            state, _ = sim.step(state, np.zeros((64, 3)), rng)
+        pictures.append((sim.observe(state), state))
+    (exact, truth), (adsb, state), (again, _) = pictures
+    np.testing.assert_array_equal(adsb.rows, again.rows)  # same seed, same picture
+    assert state.tracks is not None and truth.tracks is None
+    assert not np.allclose(exact.rows, adsb.rows)
+    assert np.abs(state.gps_error_m).max() > 0 and np.abs(truth.gps_error_m).max() == 0
+    # the tracked intruder lies within a few tens of metres of the truth
+    from sim.sensors import picture
+
+    pos, _, valid = picture(state.tracks, (state.steps * adsb_cfg.dt_s)[:, None].astype(float))
+    err = np.hypot(*(pos - state.obstacle_pos_m).transpose(2, 0, 1))[valid]
+    assert valid.mean() > 0.8 and np.median(err) < 30.0 and err.max() < 120.0
+
+
+def test_perfect_adsb_is_exact_sensing_up_to_the_report_lag():
+    perfect = {
+        "model": "adsb",
+        "adsb_rate_hz": [1000.0, 1000.0],
+        "adsb_latency_s": [0.0, 0.0],
+        "adsb_epu_m": [0.0, 0.0],
+        "adsb_nacv_m_s": 0.0,
+        "adsb_drop_probability": 0.0,
+        "gps_sigma_m": 0.0,
+    }
+    outs = []
+    for cfg in (load_scenario("3u2o"), load_scenario("3u2o", sensors=perfect)):
+        sim, rng = SwarmSim(cfg, scored=False), np.random.default_rng(3)
+        state = sim.initial_state(rng, 16)
+        for _ in range(3):
+            state, _ = sim.step(state, np.zeros((16, 3)), rng)
+        outs.append(sim.observe(state).rows)
+    np.testing.assert_allclose(outs[0], outs[1], atol=1e-3)

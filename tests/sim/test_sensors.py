@@ -1,0 +1,370 @@
+"""The ADS-B sensor model: reports only from the past, newest first, with the stated errors, and
+the extrapolation and age rule the runtime's tracker shares."""
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from remarl_fc.flight.traffic import Intruder, TrafficPicture, _at
+from sim.config import SensorConfig
+from sim.sensors import (
+    ADSB_TSLC_S,
+    POSITION_95_TO_SIGMA,
+    TRACK_MAX_AGE_S,
+    AdsbTracks,
+    extrapolate,
+    gps_noise,
+    is_fresh,
+    picture,
+    report_time,
+    update,
+)
+
+EXACT = SensorConfig(
+    model="adsb",
+    adsb_latency_s=(0.0, 0.0),
+    adsb_epu_m=(0.0, 0.0),
+    adsb_nacv_m_s=0.0,
+    adsb_drop_probability=0.0,
+)
+"""Reports without error, delay or loss."""
+
+
+def straight(b, m, rng):
+    """A random straight constant-velocity track per intruder: position at time t."""
+    p0 = rng.uniform(-500.0, 500.0, (b, m, 2))
+    vel = rng.uniform(-40.0, 40.0, (b, m, 2))
+    return (lambda t: p0 + vel * t), vel
+
+
+def arrived_indices(tracks, visible_since, now, b, m):
+    """Reference: the report indices k of intruder (b, m) transmitted and arrived by ``now``."""
+    period, phase = tracks.period_s[b, m], tracks.phase_s[b, m]
+    latency, since = tracks.latency_s[b, m], visible_since[b, m]
+    if since == math.inf:
+        return []
+    hi = math.floor((now - latency - phase) / period) + 1
+    lo = hi - 200 if since == -math.inf else math.floor((since - phase) / period) - 1
+    return [
+        k
+        for k in range(lo, hi + 1)
+        if phase + k * period >= since and phase + k * period + latency <= now
+    ]
+
+
+settings_cfg = st.builds(
+    lambda lo, span, lat, lat_span, p: SensorConfig(
+        model="adsb",
+        adsb_rate_hz=(lo, lo + span),
+        adsb_latency_s=(lat, lat + lat_span),
+        adsb_drop_probability=p,
+    ),
+    st.floats(0.2, 5.0),
+    st.floats(0.0, 3.0),
+    st.floats(0.0, 2.0),
+    st.floats(0.0, 1.0),
+    st.sampled_from([0.0, 0.1, 0.5, 0.9]),
+)
+
+
+@given(
+    cfg=settings_cfg,
+    seed=st.integers(0, 2**32 - 1),
+    steps=st.lists(st.floats(0.0, 4.0), min_size=1, max_size=8),
+    since_kind=st.sampled_from(["zero", "random", "never", "always"]),
+)
+def test_reports_come_only_from_the_past_and_never_go_back(cfg, seed, steps, since_kind):
+    rng = np.random.default_rng(seed)
+    b, m = 3, 4
+    true_at, vel = straight(b, m, rng)
+    since = {
+        "zero": np.zeros((b, m)),
+        "random": rng.uniform(0.0, 6.0, (b, m)),
+        "never": np.full((b, m), math.inf),
+        "always": np.full((b, m), -math.inf),
+    }[since_kind]
+    tracks = AdsbTracks.fresh(b, m, cfg, rng)
+    now = 0.0
+    for dt in steps:
+        now += dt
+        before = tracks
+        tracks = update(tracks, true_at(now), vel, now, since, cfg, rng)
+        held = np.isfinite(tracks.t_valid_s)
+        # never from the future, never before the intruder transmits, never an older report
+        assert np.all(tracks.t_valid_s[held] + tracks.latency_s[held] <= now)
+        assert np.all(tracks.t_valid_s[held] >= since[held])
+        assert np.all(tracks.t_valid_s >= before.t_valid_s)
+        assert np.all(tracks.last_index >= before.last_index)
+        assert np.array_equal(held, np.isfinite(tracks.pos_m).all(axis=-1))
+        np.testing.assert_array_equal(
+            tracks.t_report_s[held],
+            report_time(tracks.t_valid_s[held] + tracks.latency_s[held], ADSB_TSLC_S),
+        )
+        for i in range(b):
+            for j in range(m):
+                arrived = arrived_indices(tracks, since, now, i, j)
+                if not held[i, j]:
+                    assert cfg.adsb_drop_probability > 0.0 or not arrived
+                    continue
+                k = (tracks.t_valid_s[i, j] - tracks.phase_s[i, j]) / tracks.period_s[i, j]
+                assert k == pytest.approx(round(k), abs=1e-6)  # a transmitted report
+                assert round(k) in arrived
+                lost = max(arrived) - round(k)  # the newer reports that were lost
+                age = now - tracks.t_valid_s[i, j]
+                assert age <= tracks.latency_s[i, j] + tracks.period_s[i, j] * (1 + lost) + 1e-9
+                if cfg.adsb_drop_probability == 0.0:
+                    assert lost == 0
+
+
+@given(seed=st.integers(0, 2**32 - 1), latency=st.floats(0.0, 2.0), now=st.floats(3.0, 60.0))
+def test_without_losses_the_age_is_the_latency_within_a_period(seed, latency, now):
+    rate_hz = 20.0
+    cfg = SensorConfig(
+        model="adsb",
+        adsb_rate_hz=(rate_hz, rate_hz),
+        adsb_latency_s=(latency, latency),
+        adsb_drop_probability=0.0,
+    )
+    rng = np.random.default_rng(seed)
+    true_at, vel = straight(2, 3, rng)
+    tracks = AdsbTracks.fresh(2, 3, cfg, rng)
+    tracks = update(tracks, true_at(now), vel, now, np.zeros((2, 3)), cfg, rng)
+    age = now - tracks.t_valid_s
+    assert np.all(age >= latency - 1e-9)
+    assert np.all(age <= latency + 1.0 / rate_hz + 1e-9)
+    _, _, valid = picture(tracks, now)
+    assert valid.all()
+
+
+@given(seed=st.integers(0, 2**32 - 1), times=st.lists(st.floats(1.0, 30.0), max_size=6))
+def test_exact_config_reproduces_the_true_track(seed, times):
+    rng = np.random.default_rng(seed)
+    b, m = 2, 5
+    true_at, vel = straight(b, m, rng)
+    tracks = AdsbTracks.fresh(b, m, EXACT, rng)
+    for now in sorted({1.0, *times}):
+        tracks = update(tracks, true_at(now), vel, now, np.zeros((b, m)), EXACT, rng)
+        pos, v, valid = picture(tracks, now)
+        assert valid.all()  # report 0 went out before 1 s (period ≤ 1 s) and arrived at once
+        np.testing.assert_allclose(pos, true_at(now), rtol=0, atol=1e-9)
+        np.testing.assert_array_equal(v, vel)
+
+
+def test_exact_config_at_the_start_sees_only_what_was_sent():
+    rng = np.random.default_rng(0)
+    true_at, vel = straight(4, 8, rng)
+    tracks = AdsbTracks.fresh(4, 8, EXACT, rng)
+    tracks = update(tracks, true_at(0.0), vel, 0.0, np.zeros((4, 8)), EXACT, rng)
+    _, _, valid = picture(tracks, 0.0)
+    np.testing.assert_array_equal(valid, tracks.phase_s == 0.0)  # report 0 only if sent at 0
+
+
+def test_errors_have_the_stated_95_percent_radius():
+    epu_m, nacv_m_s, count = 25.0, 3.0, 40_000
+    cfg = SensorConfig(
+        model="adsb",
+        adsb_latency_s=(0.0, 0.0),
+        adsb_epu_m=(epu_m, epu_m),
+        adsb_nacv_m_s=nacv_m_s,
+        adsb_drop_probability=0.0,
+    )
+    rng = np.random.default_rng(1)
+    true_at, vel = straight(count, 1, rng)
+    tracks = AdsbTracks.fresh(count, 1, cfg, rng)
+    now = 1.0  # every intruder has sent a report by then (period ≤ 1 s)
+    tracks = update(tracks, true_at(now), vel, now, np.zeros((count, 1)), cfg, rng)
+    truth_then = true_at(tracks.t_valid_s[..., None])
+    pos_err = (tracks.pos_m - truth_then).reshape(-1, 2)
+    vel_err = (tracks.vel_m_s - vel).reshape(-1, 2)
+    for err, radius in ((pos_err, epu_m), (vel_err, nacv_m_s)):
+        np.testing.assert_allclose(err.mean(axis=0), 0.0, atol=0.03 * radius)
+        np.testing.assert_allclose(err.std(axis=0), radius / POSITION_95_TO_SIGMA, rtol=0.02)
+        within = np.mean(np.hypot(*err.T) <= radius)
+        assert within == pytest.approx(0.95, abs=0.005)
+
+
+@pytest.mark.parametrize("p", [0.1, 0.5])
+def test_losses_have_the_stated_probability(p):
+    """One update per report: a fraction p is lost; three at once: all lost with p³."""
+    count, rate_hz = 20_000, 1.0
+    cfg = SensorConfig(
+        model="adsb",
+        adsb_rate_hz=(rate_hz, rate_hz),
+        adsb_latency_s=(0.5, 0.5),
+        adsb_drop_probability=p,
+    )
+    rng = np.random.default_rng(2)
+    true_at, vel = straight(count, 1, rng)
+    tracks = AdsbTracks.fresh(count, 1, cfg, rng)
+    since = np.zeros((count, 1))
+    now = 1.5  # report 0 (sent before 1 s) has arrived everywhere, report 1 (after) nowhere
+    one = update(tracks, true_at(now), vel, now, since, cfg, rng)
+    assert np.all(one.last_index[tracks.phase_s > 0] == 0.0)
+    assert np.mean(np.isfinite(one.t_valid_s)) == pytest.approx(1 - p, abs=0.015)
+    three = update(tracks, true_at(now + 2.0), vel, now + 2.0, since, cfg, rng)
+    assert np.all(three.last_index[tracks.phase_s > 0] == 2.0)
+    assert np.mean(np.isnan(three.pos_m[..., 0])) == pytest.approx(p**3, abs=0.01)
+    newest = np.isclose(three.t_valid_s, three.phase_s + 2.0 * three.period_s)
+    assert np.mean(newest) == pytest.approx(1 - p, abs=0.015)
+
+
+def test_a_lost_report_stays_lost():
+    """A report's loss is drawn once: until a newer one arrives, updates change nothing."""
+    cfg = SensorConfig(model="adsb", adsb_drop_probability=0.5)
+    rng = np.random.default_rng(3)
+    true_at, vel = straight(500, 2, rng)
+    since = np.zeros((500, 2))
+    tracks = AdsbTracks.fresh(500, 2, cfg, rng)
+    changed = np.zeros((500, 2), dtype=bool)
+    for now in np.arange(0.0, 6.0, 0.05):
+        new = update(tracks, true_at(now), vel, now, since, cfg, rng)
+        same = new.last_index == tracks.last_index  # nothing arrived since the last update
+        np.testing.assert_array_equal(new.t_valid_s[same], tracks.t_valid_s[same])
+        np.testing.assert_array_equal(new.pos_m[same], tracks.pos_m[same])
+        changed |= new.t_valid_s != tracks.t_valid_s
+        tracks = new
+    assert changed.mean() > 0.9  # most tracks got reports (all lost over 6 s: p⁶ ≈ 2%)
+
+
+def test_picture_ages_by_report_time_and_extrapolates():
+    cfg = dataclasses.replace(EXACT, adsb_latency_s=(1.2, 1.2))
+    rng = np.random.default_rng(4)
+    true_at, vel = straight(3, 2, rng)
+    since = np.zeros((3, 2))
+    tracks = AdsbTracks.fresh(3, 2, cfg, rng)
+    tracks = update(tracks, true_at(3.0), vel, 3.0, since, cfg, rng)
+    t = tracks.t_report_s
+    assert np.all(t == tracks.t_valid_s + 1.2 - ADSB_TSLC_S)
+    for now in (3.0, 5.0):
+        pos, v, valid = picture(tracks, now)
+        assert valid.all()
+        np.testing.assert_array_equal(pos, extrapolate(tracks.pos_m, tracks.vel_m_s, t, now))
+        np.testing.assert_array_equal(v, tracks.vel_m_s)
+    # the latency is not corrected: the picture lags the truth by v · latency (minus tslc)
+    lag = true_at(5.0) - picture(tracks, 5.0)[0]
+    np.testing.assert_allclose(lag, vel * (1.2 - ADSB_TSLC_S), rtol=0, atol=1e-9)
+    # exactly TRACK_MAX_AGE_S after the report time it is still used, after that not
+    last = float(t.max())
+    assert picture(tracks, last + TRACK_MAX_AGE_S)[2][t == last].all()
+    pos, v, valid = picture(tracks, float(t.max()) + TRACK_MAX_AGE_S + 1e-6)
+    assert not valid.any()
+    assert np.isnan(pos).all() and np.isnan(v).all()
+
+
+def test_never_visible_intruders_are_never_seen():
+    cfg = SensorConfig(model="adsb", adsb_drop_probability=0.0)
+    rng = np.random.default_rng(5)
+    true_at, vel = straight(2, 3, rng)
+    since = np.array([[0.0, math.inf, 10.0], [math.inf, 0.0, 0.0]])
+    tracks = AdsbTracks.fresh(2, 3, cfg, rng)
+    for now in (4.0, 8.0, 13.0):
+        tracks = update(tracks, true_at(now), vel, now, since, cfg, rng)
+        _, _, valid = picture(tracks, now)
+        np.testing.assert_array_equal(valid[np.isinf(since)], False)
+        assert valid[0, 2] == (now > 10.0)  # the pop-up: its first report arrived by 12.5 s
+        held = np.isfinite(tracks.t_valid_s)
+        assert np.all(tracks.t_valid_s[held] >= since[held])
+
+
+def test_fresh_draws_within_the_configured_ranges():
+    cfg = SensorConfig(model="adsb")
+    tracks = AdsbTracks.fresh(50, 6, cfg, np.random.default_rng(6))
+    rate = 1.0 / tracks.period_s
+    assert np.all((rate >= cfg.adsb_rate_hz[0]) & (rate <= cfg.adsb_rate_hz[1]))
+    assert np.all((tracks.phase_s >= 0.0) & (tracks.phase_s < tracks.period_s))
+    lat = tracks.latency_s
+    assert np.all((lat >= cfg.adsb_latency_s[0]) & (lat <= cfg.adsb_latency_s[1]))
+    epu = tracks.pos_sigma_m * POSITION_95_TO_SIGMA
+    assert np.all((epu >= cfg.adsb_epu_m[0] - 1e-9) & (epu <= cfg.adsb_epu_m[1] + 1e-9))
+    np.testing.assert_allclose(tracks.vel_sigma_m_s, cfg.adsb_nacv_m_s / 2.448)
+    assert math.sqrt(-2 * math.log(0.05)) == pytest.approx(POSITION_95_TO_SIGMA, abs=1e-3)
+
+
+def merge(old, new, mask):
+    """A local `merge_where`: every field an ndarray with B first, replaced where ``mask``."""
+    fields = {}
+    for f in dataclasses.fields(old):
+        a, b_ = getattr(old, f.name), getattr(new, f.name)
+        assert isinstance(a, np.ndarray) and a.shape[0] == mask.shape[0], f.name
+        out = a.copy()
+        out[mask] = b_[mask]
+        fields[f.name] = out
+    return dataclasses.replace(old, **fields)
+
+
+def test_tracks_merge_per_environment():
+    cfg = SensorConfig(model="adsb", adsb_drop_probability=0.0)
+    rng = np.random.default_rng(7)
+    b, m = 4, 3
+    true_at, vel = straight(b, m, rng)
+    tracks = AdsbTracks.fresh(b, m, cfg, rng)
+    tracks = update(tracks, true_at(5.0), vel, 5.0, np.zeros((b, m)), cfg, rng)
+    restart = AdsbTracks.fresh(b, m, cfg, rng)
+    mask = np.array([True, False, True, False])
+    merged = merge(tracks, restart, mask)
+    _, _, valid = picture(merged, 5.0)
+    np.testing.assert_array_equal(valid.any(axis=1), ~mask)
+    np.testing.assert_array_equal(merged.period_s[mask], restart.period_s[mask])
+    assert AdsbTracks.fresh(2, 0, cfg, rng).pos_m.shape == (2, 0, 2)
+
+
+def test_draws_do_not_depend_on_the_data():
+    cfg = SensorConfig(model="adsb")
+    rng = np.random.default_rng(8)
+    true_at, vel = straight(2, 2, rng)
+    tracks = AdsbTracks.fresh(2, 2, cfg, rng)
+    after = []
+    for since in (np.zeros((2, 2)), np.full((2, 2), math.inf)):
+        r = np.random.default_rng(9)
+        update(tracks, true_at(3.0), vel, 3.0, since, cfg, r)
+        after.append(r.random())
+    assert after[0] == after[1]
+
+
+def test_gps_noise():
+    rng = np.random.default_rng(10)
+    pos = rng.uniform(-10, 10, (1000, 3, 2))
+    state = rng.bit_generator.state
+    assert gps_noise(pos, 0.0, rng) is pos
+    assert rng.bit_generator.state == state  # no draw
+    noisy = gps_noise(pos, 1.5, rng)
+    assert noisy.shape == pos.shape
+    assert (noisy - pos).std() == pytest.approx(1.5, rel=0.05)
+
+
+# -- shared with the runtime -----------------------------------------------------------------
+
+
+@given(
+    ne=st.tuples(st.floats(-1e5, 1e5), st.floats(-1e5, 1e5)),
+    vel=st.tuples(st.floats(-400, 400), st.floats(-400, 400)),
+    t=st.floats(0.0, 1e6),
+    ahead=st.floats(-10.0, 10.0),
+)
+def test_runtime_extrapolates_with_the_same_code(ne, vel, t, ahead):
+    intr = Intruder(np.array(ne), 20.0, np.array(vel), t)
+    now = t + ahead
+    expected = extrapolate(np.array(ne), np.array(vel), t, now)
+    np.testing.assert_array_equal(intr.predicted_ne_m(now), expected)
+    assert _at(intr, now) == tuple(expected.tolist())  # the float path: the same bits
+
+
+def test_extrapolate_is_batched_and_never_goes_back():
+    pos = np.zeros((2, 3, 2))
+    vel = np.ones((2, 3, 2))
+    t = np.arange(6.0).reshape(2, 3)
+    out = extrapolate(pos, vel, t, 2.0)
+    assert out.shape == (2, 3, 2)
+    np.testing.assert_array_equal(out[..., 0], np.maximum(0.0, 2.0 - t))
+
+
+def test_runtime_ages_tracks_with_the_shared_rule():
+    assert TrafficPicture.__dataclass_fields__["max_age_s"].default == TRACK_MAX_AGE_S
+    assert report_time(10.0, 3.0) == 7.0
+    assert is_fresh(0.0, TRACK_MAX_AGE_S) and not is_fresh(0.0, TRACK_MAX_AGE_S + 1e-9)
+    ages = np.array([0.0, 5.0, 5.5, -math.inf])
+    np.testing.assert_array_equal(is_fresh(ages, 5.0), [True, True, True, False])
