@@ -28,7 +28,7 @@ from remarl_fc.flight.status import Status
 from remarl_fc.mavlink.codec import SigningConfig
 from remarl_fc.policy_io import load_policy
 from remarl_fc.sitl.attacker import Attacker
-from remarl_fc.sitl.config import DEFAULT_HOME, Flavour, SitlConfig
+from remarl_fc.sitl.config import ARDUPILOT_QUICK_START, DEFAULT_HOME, Flavour, SitlConfig
 from remarl_fc.sitl.faults import Faults
 from remarl_fc.sitl.fleet import SitlFleet
 from sim.scenarios import load_scenario
@@ -122,6 +122,7 @@ async def fly_on_mock(
     tcp: bool = False,
     signing_key: bytes | None = None,
     sitl_options: dict[str, Any] | None = None,
+    quick_start: bool = False,
 ) -> MockFlight:
     """Fly ``policy`` (default: the zoo policy of ``scenario``) on a mock of ``scenario``.
 
@@ -136,11 +137,15 @@ async def fly_on_mock(
             SITL's serial-over-TCP ports).
         signing_key: sign both sides with this key (the mock then rejects unsigned commands).
         sitl_options: extra `SitlConfig` fields (e.g. ``px4=Px4Params(...)``).
+        quick_start: skip ArduCopter's slow start (EKF ready after 5 s instead of 39 s, the
+            climb at once after the take-off ACK): for tests that do not exercise the start.
     """
     cfg = load_scenario(scenario)
     pol = load_policy(policy or scenario)
     pol.check_scenario(cfg)
     port = free_udp_port()
+    options: dict[str, Any] = {"ardupilot": ARDUPILOT_QUICK_START} if quick_start else {}
+    options.update(sitl_options or {})
     sitl = SitlConfig(
         vehicles=cfg.uav.count,
         flavour=flavour,
@@ -150,7 +155,7 @@ async def fly_on_mock(
         speedup=speedup,
         cruise_alt_m=CRUISE_ALT_M,
         seed=seed,
-        **(sitl_options or {}),
+        **options,
     )
     mission = Mission.from_scenario(cfg, DEFAULT_HOME, CRUISE_ALT_M)
     if geofence is not None:

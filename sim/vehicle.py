@@ -16,6 +16,7 @@ simulator's frame (the trace tools convert from NED).
 
 from __future__ import annotations
 
+import csv
 import math
 from collections import deque
 from dataclasses import dataclass, fields
@@ -203,3 +204,36 @@ class DelayLine:
             return command
         self._queue.append(command.copy())
         return self._queue[0]
+
+
+@dataclass(frozen=True)
+class Trace:
+    """A recorded response of real firmware to our setpoints (one CSV of the SITL traces).
+
+    North/east velocities; yaws counter-clockwise in radians (the files' NED degrees
+    converted), not unwrapped. Attributes are (T,) or (T, 2) arrays, one row per sample.
+    """
+
+    times_s: FloatArray
+    command_m_s: FloatArray
+    velocity_m_s: FloatArray
+    command_yaw_rad: FloatArray
+    yaw_rad: FloatArray
+
+
+def read_trace(path: Path) -> Trace:
+    """Read one trace file.
+
+    Columns t_s, cmd_vn_m_s, cmd_ve_m_s, vn_m_s, ve_m_s, cmd_yaw_deg, yaw_deg, as the README of
+    the traces describes them.
+    """
+    with path.open(encoding="utf-8") as f:
+        rows = list(csv.DictReader(f))
+    col = {k: np.array([float(r[k]) for r in rows]) for k in rows[0]}
+    return Trace(
+        times_s=col["t_s"],
+        command_m_s=np.stack([col["cmd_vn_m_s"], col["cmd_ve_m_s"]], axis=-1),
+        velocity_m_s=np.stack([col["vn_m_s"], col["ve_m_s"]], axis=-1),
+        command_yaw_rad=-np.radians(col["cmd_yaw_deg"]),  # NED clockwise → counter-clockwise
+        yaw_rad=-np.radians(col["yaw_deg"]),
+    )

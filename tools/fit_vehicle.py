@@ -14,7 +14,6 @@ tests/data/sitl/README.md.
 from __future__ import annotations
 
 import argparse
-import csv
 import itertools
 import math
 from pathlib import Path
@@ -22,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from sim.arrays import FloatArray
-from sim.vehicle import VehicleProfile, respond
+from sim.vehicle import VehicleProfile, read_trace, respond
 
 TRACES = Path(__file__).resolve().parents[1] / "tests" / "data" / "sitl"
 PROFILES = Path(__file__).resolve().parents[1] / "sim" / "vehicles"
@@ -51,12 +50,8 @@ COARSE = {
 
 def read(name: str) -> tuple[FloatArray, FloatArray, FloatArray]:
     """(times (T,), commands (T, 2), velocities (T, 2)) of a trace, north/east."""
-    with (TRACES / f"{name}.csv").open() as f:
-        rows = list(csv.DictReader(f))
-    col = {k: np.array([float(r[k]) for r in rows]) for k in rows[0]}
-    cmd = np.stack([col["cmd_vn_m_s"], col["cmd_ve_m_s"]], axis=-1)
-    vel = np.stack([col["vn_m_s"], col["ve_m_s"]], axis=-1)
-    return col["t_s"], cmd, vel
+    trace = read_trace(TRACES / f"{name}.csv")
+    return trace.times_s, trace.command_m_s, trace.velocity_m_s
 
 
 def errors(
@@ -125,12 +120,8 @@ YAW_GRID = {
 
 def read_yaw(name: str) -> tuple[FloatArray, FloatArray, FloatArray]:
     """(times, commanded yaw, yaw) of a trace, radians (counter-clockwise, unwrapped later)."""
-    with (TRACES / f"{name}.csv").open() as f:
-        rows = list(csv.DictReader(f))
-    t = np.array([float(r["t_s"]) for r in rows])
-    cmd = -np.radians([float(r["cmd_yaw_deg"]) for r in rows])  # NED clockwise → CCW
-    yaw = -np.radians([float(r["yaw_deg"]) for r in rows])
-    return t, cmd, yaw
+    trace = read_trace(TRACES / f"{name}.csv")
+    return trace.times_s, trace.command_yaw_rad, trace.yaw_rad
 
 
 def fit_yaw(names: tuple[str, ...], delay: float) -> tuple[dict[str, float], float]:

@@ -4,7 +4,11 @@
 
 For each scenario: ``remarl-fc train`` with a wall-clock budget, ``remarl-fc eval`` of the best
 checkpoint on 1,000 episodes with seeds never used in training, then export with the metrics
-embedded, and the eval JSON beside the policy file. Prints one line per scenario.
+embedded, and the eval JSON beside the policy file. Prints one line per scenario. A scenario
+may be a file: the policy is named after it and evaluated on it, e.g. the robust 3u2o policy::
+
+    python tools/train_zoo.py --scenarios policies/zoo/robust/3u2o.toml --minutes 35 \
+        --zoo policies/zoo/robust --runs runs/robust
 """
 
 from __future__ import annotations
@@ -41,7 +45,8 @@ def main() -> None:
     args = parser.parse_args()
     zoo = Path(args.zoo)
     zoo.mkdir(parents=True, exist_ok=True)
-    for name in args.scenarios:
+    for scenario in args.scenarios:
+        name = Path(scenario).stem
         t0 = time.monotonic()
         if args.from_run:
             run = Path(args.from_run)
@@ -50,7 +55,7 @@ def main() -> None:
         else:
             run = Path(args.runs) / name
             cfg = TrainConfig(
-                scenario=name,
+                scenario=scenario,
                 total_steps=10_000_000,
                 minutes=args.minutes,
                 seed=args.seed,
@@ -59,7 +64,7 @@ def main() -> None:
                 ddpg=DDPGConfig(shared=args.shared),
             )
             summary = train(cfg, run)
-        result = publish(run, name, args.episodes, zoo, summary)
+        result = publish(run, scenario, args.episodes, zoo, summary)
         print(
             f"{name}: success {result['success_rate']:.1%}, collisions "
             f"{result['collision_rate']:.1%}, min d_U2O {result['min_d_u2o_m']:.1f} m, "
@@ -70,16 +75,22 @@ def main() -> None:
 
 
 def publish(
-    run: Path, name: str, episodes: int, zoo: Path, summary: dict[str, Any]
+    run: Path, scenario: str, episodes: int, zoo: Path, summary: dict[str, Any]
 ) -> dict[str, Any]:
     """Evaluate a run's best networks on held-out seeds and write the zoo file and its JSON."""
+    name = Path(scenario).stem
     staging = run / "policy.safetensors"
     export_policy(run, staging)
-    _, result = evaluate_policy(str(staging), name, episodes, EVAL_SEED)
+    _, result = evaluate_policy(str(staging), scenario, episodes, EVAL_SEED)
     result["train_wall_s"] = summary["elapsed_s"]
     result["train_env_steps"] = summary["env_steps"]
     export_policy(run, zoo / f"{name}.safetensors", metrics=result)
-    result["policy"] = f"{name} (policies/zoo/{name}.safetensors)"
+    where = (
+        zoo.resolve().relative_to(ZOO.parents[1])
+        if zoo.resolve().is_relative_to(ZOO.parents[1])
+        else zoo
+    )
+    result["policy"] = f"{name} ({where / f'{name}.safetensors'})"
     (zoo / f"{name}.eval.json").write_text(json.dumps(result, indent=2) + "\n")
     return result
 

@@ -81,6 +81,24 @@ def add_eval(sub: Any) -> None:
     )
     add_seed(p, default=evaluation_seed(), help="first evaluation seed")
     p.add_argument(
+        "--dynamics",
+        default=None,
+        help="fly every UAV with this vehicle profile: ideal (the paper), arducopter, px4, "
+        "px4-sluggish, responsive, or a profile .toml (default: the scenario's)",
+    )
+    p.add_argument(
+        "--sensors",
+        choices=["exact", "adsb"],
+        default=None,
+        help="exact positions, or ADS-B intruders and GPS noise (default: the scenario's)",
+    )
+    p.add_argument(
+        "--arrival",
+        choices=["hover", "leave"],
+        default=None,
+        help="arrived UAVs hover in the way, or leave (the paper's rule); default: the scenario's",
+    )
+    p.add_argument(
         "--plot",
         default=None,
         help="draw one episode and its Q-values to this file; with --suite, a folder for the "
@@ -172,18 +190,27 @@ def cmd_train(args: argparse.Namespace) -> int:
 def cmd_eval(args: argparse.Namespace) -> int:
     """Evaluate a policy file with numpy inference; optionally draw one episode."""
     if args.suite:
+        if args.dynamics or args.sensors or args.arrival:
+            raise ConfigError(
+                "eval --suite flies each family in its own world; --dynamics, --sensors and "
+                "--arrival apply to --policy evaluations on a scenario (the suite's oracle "
+                "labels are proved for the paper's vehicles)"
+            )
         return cmd_eval_suite(args)
     if not args.policy:
         raise ConfigError("eval: give --policy NAME|PATH (or --suite NAME with --method/--policy)")
-    from remarl_fc.offline.evaluate import evaluate_policy, plot_episode
+    from remarl_fc.offline.evaluate import evaluate_policy, plot_episode, world_overrides
 
     episodes = args.episodes or DEFAULT_EVAL_EPISODES
-    policy, result = evaluate_policy(args.policy, args.scenario, episodes, args.seed)
+    world = world_overrides(args.dynamics, args.sensors, args.arrival)
+    policy, result = evaluate_policy(args.policy, args.scenario, episodes, args.seed, world)
     if args.plot:
-        plot_episode(policy, args.scenario, args.seed, Path(args.plot))
+        plot_episode(policy, args.scenario, args.seed, Path(args.plot), world)
         result["plot"] = args.plot
     human = (
-        f"{result['scenario']}, {int(result['episodes'])} episodes: success "
+        f"{result['scenario']} ({result['dynamics']}"
+        f"{' randomised' if result['dynamics_randomised'] else ''}, {result['sensors']} "
+        f"sensing, arrived UAVs {result['arrival']}), {int(result['episodes'])} episodes: success "
         f"{result['success_rate']:.1%}, collisions {result['collision_rate']:.1%} "
         f"(U2O {result['collision_rate_u2o']:.1%}, U2U {result['collision_rate_u2u']:.1%}), "
         f"min d_U2O {result['min_d_u2o_m']:.1f} m, min d_U2U {result['min_d_u2u_m']:.1f} m, "

@@ -104,6 +104,12 @@ def add_sitl_parser(sub: Any) -> None:
         help="vehicle profile: responsive (default), flavour (fitted to the flavour's real "
         "SITL traces), arducopter, px4, px4-sluggish, ideal, or a .toml path",
     )
+    p.add_argument(
+        "--quick-start",
+        action="store_true",
+        help="ArduPilot: the EKF is ready after 5 s and the climb starts at once after the "
+        "take-off ACK (real ArduCopter SITL: about 39 s and 4.5 s; for tests and rehearsals)",
+    )
     _repeatable(
         p,
         "--param",
@@ -139,6 +145,7 @@ def cmd_sitl(args: argparse.Namespace) -> int:
     from remarl_fc.errors import ConfigError
     from remarl_fc.mavlink.codec import load_signing_key
     from remarl_fc.sitl.config import (
+        ARDUPILOT_QUICK_START,
         DEFAULT_HOME,
         ArduPilotParams,
         Px4Params,
@@ -154,7 +161,8 @@ def cmd_sitl(args: argparse.Namespace) -> int:
         model = VehicleModelConfig(
             gps_noise_m=args.gps_noise, gust_m_s=args.gust, profile=args.vehicle
         )
-        ardupilot, px4 = ArduPilotParams(), Px4Params()
+        ardupilot = ARDUPILOT_QUICK_START if args.quick_start else ArduPilotParams()
+        px4 = Px4Params()
         if args.flavour == "px4":
             px4 = with_overrides(px4, PX4_PARAMS, args.param)
         else:

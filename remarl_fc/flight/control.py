@@ -82,6 +82,7 @@ class Decision:
         t: decision time. obs: (N, size) observations. action: (N,) in [−1, 1].
         turn_rad: (N,) heading change over the coming step. heading_rad: (N,) at t.
         positions_ne_m: (N, 2) as used. obstacles_ne_m: (M, 2) as used.
+        speed_m_s: (N,) the speed commanded along the coming arc.
     """
 
     t: float
@@ -91,6 +92,7 @@ class Decision:
     heading_rad: FloatArray
     positions_ne_m: FloatArray
     obstacles_ne_m: FloatArray
+    speed_m_s: FloatArray
 
 
 class SwarmController:
@@ -110,6 +112,7 @@ class SwarmController:
         self.h0 = np.zeros(n)
         self.turn = np.zeros(n)
         self.t0 = np.zeros(n)
+        self.speed_m_s = np.full(n, spec.speed_m_s)
         self.centre0 = np.zeros(2)
         self.swarm_vel = np.zeros(2)
         self.t_start = 0.0
@@ -145,6 +148,7 @@ class SwarmController:
         positions_ne_m: FloatArray,
         obstacles_ne_m: FloatArray,
         obstacle_vel_ne_m_s: FloatArray,
+        speed_m_s: FloatArray | None = None,
     ) -> Decision:
         """Decide every vehicle's next arc.
 
@@ -153,6 +157,8 @@ class SwarmController:
             positions_ne_m: (N, 2) current positions (rows of vehicles not flown are ignored).
             obstacles_ne_m, obstacle_vel_ne_m_s: (M, 2) intruders and vehicles that are not
                 (or no longer) members of the swarm, predicted to ``now``.
+            speed_m_s: (N,) speeds to fly the coming arcs at, clipped to [0, the policy's
+                speed] (a multirotor can slow down and stop); None: the policy's speed.
         """
         layout = self.policy.layout
         heading = self.heading_at(now)
@@ -175,14 +181,24 @@ class SwarmController:
         action = np.clip(self.policy.act(flat)[0], -1.0, 1.0).astype(np.float32)
         turn = action.astype(np.float64) * self.spec.max_turn_rad
         self.h0, self.turn, self.t0[:] = heading, turn, now
+        cruise = self.spec.speed_m_s
+        wanted = np.full(self.n, cruise) if speed_m_s is None else np.asarray(speed_m_s, float)
+        self.speed_m_s = np.clip(np.nan_to_num(wanted, nan=0.0), 0.0, cruise)
         return Decision(
-            now, flat[0], action, turn, heading, np.asarray(positions_ne_m), sim_to_ne(obs_xy)
+            now,
+            flat[0],
+            action,
+            turn,
+            heading,
+            np.asarray(positions_ne_m),
+            sim_to_ne(obs_xy),
+            self.speed_m_s.copy(),
         )
 
     def setpoint(self, slot: int, now: float) -> tuple[float, float, float]:
         """(north m/s, east m/s, yaw rad) of vehicle ``slot`` on its arc now."""
         h = float(self.heading_at(now)[slot])
-        v = self.spec.speed_m_s
+        v = float(self.speed_m_s[slot])
         return v * math.sin(h), v * math.cos(h), float(heading_to_yaw(h))
 
     def reached(self, slot: int, position_ne_m: FloatArray) -> bool:

@@ -63,6 +63,7 @@ def decision_rows(
                 "obs": [round(float(v), 4) for v in d.obs[k]],
                 "action": round(float(d.action[k]), 4),
                 "turn_rad": round(float(d.turn_rad[k]), 4),
+                "speed_m_s": round(float(d.speed_m_s[k]), 3),
                 "heading_rad": round(float(d.heading_rad[k]), 4),
                 "setpoint": {"vn": round(vn, 3), "ve": round(ve, 3), "yaw": round(yaw, 4)},
                 "obstacles_ne_m": [[round(float(v), 2) for v in p] for p in d.obstacles_ne_m],

@@ -7,6 +7,7 @@ measured on observations from the evaluation itself.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -16,6 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from remarl_fc.policy_io import Policy, load_policy
+from sim.config import DynamicsRandomisation, ScenarioConfig
 from sim.evaluation import run_episodes, summarize
 from sim.scenarios import load_scenario
 from sim.swarm import SwarmSim
@@ -44,13 +46,54 @@ def timed_decisions(decide: Callable[[int], object], samples: int) -> dict[str, 
     }
 
 
-def evaluate_policy(
-    policy_name: str, scenario: str | None, episodes: int, seed: int
-) -> tuple[Policy, dict[str, Any]]:
-    """Load, check against the scenario (default: the policy's own), run, summarise."""
-    policy = load_policy(policy_name)
-    cfg = load_scenario(scenario or policy.meta["scenario"])
+def world_overrides(
+    dynamics: str | None = None, sensors: str | None = None, arrival: str | None = None
+) -> dict[str, Any]:
+    """Scenario overrides that fly a scenario in another world (None: keep the scenario's).
+
+    Args:
+        dynamics: a vehicle profile every UAV flies, without randomisation ("ideal",
+            "arducopter", "px4", ... or a profile file).
+        sensors: "exact" or "adsb" (with the scenario's ADS-B and GPS settings).
+        arrival: "hover" or "leave".
+    """
+    out: dict[str, Any] = {}
+    if dynamics is not None:
+        out["dynamics"] = dynamics
+        out["dynamics_randomisation"] = {
+            f.name: list(f.default) if isinstance(f.default, tuple) else f.default
+            for f in dataclasses.fields(DynamicsRandomisation)
+        }
+    if sensors is not None:
+        out["sensors"] = {"model": sensors}
+    if arrival is not None:
+        out["arrival"] = arrival
+    return out
+
+
+def evaluation_scenario(
+    policy: Policy, scenario: str | None, overrides: dict[str, Any] | None = None
+) -> ScenarioConfig:
+    """The scenario of an evaluation (default: the policy's own), in the world asked for."""
+    cfg = load_scenario(scenario or policy.meta["scenario"], **(overrides or {}))
     policy.check_scenario(cfg)
+    return cfg
+
+
+def evaluate_policy(
+    policy_name: str,
+    scenario: str | None,
+    episodes: int,
+    seed: int,
+    overrides: dict[str, Any] | None = None,
+) -> tuple[Policy, dict[str, Any]]:
+    """Load, check against the scenario (default: the policy's own), run, summarise.
+
+    ``overrides`` (`world_overrides`) change the scenario's world: vehicle response, sensing,
+    arrival; the result records the world flown.
+    """
+    policy = load_policy(policy_name)
+    cfg = evaluation_scenario(policy, scenario, overrides)
     seen: list[NDArray[np.float32]] = []
 
     def act(obs: NDArray[np.float32]) -> NDArray[np.float32]:
@@ -66,11 +109,21 @@ def evaluate_policy(
         **summarize(rows),
         **reaction_time_ms(policy, np.asarray(seen)),
         "uavs": cfg.uav.count,
+        "dynamics": cfg.dynamics,
+        "dynamics_randomised": cfg.dynamics_randomisation.randomised,
+        "sensors": cfg.sensors.model,
+        "arrival": cfg.arrival,
     }
     return policy, result
 
 
-def plot_episode(policy: Policy, scenario: str | None, seed: int, out: Path) -> None:
+def plot_episode(
+    policy: Policy,
+    scenario: str | None,
+    seed: int,
+    out: Path,
+    overrides: dict[str, Any] | None = None,
+) -> None:
     """Trajectories over the field's contours (paper Fig. 4a) and per-step Q-values (Fig. 4b)."""
     import matplotlib
 
@@ -79,7 +132,7 @@ def plot_episode(policy: Policy, scenario: str | None, seed: int, out: Path) -> 
 
     from sim.render import draw_state
 
-    cfg = load_scenario(scenario or policy.meta["scenario"])
+    cfg = evaluation_scenario(policy, scenario, overrides)
     sim = SwarmSim(cfg)
     rng = np.random.default_rng(seed)
     state = sim.initial_state(rng, 1)

@@ -133,6 +133,8 @@ class ArduCopterLogic(Autopilot[ArduPilotParams]):
         self.pilot_holding = False
         self.takeoff_active = False
         self._boot_pending = True  # a mode set during boot is overwritten when it ends
+        self._climb_at_s: float | None = None  # a take-off's climb waits for this time
+        self._climb_height_m = 0.0
 
     def mode_rules(self) -> ModeRules:
         """The row of `COPTER_MODES` (`UNMODELLED` for a mode outside it)."""
@@ -170,7 +172,7 @@ class ArduCopterLogic(Autopilot[ArduPilotParams]):
             )
         self.custom_mode = mode
         self.pilot_holding = False
-        self.takeoff_active = False
+        self._end_takeoff()
         self._apply_mode()
         return MavResult.ACCEPTED, ""
 
@@ -178,8 +180,17 @@ class ArduCopterLogic(Autopilot[ArduPilotParams]):
         """The pilot selects ``mode`` and holds the sticks centred."""
         self.custom_mode = mode
         self.pilot_holding = True
-        self.takeoff_active = False
+        self._end_takeoff()
         self._apply_mode()
+
+    def _end_takeoff(self) -> None:
+        """No take-off under way any more (a pending climb is dropped)."""
+        self.takeoff_active = False
+        self._climb_at_s = None
+
+    def climb_pending(self) -> bool:
+        """A take-off was accepted and its climb has not started yet (`takeoff_delay_s`)."""
+        return self._climb_at_s is not None
 
     def _apply_mode(self) -> None:
         mode, p, motion = self.custom_mode, self.p, self.motion
@@ -202,7 +213,12 @@ class ArduCopterLogic(Autopilot[ArduPilotParams]):
         return None
 
     def cmd_takeoff(self, cmd: Command, now_s: float) -> Result:
-        """p7 = height above home, m; armed, landed, take-off mode; COMMAND_INT frame 3."""
+        """p7 = height above home, m; armed, landed, take-off mode; COMMAND_INT frame 3.
+
+        The climb starts `ArduPilotParams.takeoff_delay_s` after the ACK (spool-up and
+        throttle ramp on ArduCopter; the vehicle stays on the ground meanwhile). A repeat
+        while the climb is pending is ACCEPTED and changes nothing (a client's retry).
+        """
         if not cmd.frame_in((MavFrame.GLOBAL_RELATIVE_ALT,)):
             return MavResult.DENIED, ""
         height = cmd.params[6]
@@ -210,9 +226,18 @@ class ArduCopterLogic(Autopilot[ArduPilotParams]):
             return MavResult.FAILED, ""
         if not math.isfinite(height) or height <= 0.0:
             return MavResult.FAILED, ""
+        if self.climb_pending():
+            return MavResult.ACCEPTED, ""
         self.takeoff_active = True
-        self.motion.climb(height, self.p.wpnav_speed_up_m_s)
+        self._climb_height_m = height
+        self._climb_at_s = now_s + self.p.takeoff_delay_s
+        if self.p.takeoff_delay_s <= 0.0:
+            self._start_climb()
         return MavResult.ACCEPTED, ""
+
+    def _start_climb(self) -> None:
+        self._climb_at_s = None
+        self.motion.climb(self._climb_height_m, self.p.wpnav_speed_up_m_s)
 
     def cmd_condition_yaw(self, cmd: Command, now_s: float) -> Result:
         """p1 angle 0–360°, p2 rate °/s, p3 direction −1/0/1, p4 0 absolute / 1 relative."""
@@ -244,18 +269,24 @@ class ArduCopterLogic(Autopilot[ArduPilotParams]):
             return self.ignore_setpoint("acceleration-only targets are not modelled")
         self.last_setpoint_s = now_s
         self.setpoint = sp
-        if not self.armed or (self.landed and not self.takeoff_active):
+        on_ground = self.landed and (not self.takeoff_active or self.climb_pending())
+        if not self.armed or on_ground:
             return self.ignore_setpoint("on the ground")
         self.takeoff_active = False
         self.motion.fly(sp, default_yaw=YawMode.TRAVEL)
         return True
 
     def mode_timers(self, now_s: float) -> None:
-        """Boot end, GUID_TIMEOUT, take-off end, RTL's landing."""
+        """Boot end, GUID_TIMEOUT, take-off start and end, RTL's landing."""
         p, motion = self.p, self.motion
         if not self.booting(now_s) and self._boot_pending:
             self._boot_pending = False
             self.custom_mode = self.spec.initial_mode  # overwrites a mode set during boot
+        if self._climb_at_s is not None and now_s >= self._climb_at_s:
+            if self.armed and self.landed and self.takeoff_active:
+                self._start_climb()
+            else:
+                self._end_takeoff()
         timed_out = now_s - self.last_setpoint_s > p.guid_timeout_s
         if self.under_external_control() and timed_out and motion.guidance == Guidance.VELOCITY:
             motion.stop_velocity()  # GUID_TIMEOUT: stop, stay in GUIDED

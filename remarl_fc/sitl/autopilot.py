@@ -84,8 +84,12 @@ class Autopilot(ABC, Generic[P]):
         self.failsafe = False
         self.flew = False  # has been airborne
         self.streams = StreamSchedule(
-            spec.default_streams, spec.supported_streams, spec.data_stream_groups
+            {**spec.default_streams, MsgId.ADSB_VEHICLE: 1.0 / cfg.adsb_hz},
+            spec.supported_streams,
+            spec.data_stream_groups,
         )
+        # the ADS-B receiver's first report comes one period after start
+        self.streams.first_due(MsgId.ADSB_VEHICLE, 1.0 / cfg.adsb_hz)
         self.command_server = CommandServer(self.channel)
         self.param_server: ParamServer[P] = ParamServer(spec.param_table, self.channel)
         self.last_setpoint_s = -math.inf

@@ -32,6 +32,23 @@ server: 5760 + 10·i (the mock's TCP vehicles use that layout for either flavour
 instance i's GCS link listens on 18570 + i (and sends to 14540 + i)."""
 
 
+ARDUCOPTER_EKF_READY_S = 39.0
+"""Seconds from start until ArduCopter SITL's EKF uses GPS, s: measured (V4.7.0-dev, quad
+model, 1× time) as arming refused 20–40 s after boot, and control beginning 52.8 s after start
+in a `fly --takeoff 20` flight whose take-off (ACK to 19.5 m) took 13.5 s."""
+
+ARDUCOPTER_CLIMB_START_S = 4.5
+"""Seconds from NAV_TAKEOFF's ACK to 1 m of height on ArduCopter SITL (measured, 20 m
+take-off)."""
+
+MOCK_CLIMB_TO_1M_S = 1.0
+"""Seconds the mock's own climb (`VerticalAxis` defaults, 2.5 m/s WPNAV_SPEED_UP) takes from
+standstill to 1 m: measured on the mock, 0.98 s."""
+
+ARDUCOPTER_TAKEOFF_DELAY_S = ARDUCOPTER_CLIMB_START_S - MOCK_CLIMB_TO_1M_S
+"""The mock's wait between NAV_TAKEOFF's ACK and its climb, s (3.5 s)."""
+
+
 @dataclass(frozen=True)
 class ArduPilotParams:
     """ArduCopter parameters the mock honours (names and defaults of ArduCopter 4.x)."""
@@ -52,13 +69,46 @@ class ArduPilotParams:
     """RTL_ALT: RTL climbs to at least this height above home first (1500 cm)."""
     rtl_speed_m_s: float = 5.0
     """WPNAV_SPEED: horizontal speed of RTL (500 cm/s)."""
+    fs_gcs_enable: int = 0
+    """FS_GCS_ENABLE: GCS failsafe, 0 disabled (ArduCopter default, `Parameters.cpp`; the SITL
+    defaults file leaves it). Served for pre-flight checks; the mock models no GCS failsafe, so
+    it takes 0 only."""
+    fence_enable: int = 0
+    """FENCE_ENABLE: 0, no fence (AC_Fence default; the SITL runs had the fence not enabled).
+    Served for pre-flight checks; the mock models no fence, so it takes 0 only."""
+    avd_enable: int = 0
+    """AVD_ENABLE: ADS-B avoidance off (AP_Avoidance default 0). The mock models no avoidance,
+    so it takes 0 only."""
+    avd_f_action: int = 1
+    """AVD_F_ACTION: 1 Report (AP_Avoidance default `MAV_COLLISION_ACTION_REPORT`); inert while
+    AVD_ENABLE is 0, so any option 0–6 is taken."""
     boot_s: float = 2.0
     """Time in MAV_STATE_BOOT after start; a mode set then is ACKed and then overwritten by
     the initial mode, as measured on ArduCopter SITL (≈ 2.3 s there)."""
-    position_estimate_s: float = 5.0
-    """Time after start until the EKF has an absolute position (arming, GUIDED and
-    LOCAL_POSITION_NED wait for it). 20–40 s on ArduCopter SITL; shorter here to keep tests
-    quick — raise it to rehearse a slow start."""
+    position_estimate_s: float = ARDUCOPTER_EKF_READY_S
+    """Time after start until the EKF uses GPS (arming, GUIDED, NAV_TAKEOFF and
+    LOCAL_POSITION_NED wait for it; EKF_STATUS_REPORT lacks the position flags until then):
+    `ARDUCOPTER_EKF_READY_S`, as measured on ArduCopter SITL. Tests that do not rehearse the
+    start use a few seconds (`QUICK_START`)."""
+    takeoff_delay_s: float = ARDUCOPTER_TAKEOFF_DELAY_S
+    """Time from NAV_TAKEOFF's ACCEPTED to the start of the climb, the vehicle armed on the
+    ground meanwhile (ArduCopter spools the motors up and ramps the throttle over
+    TKOFF_SLEW_TIME first): `ARDUCOPTER_TAKEOFF_DELAY_S`, so that 1 m is reached 4.5 s after
+    the ACK as on ArduCopter SITL."""
+
+
+PX4_EKF_READY_S = 4.0
+"""Seconds from start until PX4 SITL arms, s: on PX4 v1.16 SIH an arming request 3.3 s after
+start was denied ("Resolve system health failures first") and the retry 1 s later accepted
+(three fresh-start runs of the recorded traces)."""
+
+PX4_COM_RC_IN_MODE = 3
+"""COM_RC_IN_MODE default of PX4 v1.14–v1.16: 3, "RC or MAVLink, keep first"
+(`src/modules/commander/commander_params.yaml`)."""
+
+PX4_GF_ACTION = 2
+"""GF_ACTION default of PX4 v1.14–v1.16: 2, Hold mode
+(`src/modules/navigator/geofence_params.yaml`)."""
 
 
 @dataclass(frozen=True)
@@ -85,10 +135,28 @@ class Px4Params:
     """RTL_RETURN_ALT: RTL climbs to at least this height above home first."""
     rtl_speed_m_s: float = 5.0
     """MPC_XY_CRUISE: horizontal speed of RTL (and of PX4's other auto modes)."""
+    nav_dll_act: int = 0
+    """NAV_DLL_ACT: data-link-loss action, 0 disabled (`commander_params.yaml` default). Served
+    for pre-flight checks; the mock models no data-link-loss failsafe, so it takes 0 only."""
+    com_rc_in_mode: int = PX4_COM_RC_IN_MODE
+    """COM_RC_IN_MODE: manual control input source (`PX4_COM_RC_IN_MODE`). The mock has no RC
+    and does not change with it, so it takes the default only."""
+    gf_action: int = PX4_GF_ACTION
+    """GF_ACTION: geofence breach action (`PX4_GF_ACTION`); inert without a geofence (the
+    mock has none), so any option 0–5 is taken."""
     boot_s: float = 1.0
     """Time in MAV_STATE_BOOT after start (the mock's choice)."""
-    position_estimate_s: float = 3.0
-    """Time after start until a global position is valid (the mock's choice)."""
+    position_estimate_s: float = PX4_EKF_READY_S
+    """Time after start until a global position is valid (`PX4_EKF_READY_S`)."""
+
+
+QUICK_START_S = 5.0
+"""EKF-ready time of a quick-start mock, s (the mock's value before the slow start was modelled)."""
+
+ARDUPILOT_QUICK_START = ArduPilotParams(position_estimate_s=QUICK_START_S, takeoff_delay_s=0.0)
+"""ArduCopter parameters that skip the slow start: the EKF ready after `QUICK_START_S` and
+the climb at once after NAV_TAKEOFF's ACK. For tests and rehearsals that do not exercise the
+start (``SitlConfig(ardupilot=ARDUPILOT_QUICK_START)``); the defaults are the real firmware's."""
 
 
 @dataclass(frozen=True)
@@ -179,7 +247,8 @@ class SitlConfig:
     heartbeat_hz: float = 1.0
     """HEARTBEAT rate (1 Hz on both autopilots)."""
     adsb_hz: float = 2.0
-    """ADSB_VEHICLE rate per intruder."""
+    """ADSB_VEHICLE rate per intruder until a client asks for another with
+    MAV_CMD_SET_MESSAGE_INTERVAL (246), per vehicle."""
     cruise_alt_m: float = 20.0
     """Height above the origin at which scenario intruders fly."""
     seed: int = 0
@@ -195,6 +264,8 @@ class SitlConfig:
             raise ValueError(f"vehicles must be 1..250 (system ids), not {self.vehicles}")
         if not self.speedup > 0:
             raise ValueError(f"speedup must be > 0, not {self.speedup}")
+        if not self.adsb_hz > 0:
+            raise ValueError(f"adsb_hz must be > 0, not {self.adsb_hz}")
         if self.transport not in ("udp", "tcp"):
             raise ValueError(f"transport {self.transport!r} is not udp or tcp")
         if self.transport == "tcp" and self.out is not None:

@@ -30,7 +30,7 @@ from numpy.typing import NDArray
 
 from remarl_fc.frames import GeoPoint, heading_to_yaw, ned_to_geodetic, sim_to_ne
 from remarl_fc.mavlink.codec import Codec, SigningConfig
-from remarl_fc.mavlink.consts import MavComponent
+from remarl_fc.mavlink.consts import MavComponent, MsgId
 from remarl_fc.mavlink.udp import Address
 from remarl_fc.resource import StackOwner
 from remarl_fc.sitl.ardupilot import ArduCopterLogic
@@ -242,7 +242,6 @@ class SitlFleet(StackOwner):
         wall_per_tick = self._dt / self.cfg.speedup
         autopilot_every = max(1, round(self.cfg.physics_hz / TICK_HZ))
         heartbeat_every = max(1, round(self.cfg.physics_hz / self.cfg.heartbeat_hz))
-        adsb_every = max(1, round(self.cfg.physics_hz / self.cfg.adsb_hz))
         while True:
             delay = start + (self._ticks + 1) * wall_per_tick - loop.time()
             if delay > 0:
@@ -260,14 +259,11 @@ class SitlFleet(StackOwner):
                 autopilot=k % autopilot_every == 0,
                 beat_phase=k % heartbeat_every,
                 beat_every=heartbeat_every,
-                adsb=k % adsb_every == 0,
             )
             if self.now_s() >= self._time_limit_s or (self._until_done and self.finished()):
                 self._done.set()
 
-    def _tick(
-        self, now: float, *, autopilot: bool, beat_phase: int, beat_every: int, adsb: bool
-    ) -> None:
+    def _tick(self, now: float, *, autopilot: bool, beat_phase: int, beat_every: int) -> None:
         f = self.frames
         self._apply_faults(now)
         step(f, self.cfg.model, self._dt, self.rng, self.vehicle_profile, self._delay)
@@ -288,12 +284,19 @@ class SitlFleet(StackOwner):
             if beat and not self.faults.heartbeat_muted(i, now):
                 send(i, heartbeat(ap.factory, ap))
             for mid in ap.streams.due(now) + ap.streams.take_requested():
+                if mid == MsgId.ADSB_VEHICLE:
+                    self._send_traffic(i, ap, now)
+                    continue
                 msg = self.telemetry.build(mid, i, ap, now)
                 if msg is not None:
                     send(i, msg)
-            if adsb and self.traffic is not None and self.traffic.count:
-                for report in self.traffic.reports(ap.factory, self.cfg.home, now):
-                    send(i, report, component=MavComponent.ADSB)
+
+    def _send_traffic(self, i: int, ap: Autopilot[Any], now: float) -> None:
+        """Vehicle i's ADSB_VEHICLE stream: one report per intruder, from its ADS-B receiver."""
+        if self.traffic is None or not self.traffic.count:
+            return
+        for report in self.traffic.reports(ap.factory, self.cfg.home, now):
+            self.links.send(i, report, component=MavComponent.ADSB)
 
     def _apply_faults(self, now: float) -> None:
         for k, sw in enumerate(self.faults.pilot_switches):

@@ -7,8 +7,10 @@ and a value set takes effect at once: a new MIS_TAKEOFF_ALT changes the next tak
 
 Integer parameters travel in PARAM_VALUE's float field the way each autopilot puts them there
 (`remarl_fc.mavlink.params`): ArduPilot converts the number, PX4 copies its bytes. Only the
-parameters that change the mock's behaviour are served; the others a ground station asks for
-get no answer, as on a vehicle without them.
+parameters that change the mock's behaviour are served, and the failsafe switches that
+`remarl-fc fly` reads before a flight (with the firmware defaults, taking only the values the
+mock flies alike); the others a ground station asks for get no answer, as on a vehicle without
+them.
 
 `ParamTable` is a flavour's served parameters; `ParamServer` is one vehicle's end of the
 protocol.
@@ -20,11 +22,13 @@ import dataclasses
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
+from types import MappingProxyType
 from typing import Any, Generic, TypeVar
 
 from remarl_fc.mavlink.consts import MavParamType, MsgId, Severity
 from remarl_fc.mavlink.params import INT_FORMATS, PARAM_ID_LEN, from_wire, param_name, to_wire
 from remarl_fc.sitl.channel import Channel
+from remarl_fc.sitl.config import PX4_COM_RC_IN_MODE
 
 P = TypeVar("P")
 
@@ -53,7 +57,7 @@ class ParamSpec:
     high: float = math.inf
     """Largest value the mock can fly, in parameter units (an integer type's range also
     bounds it)."""
-    choices: Mapping[int, str] | None = None
+    choices: Mapping[int, object] | None = None
     """For an enumerated parameter: wire value → field value (the options the mock models)."""
 
     def bounds(self) -> tuple[float, float]:
@@ -181,9 +185,16 @@ class ParamServer(Generic[P]):
 CM = 100.0
 """ArduCopter's centimetres (and cm/s) per metre."""
 
+ONLY_ZERO: Mapping[int, object] = MappingProxyType({0: 0})
+"""``choices`` of a served switch whose other settings the mock does not model (0 only)."""
+
 ARDUPILOT_PARAMS = ParamTable(
     (
+        ParamSpec("AVD_ENABLE", "avd_enable", MavParamType.INT8, choices=ONLY_ZERO),
+        ParamSpec("AVD_F_ACTION", "avd_f_action", MavParamType.INT8, high=6),
         ParamSpec("DISARM_DELAY", "disarm_delay_s", MavParamType.INT8),
+        ParamSpec("FENCE_ENABLE", "fence_enable", MavParamType.INT8, choices=ONLY_ZERO),
+        ParamSpec("FS_GCS_ENABLE", "fs_gcs_enable", MavParamType.INT8, choices=ONLY_ZERO),
         ParamSpec("GUID_TIMEOUT", "guid_timeout_s"),
         ParamSpec("LAND_ALT_LOW", "land_alt_low_m", MavParamType.INT16, CM),
         ParamSpec("LAND_SPEED", "land_speed_m_s", MavParamType.INT16, CM, low=1),
@@ -195,7 +206,9 @@ ARDUPILOT_PARAMS = ParamTable(
     bytewise=False,
 )
 """ArduCopter's parameters the mock honours (`ArduPilotParams`), alphabetical as ArduPilot
-lists them; types as in ArduCopter's Parameters.h (AP_Int8/16/32, AP_Float)."""
+lists them; types as in ArduCopter's Parameters.h (AP_Int8/16/32, AP_Float). The failsafe
+switches `remarl-fc fly` checks (FS_GCS_ENABLE, FENCE_ENABLE, AVD_*) are served with the
+firmware defaults, as ArduCopter SITL answers them; the mock takes only values it flies alike."""
 
 PX4_PARAMS = ParamTable(
     (
@@ -209,17 +222,27 @@ PX4_PARAMS = ParamTable(
             choices={0: "position", 3: "return", 4: "land", 5: "hold"},
         ),
         ParamSpec("COM_OF_LOSS_T", "com_of_loss_t_s"),
+        ParamSpec(
+            "COM_RC_IN_MODE",
+            "com_rc_in_mode",
+            MavParamType.INT32,
+            choices=MappingProxyType({PX4_COM_RC_IN_MODE: PX4_COM_RC_IN_MODE}),
+        ),
+        ParamSpec("GF_ACTION", "gf_action", MavParamType.INT32, high=5),
         ParamSpec("MIS_TAKEOFF_ALT", "mis_takeoff_alt_m", low=0.1),
         ParamSpec("MPC_LAND_SPEED", "mpc_land_speed_m_s", low=0.1),
         ParamSpec("MPC_TKO_SPEED", "mpc_tko_speed_m_s", low=0.1),
         ParamSpec("MPC_XY_CRUISE", "rtl_speed_m_s", low=0.1),
+        ParamSpec("NAV_DLL_ACT", "nav_dll_act", MavParamType.INT32, choices=ONLY_ZERO),
         ParamSpec("RTL_RETURN_ALT", "rtl_return_alt_m"),
     ),
     bytewise=True,
 )
 """PX4's parameters the mock honours (`Px4Params`); INT32 and FLOAT as in PX4's parameter
 definitions. COM_OBL_RC_ACT takes the options the mock flies (not 1 Altitude, 2 Manual,
-6 Terminate, 7 Disarm)."""
+6 Terminate, 7 Disarm). The failsafe settings `remarl-fc fly` checks (NAV_DLL_ACT,
+COM_RC_IN_MODE, GF_ACTION) are served with PX4's defaults; the mock takes only values it flies
+alike."""
 
 
 def parse_override(text: str) -> tuple[str, float]:

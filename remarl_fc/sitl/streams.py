@@ -28,9 +28,14 @@ SUPPORTED_STREAMS = frozenset(
         MsgId.POSITION_TARGET_LOCAL_NED,
         MsgId.HOME_POSITION,
         MsgId.EXTENDED_SYS_STATE,
+        MsgId.ADSB_VEHICLE,
     }
 )
-"""Messages both flavours stream on request (a flavour may add its own)."""
+"""Messages both flavours stream on request (a flavour may add its own).
+
+ADSB_VEHICLE is the traffic the vehicle relays: ArduCopter SITL ACKs SET_MESSAGE_INTERVAL for
+it (0, ACCEPTED) and then sends its ADS-B list at that interval; PX4 streams it as any of its
+MAVLink streams."""
 
 
 class StreamSchedule:
@@ -62,6 +67,10 @@ class StreamSchedule:
             return
         self.interval_s[msg_id] = max(interval_s, 1.0 / MAX_INTERVAL_HZ)
         self.due_s[msg_id] = now_s
+
+    def first_due(self, msg_id: int, at_s: float) -> None:
+        """Send the next ``msg_id`` at ``at_s`` (simulated s), then at its interval."""
+        self.due_s[msg_id] = at_s
 
     def set_default(self, msg_id: int, now_s: float) -> None:
         """Back to the flavour's default for ``msg_id`` (off where it streams none)."""

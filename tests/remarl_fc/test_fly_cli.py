@@ -23,8 +23,8 @@ def test_fly_the_example_mission_on_a_mock_in_another_process(tmp_path, capsys):
     port = free_udp_port()
     truth_file = tmp_path / "truth.json"
     mock = subprocess.Popen(
-        [sys.executable, "-m", "remarl_fc", "sitl", "--scenario", "3u2o", "--base-port", "0",
-         "--out", f"127.0.0.1:{port}", "--speedup", "4", "--timeout", "200",
+        [sys.executable, "-m", "remarl_fc", "sitl", "--quick-start", "--scenario", "3u2o",
+         "--base-port", "0", "--out", f"127.0.0.1:{port}", "--speedup", "4", "--timeout", "200",
          "--summary", str(truth_file), "--json"],
         stdout=subprocess.DEVNULL,
         stderr=subprocess.PIPE,

@@ -1,6 +1,5 @@
 """The vehicle model (sim.vehicle): its arithmetic, its profiles, and its fit to real SITL."""
 
-import csv
 import math
 from pathlib import Path
 
@@ -14,6 +13,7 @@ from sim.vehicle import (
     VehicleProfile,
     load_profile,
     profile_names,
+    read_trace,
     respond,
     track_velocity,
     track_yaw,
@@ -23,14 +23,8 @@ TRACES = Path(__file__).resolve().parents[1] / "data" / "sitl"
 
 
 def read(name):
-    with (TRACES / f"{name}.csv").open() as f:
-        rows = list(csv.DictReader(f))
-    col = {k: np.array([float(r[k]) for r in rows]) for k in rows[0]}
-    return (
-        col["t_s"],
-        np.stack([col["cmd_vn_m_s"], col["cmd_ve_m_s"]], axis=-1),
-        np.stack([col["vn_m_s"], col["ve_m_s"]], axis=-1),
-    )
+    trace = read_trace(TRACES / f"{name}.csv")
+    return trace.times_s, trace.command_m_s, trace.velocity_m_s
 
 
 def test_shipped_profiles():

@@ -147,6 +147,20 @@ def test_actions_are_clipped_to_the_unit_interval():
     assert d.turn_rad[0] == pytest.approx(SPEC.max_turn_rad)
 
 
+def test_a_speed_command_slows_the_setpoints_down_to_a_hover():
+    c = controller([[0.0, 500.0], [100.0, 500.0]])
+    c.start(np.array([[0.0, 0.0], [100.0, 0.0]]), 0.0)
+    d = c.decide(0.0, np.zeros((2, 2)), NO_OBSTACLES, NO_OBSTACLES, np.array([4.0, 99.0]))
+    np.testing.assert_allclose(d.speed_m_s, [4.0, SPEC.speed_m_s])  # clipped to the policy's
+    assert math.hypot(*c.setpoint(0, 1.0)[:2]) == pytest.approx(4.0)
+    assert math.hypot(*c.setpoint(1, 1.0)[:2]) == pytest.approx(SPEC.speed_m_s)
+    d = c.decide(2.0, np.zeros((2, 2)), NO_OBSTACLES, NO_OBSTACLES, np.array([-1.0, math.nan]))
+    assert d.speed_m_s.tolist() == [0.0, 0.0]  # negative or not a number: stop
+    assert c.setpoint(0, 3.0)[:2] == (0.0, 0.0)
+    d = c.decide(4.0, np.zeros((2, 2)), NO_OBSTACLES, NO_OBSTACLES)
+    np.testing.assert_allclose(d.speed_m_s, SPEC.speed_m_s)  # None: back to the policy's
+
+
 def test_setpoints_fly_the_simulators_arc():
     """Integrating the velocity setpoints over one step lands where the simulator's arc does."""
     action = 0.8

@@ -18,7 +18,7 @@ import pytest_asyncio
 
 from remarl_fc.mavlink.codec import Codec, SigningConfig
 from remarl_fc.mavlink.udp import Address, UdpEndpoint
-from remarl_fc.sitl.config import SitlConfig
+from remarl_fc.sitl.config import ARDUPILOT_QUICK_START, SitlConfig
 from remarl_fc.sitl.fleet import SitlFleet
 
 WAIT_S = 10.0
@@ -174,6 +174,7 @@ async def sitl() -> Callable[..., Any]:
     ) -> AsyncIterator[tuple[SitlFleet, Gcs]]:
         kw.setdefault("base_port", 0)
         kw.setdefault("speedup", 10.0)
+        kw.setdefault("ardupilot", ARDUPILOT_QUICK_START)  # tests of the slow start opt out
         cfg = SitlConfig(**kw)
         fleet = SitlFleet(cfg, scenario=scenario, faults=faults, signing_key=signing_key)
         signing = SigningConfig(gcs_signing) if gcs_signing else None

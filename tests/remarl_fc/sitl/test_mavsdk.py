@@ -35,7 +35,7 @@ from mavsdk.asyncio.plugins.telemetry import FlightMode, TelemetryAsync
 from mavsdk.logging import LogLevel, log_subscribe, log_unsubscribe
 
 from remarl_fc.mavlink.consts import CopterMode, Px4AutoSubMode, Px4MainMode, px4_custom_mode
-from remarl_fc.sitl.config import Flavour, SitlConfig
+from remarl_fc.sitl.config import ARDUPILOT_QUICK_START, Flavour, SitlConfig
 from remarl_fc.sitl.fleet import SitlFleet
 from remarl_fc.sitl.vehicle import Guidance
 
@@ -212,6 +212,7 @@ async def test_mavsdk_discovers_arms_takes_off_and_flies_offboard(flavour: Flavo
         flavour=flavour,
         base_port=0,
         speedup=1.0,
+        ardupilot=ARDUPILOT_QUICK_START,  # the slow start has its own tests
         out=("127.0.0.1", port),
         out_step=0,
     )

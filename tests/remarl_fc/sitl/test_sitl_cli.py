@@ -72,7 +72,8 @@ def test_params_at_start_reach_the_vehicles(tmp_path, capsys):
 @pytest.mark.parametrize(
     ("flavour", "param", "message"),
     [
-        ("ardupilot", "FS_GCS_ENABLE=1", "not modelled here; this flavour serves DISARM_DELAY"),
+        ("ardupilot", "FS_THR_ENABLE=1", "not modelled here; this flavour serves AVD_ENABLE"),
+        ("ardupilot", "FS_GCS_ENABLE=1", "FS_GCS_ENABLE=1 not modelled: use 0"),
         ("px4", "RTL_ALT=2500", "COM_DISARM_LAND"),  # ArduPilot's name on PX4
         ("ardupilot", "LAND_SPEED=0", "LAND_SPEED=0 outside"),
         ("px4", "COM_OBL_RC_ACT=6", "not modelled: use 0,3,4,5"),

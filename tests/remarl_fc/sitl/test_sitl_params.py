@@ -9,6 +9,7 @@ import pytest
 from hypothesis import assume, given
 from hypothesis import strategies as st
 
+from remarl_fc.flight.paramcheck import check_params, checked_names
 from remarl_fc.mavlink.consts import (
     MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE,
     MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST,
@@ -231,8 +232,13 @@ async def test_ardupilot_set_converts_units_refuses_and_takes_effect(sitl):
         (text,) = heard_since(gcs, mark, "STATUSTEXT")  # sent before the PARAM_VALUE
         assert text.text == "LAND_SPEED=0 outside 1..32767"  # INT16 cm/s
 
-        mark = param_set(gcs, "FS_GCS_ENABLE", 1.0, MavParamType.INT8)  # not modelled: said so
-        await gcs.wait_for("STATUSTEXT", lambda m: m.text == "Unknown parameter FS_GCS_ENABLE")
+        mark = param_set(gcs, "FS_GCS_ENABLE", 1.0, MavParamType.INT8)  # served, not modelled
+        assert (await value_of(gcs, "FS_GCS_ENABLE")).param_value == 0.0  # the default stays
+        (text,) = heard_since(gcs, mark, "STATUSTEXT")
+        assert text.text == "FS_GCS_ENABLE=1 not modelled: use 0"
+
+        mark = param_set(gcs, "FS_THR_ENABLE", 1.0, MavParamType.INT8)  # not served: said so
+        await gcs.wait_for("STATUSTEXT", lambda m: m.text == "Unknown parameter FS_THR_ENABLE")
         await gcs.wait_sim(QUIET_S)
         assert not heard_since(gcs, mark, "PARAM_VALUE")
 
@@ -245,8 +251,8 @@ async def test_ardupilot_set_converts_units_refuses_and_takes_effect(sitl):
         assert 1.9 < t_disarmed - t_armed < 2.5 and not ap.armed
         summary = fleet.summary()["vehicles"][0]
         assert summary["params_set"] == {"RTL_ALT": 1, "DISARM_DELAY": 1}
-        assert summary["params_refused"] == {"LAND_SPEED": 1}
-        assert summary["params_unknown"] == {"FS_GCS_ENABLE": 1}
+        assert summary["params_refused"] == {"LAND_SPEED": 1, "FS_GCS_ENABLE": 1}
+        assert summary["params_unknown"] == {"FS_THR_ENABLE": 1}
 
 
 @pytest.mark.asyncio
@@ -284,3 +290,64 @@ async def test_px4_set_is_bytewise_typed_and_takes_effect(sitl):
         await armed(gcs)
         await gcs.wait_sim(Px4Params().com_disarm_prflt_s + 1.0)
         assert ap.armed
+
+
+# -- what `remarl-fc fly` reads before a flight ---------------------------------------------
+
+FIRMWARE_DEFAULTS = {
+    # ArduCopter (Parameters.cpp, AC_Fence, AP_Avoidance); GUID_TIMEOUT read back on SITL
+    "GUID_TIMEOUT": 3.0,
+    "FS_GCS_ENABLE": 0.0,
+    "AVD_ENABLE": 0.0,
+    "AVD_F_ACTION": 1.0,
+    "FENCE_ENABLE": 0.0,
+    # PX4 v1.16 (commander_params.yaml, geofence_params.yaml)
+    "COM_OF_LOSS_T": 1.0,
+    "COM_OBL_RC_ACT": 0.0,
+    "NAV_DLL_ACT": 0.0,
+    "COM_RC_IN_MODE": 3.0,
+    "GF_ACTION": 2.0,
+}
+
+
+@pytest.mark.parametrize("flavour", ["ardupilot", "px4"])
+def test_every_checked_parameter_is_served_with_the_firmware_default(flavour):
+    """Real ArduCopter SITL answers every parameter `fly` checks; so does the mock, with the
+    firmware's defaults, and the check then says what it says of the real firmware."""
+    px4 = flavour == "px4"
+    table, values = TABLES[flavour], Px4Params() if px4 else ArduPilotParams()
+    served = table.snapshot(values)
+    names = checked_names(px4)
+    assert {n: served[n] for n in names} == {n: FIRMWARE_DEFAULTS[n] for n in names}
+    findings = check_params(served, px4=px4, setpoint_period_s=0.1)
+    assert all(f.level == "warning" for f in findings)  # nothing stops a flight
+    flagged = sorted(f.text.split()[0] for f in findings)
+    if px4:
+        assert flagged == ["COM_OBL_RC_ACT", "NAV_DLL_ACT"]
+    else:
+        assert flagged == ["FENCE_ENABLE", "FS_GCS_ENABLE"]
+
+
+@pytest.mark.parametrize(
+    ("flavour", "name", "value", "taken"),
+    [
+        ("ardupilot", "FS_GCS_ENABLE", 1, False),  # no GCS failsafe in the mock
+        ("ardupilot", "FENCE_ENABLE", 1, False),  # no fence
+        ("ardupilot", "AVD_ENABLE", 1, False),  # no ADS-B avoidance
+        ("ardupilot", "AVD_F_ACTION", 6, True),  # inert while AVD_ENABLE is 0
+        ("ardupilot", "AVD_F_ACTION", 7, False),  # not an option
+        ("px4", "NAV_DLL_ACT", 2, False),  # no data-link-loss failsafe
+        ("px4", "COM_RC_IN_MODE", 4, False),  # no RC: the mock flies one way
+        ("px4", "GF_ACTION", 0, True),  # inert without a geofence
+        ("px4", "GF_ACTION", 6, False),
+    ],
+)
+def test_failsafe_switches_take_only_what_the_mock_flies(flavour, name, value, taken):
+    table = TABLES[flavour]
+    values = Px4Params() if flavour == "px4" else ArduPilotParams()
+    spec = table.specs[table.find(name)]  # type: ignore[index]
+    if taken:
+        assert spec.read(spec.write(values, value)) == value
+    else:
+        with pytest.raises(ParamRejected):
+            spec.write(values, value)
