@@ -34,6 +34,9 @@ from sim.arrays import BoolArray, FloatArray
 from sim.config import FieldConfig, RewardConfig
 from sim.field import FieldSources, peak_gradient, potential_and_gradient_xy
 
+PAIRWISE_BLOCK = 8
+"""numpy sums a run of fewer numbers than this left to right (`_sum_last` matches it)."""
+
 GRADIENT_FLOOR = 1e-12
 """|∇Φ| below this, in 1/(m²·s), counts as a flat field: no level-set edge there."""
 
@@ -71,21 +74,45 @@ class ArcWindow:
             flown: (B, N) False for UAVs that did not fly this step (masked out); their
                 windows are left unchanged.
         """
-        fl = flown[..., None]
-
-        def shifted(old: NDArray[Any], new: NDArray[Any]) -> NDArray[Any]:
-            return np.where(fl, np.concatenate([old[..., 1:], new[..., None]], axis=-1), old)
-
         return ArcWindow(
-            turn_rad=shifted(self.turn_rad, turn_rad),
-            external=shifted(self.external, external),
-            valid=shifted(self.valid, flown),
+            turn_rad=_shifted(self.turn_rad, turn_rad, flown),
+            external=_shifted(self.external, external, flown),
+            valid=_shifted(self.valid, flown, flown),
         )
 
     def reset(self, mask: BoolArray) -> ArcWindow:
         """The window with the environments selected by ``mask`` (B,) emptied."""
         keep = ~mask[:, None, None]
         return ArcWindow(self.turn_rad * keep, self.external * keep, self.valid & keep)
+
+
+def _shifted(old: NDArray[Any], new: NDArray[Any], flown: BoolArray) -> NDArray[Any]:
+    """``old`` (B, N, K) shifted one arc to the left with ``new`` (B, N) last, where ``flown``.
+
+    Slot by slot on (B, N) slices: a selection over the whole window would broadcast ``flown``
+    along its short last axis, which numpy runs one K-long row at a time.
+    """
+    out = np.empty_like(old)
+    for k in range(old.shape[-1] - 1):
+        np.copyto(out[..., k], np.where(flown, old[..., k + 1], old[..., k]))
+    np.copyto(out[..., -1], np.where(flown, new, old[..., -1]))
+    return out
+
+
+def _sum_last(a: NDArray[Any]) -> NDArray[Any]:
+    """``a.sum(axis=-1)``, bit for bit, for a short last axis: added slice by slice.
+
+    numpy adds fewer than 8 numbers left to right (pairwise beyond), and runs a reduction over
+    a short last axis one row at a time; the slices are whole (B, N) arrays.
+    """
+    k = a.shape[-1]
+    if k == 0 or k >= PAIRWISE_BLOCK:
+        total: NDArray[Any] = a.sum(axis=-1)
+        return total
+    out = a[..., 0].copy()
+    for i in range(1, k):
+        out += a[..., i]
+    return out
 
 
 @dataclass(frozen=True)
@@ -138,14 +165,27 @@ def external_density_xy(
         (B, *P) densities.
     """
     phi, gx, gy = potential_and_gradient_xy(x_m, y_m, src, field_cfg)
-    gnorm = np.sqrt(gx * gx + gy * gy)
+    gx *= gx
+    gy *= gy
+    gx += gy
+    gnorm = np.sqrt(gx, out=gx)
     if reward_cfg.external == "gradient":
         return np.square(np.minimum(gnorm / peak_gradient(field_cfg, src.swarm_speed_m_s), 1.0))
     if levels is None:
         raise ValueError('the "level-edge" external term needs the UAVs\' contour levels')
     has_edge = gnorm > GRADIENT_FLOOR
-    signed = (phi - levels) / (np.where(has_edge, gnorm, 1.0) * reward_cfg.edge_width_m)
-    return np.exp(-signed * signed) * has_edge
+    # signed = (Φ − φ_i)/(|∇Φ|·σ), with |∇Φ| replaced by 1 where there is no edge: adding 1 to a
+    # product below GRADIENT_FLOOR·σ gives exactly 1 in any float, as np.where would.
+    den = gnorm
+    den *= reward_cfg.edge_width_m
+    den += ~has_edge
+    signed = phi - levels
+    signed /= den
+    signed *= signed
+    np.negative(signed, out=signed)
+    dens = np.exp(signed, out=signed)
+    dens *= has_edge
+    return dens
 
 
 def external_density(
@@ -188,7 +228,9 @@ def arc_external_xy(
 ) -> FloatArray:
     """`arc_external` on the coordinates of the arc points, each (B, N, T + 1)."""
     dens = external_density_xy(x_m, y_m, levels[..., None], src, field_cfg, reward_cfg)
-    mean: FloatArray = dens @ trapezoid_weights(x_m.shape[-1] - 1)
+    # The trapezoid rule as one matrix–vector product on (B·N, T + 1) rows, in float64.
+    rows = dens.reshape(-1, dens.shape[-1]).astype(np.float64)
+    mean: FloatArray = (rows @ trapezoid_weights(x_m.shape[-1] - 1)).reshape(dens.shape[:-1])
     return mean
 
 
@@ -199,7 +241,9 @@ def window_terms(window: ArcWindow, max_turn_rad: float) -> ContourTerms:
     valid arcs of the window, so a window that is not full yet is not penalised for its length.
     """
     valid = window.valid
-    count = np.maximum(valid.sum(axis=-1), 1)  # (B, N)
-    internal = np.where(valid, np.square(window.turn_rad / max_turn_rad), 0.0).sum(-1) / count
-    external = np.where(valid, window.external, 0.0).sum(axis=-1) / count
+    count = np.maximum(_sum_last(valid.astype(np.int64)), 1)  # (B, N)
+    internal = _sum_last(np.where(valid, np.square(window.turn_rad / max_turn_rad), 0.0))
+    external = _sum_last(np.where(valid, window.external, 0.0))
+    internal /= count
+    external /= count
     return ContourTerms(internal=internal, external=external)

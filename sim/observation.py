@@ -19,7 +19,7 @@ every entry is dimensionless.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
@@ -86,9 +86,15 @@ class Observations:
     rows: NDArray[np.float32]
     mask: NDArray[np.float32]
     sensed: BoolArray
+    storage: NDArray[np.float32] | None = field(default=None, repr=False, compare=False)
+    """(B, N, (2 + m)·4 + m) where ``rows`` and ``mask`` are views of one flat array (as
+    `build_observations` makes them), so `flat` copies it instead of concatenating; None
+    otherwise."""
 
     def flat(self) -> NDArray[np.float32]:
-        """(B, N, (2 + m)·4 + m): the rows, flattened, then the mask."""
+        """(B, N, (2 + m)·4 + m): the rows, flattened, then the mask (a new array)."""
+        if self.storage is not None:
+            return self.storage.copy()
         b, n = self.rows.shape[:2]
         return np.concatenate([self.rows.reshape(b, n, -1), self.mask], axis=-1)
 
@@ -126,18 +132,23 @@ def build_observations(
     used = ROW_OBSTACLES + keep  # rows below are empty: not computed
     wx = np.empty((used, 2, b, n))
     wy = np.empty((used, 2, b, n))
-    to_target = target_m - own_pos_m
-    dist_t = np.sqrt(np.einsum("...i,...i->...", to_target, to_target))
-    vbar = layout.speed_m_s / np.where(dist_t > 0, dist_t, np.inf)
-    to_centre = centre_m[:, None] - own_pos_m
     for w, k in ((wx, 0), (wy, 1)):
-        w[ROW_SELF, 0] = to_target[..., k]
+        np.subtract(target_m[..., k], own_pos_m[..., k], out=w[ROW_SELF, 0])  # to the target
         w[ROW_SELF, 1] = own_vel_m_s[..., k]
-        w[ROW_SWARM, 0] = to_centre[..., k]
-        w[ROW_SWARM, 1] = to_target[..., k] * vbar
+        np.subtract(centre_m[:, None, k], own_pos_m[..., k], out=w[ROW_SWARM, 0])  # to p*
+    tx, ty = wx[ROW_SELF, 0], wy[ROW_SELF, 0]
+    dist_t = tx * tx
+    dist_t += ty * ty
+    np.sqrt(dist_t, out=dist_t)
+    vbar = layout.speed_m_s / np.where(dist_t > 0, dist_t, np.inf)
+    np.multiply(tx, vbar, out=wx[ROW_SWARM, 1])  # pre-planned velocity v̄
+    np.multiply(ty, vbar, out=wy[ROW_SWARM, 1])
     cos_h, sin_h = np.cos(own_heading_rad), np.sin(own_heading_rad)  # (B, N)
 
-    mask = np.zeros((b, n, m), dtype=np.float32)
+    # One flat float32 array holds every observation; rows and mask are views of it.
+    storage = np.zeros((b, n, layout.size), dtype=np.float32)
+    rows = storage[..., : layout.rows * COLUMNS].reshape(b, n, layout.rows, COLUMNS)
+    mask = storage[..., layout.rows * COLUMNS :]
     sensed = np.zeros((b, n, num_obstacles), dtype=bool)
     if num_obstacles:
         rx = obstacle_pos_m[:, None, :, 0] - own_pos_m[:, :, None, 0]  # (B, N, M), world frame
@@ -163,18 +174,27 @@ def build_observations(
                 obstacle_vel_m_s[envs, order, 0],
                 obstacle_vel_m_s[envs, order, 1],
             )
-        front = np.moveaxis(chosen, -1, 0)  # (keep, B, N)
-        wx[rows_k, 0] = np.moveaxis(picked[0], -1, 0) * front
-        wy[rows_k, 0] = np.moveaxis(picked[1], -1, 0) * front
-        wx[rows_k, 1] = np.moveaxis(picked[2], -1, 0) * front
-        wy[rows_k, 1] = np.moveaxis(picked[3], -1, 0) * front
+        front = np.moveaxis(chosen, -1, 0).astype(np.float64)  # (keep, B, N): 1 or 0
+        for (w, kind), value in zip(((wx, 0), (wy, 0), (wx, 1), (wy, 1)), picked, strict=True):
+            np.multiply(np.moveaxis(value, -1, 0), front, out=w[rows_k, kind])
         mask[..., :keep] = chosen
 
     scale = np.array([1.0 / layout.range_m, 1.0 / layout.speed_m_s])[:, None, None]  # per kind
-    rotated = np.empty((2, used, 2, b, n))
-    rotated[0] = (cos_h * wx + sin_h * wy) * scale  # x' ahead
-    rotated[1] = (cos_h * wy - sin_h * wx) * scale  # y' to the left
-    np.clip(rotated, -CLIP, CLIP, out=rotated)
-    rows = np.zeros((b, n, layout.rows, 2, 2), dtype=np.float32)  # (B, N, rows, kind, xy)
-    rows[:, :, :used] = rotated.transpose(3, 4, 1, 2, 0)
-    return Observations(rows.reshape(b, n, layout.rows, COLUMNS), mask, sensed)
+    # Rotate in place, row by row (two (kind, B, N) scratch arrays, not a copy of everything):
+    # x' ahead = (cos·x + sin·y)·scale, y' to the left = (cos·y − sin·x)·scale.
+    sin_y, sin_x = np.empty((2, b, n)), np.empty((2, b, n))
+    for r in range(used):
+        np.multiply(sin_h, wy[r], out=sin_y)
+        np.multiply(sin_h, wx[r], out=sin_x)
+        wx[r] *= cos_h
+        wx[r] += sin_y
+        wy[r] *= cos_h
+        wy[r] -= sin_x
+    for w in (wx, wy):
+        w *= scale
+        np.clip(w, -CLIP, CLIP, out=w)
+    # Transposing casts into the flat layout: (rows·kind, B·N) → (B·N, rows·kind), x' then y'.
+    flat_rows = storage.reshape(b * n, layout.size)[:, : used * COLUMNS].reshape(b * n, -1, 2)
+    for xy, w in enumerate((wx, wy)):
+        np.copyto(flat_rows[..., xy], w.reshape(used * 2, b * n).T, casting="same_kind")
+    return Observations(rows, mask, sensed, storage)

@@ -58,8 +58,14 @@ def swarming_reward(
     ...                 np.array([[[1.0, 0.0], [1.0, 0.0]]]), np.array([[False, False]])).round(6)
     array([[1., 0.]])
     """
-    vbar = preplanned_direction(pos_m, target_m)
-    r_form = np.cos(heading_rad) * vbar[..., 0] + np.sin(heading_rad) * vbar[..., 1]
+    # `preplanned_direction`, component by component: the same numbers, on (B, N) arrays.
+    dx = target_m[..., 0] - pos_m[..., 0]
+    dy = target_m[..., 1] - pos_m[..., 1]
+    norm = np.hypot(dx, dy)
+    moving = norm > 0
+    safe = np.where(moving, norm, 1.0)
+    r_form = np.cos(heading_rad) * np.where(moving, dx / safe, 0.0)
+    r_form += np.sin(heading_rad) * np.where(moving, dy / safe, 0.0)
     return np.where(collided, 0.0, r_form)
 
 

@@ -3,7 +3,9 @@
     python tools/bench_sim.py [--scenario 5u1o] [--batches 1 64 1024 4096] [--seconds 2] [--json]
 
 Measures remarl-fc (full reMARL reward, autoreset) with uniform random actions and with
-N(0, 0.1) exploration around straight flight. If `vmas` is importable, VMAS "navigation" with
+N(0, 0.1) exploration around straight flight, and each part's share of a step with uniform
+actions (a separate profiled run, `remarl_fc.bench.sim.part_shares`; the throughput is timed
+without the profiler). If `vmas` is importable, VMAS "navigation" with
 the same number of agents and uniform random actions is timed at the same batch sizes; if
 `mpe2` is importable, MPE2 `simple_spread_v3` (parallel API, batch 1). Neither is a dependency
 of remarl-fc: `pip install vmas mpe2` in the benchmark environment to get the comparison.
@@ -16,7 +18,7 @@ import json
 import time
 from typing import Any
 
-from remarl_fc.bench.sim import bench_sim
+from remarl_fc.bench.sim import bench_sim, format_parts
 
 
 def vmas_agent_steps(agents: int, batch: int, seconds: float) -> float | None:
@@ -67,7 +69,7 @@ def main() -> None:
     mpe2 = mpe2_agent_steps(args.seconds)
     for batch in args.batches:
         uniform = bench_sim(args.scenario, batch, "uniform", args.seconds)
-        noise = bench_sim(args.scenario, batch, "noise", args.seconds)
+        noise = bench_sim(args.scenario, batch, "noise", args.seconds, parts=False)
         vmas = vmas_agent_steps(uniform["agents"], batch, args.seconds)
         row = {
             "batch": batch,
@@ -75,6 +77,7 @@ def main() -> None:
             "remarl_noise": noise["agent_steps_per_s"],
             "vmas_navigation": vmas,
             "ratio_vs_vmas": None if vmas is None else uniform["agent_steps_per_s"] / vmas,
+            "parts": uniform["parts"],
         }
         if batch == 1:
             row["mpe2_simple_spread"] = mpe2
@@ -95,6 +98,9 @@ def main() -> None:
             f"{r['batch']:>6} {fmt(r['remarl_uniform']):>10} {fmt(r['remarl_noise']):>10} "
             f"{fmt(r['vmas_navigation']):>10} {ratio:>6}"
         )
+    print("share of a step (uniform actions, profiled separately):")
+    for r in rows:
+        print(f"{r['batch']:>6} {format_parts(r['parts'])}")
     if mpe2 is not None:
         first = rows[0]
         print(f"MPE2 simple_spread_v3, batch 1: {mpe2:,.0f} agent-steps/s", end="")

@@ -2,8 +2,12 @@
 
 from __future__ import annotations
 
+import cProfile
+import pstats
 import statistics
+import sys
 import time
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import numpy as np
@@ -74,28 +78,186 @@ NOISE_SIGMA = 0.1
 """Standard deviation of the "noise" actions (normalised units)."""
 
 
-def bench_sim(
-    scenario: str, batch: int, actions: str = "uniform", seconds: float = 2.0, seed: int = 0
-) -> dict[str, Any]:
-    """Agent-steps per second of the batched simulator with the full reMARL reward.
+PARTS = (
+    "reset",
+    "flight",
+    "dynamics",
+    "swept",
+    "outcome",
+    "sensors",
+    "score",
+    "avoidance",
+    "observation",
+    "other",
+)
+"""The parts of a step ``bench sim`` reports a share for, in order of the step:
 
-    Times `sim.env.SwarmVectorEnv.step` (autoreset, observations, rewards, PSO where it runs)
-    on pre-drawn actions for about ``seconds``.
+reset: new episodes (spawn, merge, PSO of their levels); flight: the arcs (`fly`); dynamics:
+the fitted vehicle dynamics (`sim.dynamics`, where it exists); swept: the swept closest
+approaches; outcome: collisions, arrivals, the episode accumulators; sensors: the sensor model
+(`sim.sensors`, where it exists); score: contour windows and the reward; avoidance: PSO where
+avoidance begins; observation: the observation builder; other: everything else (the step's own
+glue, the vector env's bookkeeping)."""
+
+PART_OF_MODULE: Mapping[str, str] = {
+    "sim.spawn": "reset",
+    "sim.dynamics": "dynamics",
+    "sim.sensors": "sensors",
+    "sim.observation": "observation",
+}
+"""Every function of these modules counts in the part (unless a nearer caller part owns it)."""
+
+PART_OF_FUNCTION: Mapping[tuple[str, str], str] = {
+    ("sim.swarm", "SwarmSim.reset_where"): "reset",
+    ("sim.swarm", "SwarmSim.initial_state"): "reset",
+    ("sim.swarm", "SwarmSim.start"): "reset",
+    ("sim.swarm", "SwarmSim.observe"): "observation",
+    ("sim.transition", "fly"): "flight",
+    ("sim.transition", "closest_approaches"): "swept",
+    ("sim.metrics", "swept_min_distance_xy"): "swept",
+    ("sim.transition", "outcome"): "outcome",
+    ("sim.transition", "accumulate"): "outcome",
+    ("sim.vector_env", "episode_metrics"): "outcome",
+    ("sim.transition", "score"): "score",
+    ("sim.reward", "reward"): "score",
+    ("sim.contour", "arc_external_xy"): "score",
+    ("sim.transition", "begin_avoidance"): "avoidance",
+}
+"""(module, qualified name) of the functions that root a part. A function that is in neither
+table takes the part of its callers (split by the time spent under each), so a helper counts
+where it is called from; time with no part above it is "other"."""
+
+PROFILED_STEPS = 40
+"""Steps run under the profiler for the part shares (after the timed run, separately)."""
+
+_Key = tuple[str, int, str]  # pstats' (file, line, function name)
+
+
+def _module_of(filename: str) -> str:
+    """The dotted module of a source file under a package root, e.g. ``sim.swarm``."""
+    parts = filename.replace("\\", "/").removesuffix(".py").split("/")
+    for root in ("sim", "remarl_fc"):
+        if root in parts:
+            k = len(parts) - 1 - parts[::-1].index(root)
+            return ".".join(parts[k:])
+    return ""
+
+
+def _own_part(key: _Key, qualname: Callable[[_Key], str]) -> str | None:
+    module = _module_of(key[0])
+    part = PART_OF_FUNCTION.get((module, qualname(key)))
+    return part if part is not None else PART_OF_MODULE.get(module)
+
+
+def part_shares(stats: pstats.Stats) -> dict[str, float]:
+    """Each part's share of the profiled time (`PARTS`, summing to 1) from cProfile statistics.
+
+    See `shares_of_profile`.
     """
+    raw: Mapping[_Key, Any] = stats.stats  # type: ignore[attr-defined]
+    return shares_of_profile(raw, _qualnames())
+
+
+def shares_of_profile(
+    raw: Mapping[_Key, Any], qualname: Callable[[_Key], str] = lambda key: key[2]
+) -> dict[str, float]:
+    """Each part's share of the time in ``raw``, a cProfile table.
+
+    ``raw`` is pstats' table: function → (calls, primitive calls, own time, cumulative time,
+    callers → the same four). Every function's own time goes to its part (`PART_OF_FUNCTION`,
+    `PART_OF_MODULE`), or is split over its callers in proportion to the time spent under
+    each, up to the nearest caller that has a part; what reaches no part is "other".
+    ``qualname`` names a function's key (``Class.method``).
+    """
+    memo: dict[_Key, dict[str, float]] = {}
+
+    def shares_of(key: _Key, visiting: frozenset[_Key]) -> dict[str, float]:
+        if key in memo:
+            return memo[key]
+        part = _own_part(key, qualname)
+        if part is not None:
+            return {part: 1.0}
+        callers = {
+            c: edge[3]
+            for c, edge in raw[key][4].items()
+            if c != key and c not in visiting and c in raw
+        }
+        total = sum(callers.values())
+        result: dict[str, float] = {}
+        if total <= 0.0:
+            result["other"] = 1.0
+        for caller, t in callers.items() if total > 0.0 else ():
+            for p, f in shares_of(caller, visiting | {key}).items():
+                result[p] = result.get(p, 0.0) + f * t / total
+        memo[key] = result
+        return result
+
+    seconds = dict.fromkeys(PARTS, 0.0)
+    for key, entry in raw.items():
+        for p, f in shares_of(key, frozenset()).items():
+            seconds[p] += f * entry[2]
+    total = sum(seconds.values()) or 1.0
+    return {p: t / total for p, t in seconds.items()}
+
+
+def _qualnames() -> Callable[[_Key], str]:
+    """A function's qualified name (``Class.method``) from its pstats key.
+
+    pstats keeps only the bare name, so methods are matched through their code objects' first
+    line in the loaded modules.
+    """
+    lines: dict[tuple[str, int], str] = {}
+    for name, module in list(sys.modules.items()):
+        if not name.startswith(("sim.", "remarl_fc.")):
+            continue
+        for obj in vars(module).values():
+            if isinstance(obj, type) and obj.__module__ == name:
+                for attr in vars(obj).values():
+                    code = getattr(attr, "__code__", None)
+                    if code is not None:
+                        lines[(code.co_filename, code.co_firstlineno)] = attr.__qualname__
+
+    def qualname(key: _Key) -> str:
+        return lines.get((key[0], key[1]), key[2])
+
+    return qualname
+
+
+def _vector_env(scenario: str, batch: int, actions: str, seed: int) -> tuple[Any, np.ndarray]:
+    """A reset vector env of the scenario and 16 pre-drawn joint actions, (16, B, N) float32."""
     from sim.env import make_vector_env
 
     if actions not in ACTION_MODES:
         raise ValueError(f"actions must be one of {', '.join(ACTION_MODES)}, got {actions!r}")
     env = make_vector_env(scenario, batch)
     env.reset(seed=seed)
-    n = env.num_agents
     rng = np.random.default_rng(seed)
-    shape = (16, batch, n)
+    shape = (16, batch, env.num_agents)
     if actions == "uniform":
         drawn = rng.uniform(-1.0, 1.0, shape)
     else:
         drawn = np.clip(rng.normal(0.0, NOISE_SIGMA, shape), -1.0, 1.0)
-    drawn = drawn.astype(np.float32)
+    return env, drawn.astype(np.float32)
+
+
+def bench_sim(
+    scenario: str,
+    batch: int,
+    actions: str = "uniform",
+    seconds: float = 2.0,
+    seed: int = 0,
+    *,
+    parts: bool = True,
+) -> dict[str, Any]:
+    """Agent-steps per second of the batched simulator with the full reMARL reward.
+
+    Times `sim.env.SwarmVectorEnv.step` (autoreset, observations, rewards, PSO where it runs)
+    on pre-drawn actions for about ``seconds``. With ``parts``, a second, separate run of
+    `PROFILED_STEPS` steps under cProfile gives each part's share of a step (`PARTS`,
+    `part_shares`); the throughput comes from the first run only, without the profiler.
+    """
+    env, drawn = _vector_env(scenario, batch, actions, seed)
+    n = env.num_agents
     for k in range(3):  # warm-up
         env.step(drawn[k])
     steps, t0 = 0, time.perf_counter()
@@ -105,7 +267,7 @@ def bench_sim(
         elapsed = time.perf_counter() - t0
         if elapsed >= seconds and steps >= 5:
             break
-    return {
+    result: dict[str, Any] = {
         "benchmark": "sim",
         "scenario": env.cfg.name,
         "batch": batch,
@@ -116,3 +278,16 @@ def bench_sim(
         "env_steps_per_s": batch * steps / elapsed,
         "agent_steps_per_s": batch * n * steps / elapsed,
     }
+    if parts:
+        profiler = cProfile.Profile(builtins=False)  # C calls count in their Python caller
+        profiler.enable()
+        for k in range(PROFILED_STEPS):
+            env.step(drawn[(steps + k) % len(drawn)])
+        profiler.disable()
+        result["parts"] = part_shares(pstats.Stats(profiler))
+    return result
+
+
+def format_parts(shares: Mapping[str, float]) -> str:
+    """``reset 12% · flight 5% · …`` for the parts that have any share, in step order."""
+    return " · ".join(f"{p} {shares[p]:.0%}" for p in PARTS if shares.get(p, 0.0) >= 0.005)

@@ -25,6 +25,9 @@ SIM_SUMMARY = (
 )
 """``bench sim``'s line for people, filled from its result."""
 
+SIM_PARTS = "share of a step (profiled separately): {parts}"
+"""``bench sim``'s second line: each part's share of a step (`remarl_fc.bench.sim.PARTS`)."""
+
 
 def add_bench(sub: Any) -> None:
     """Add ``bench`` and its subcommands: pso, sim, sitl, fly, bus."""
@@ -55,6 +58,12 @@ def add_bench(sub: Any) -> None:
         help="uniform in [-1, 1] (default) or N(0, 0.1) around straight flight",
     )
     b.add_argument("--seconds", type=float, default=2.0, help="how long to time")
+    b.add_argument(
+        "--no-parts",
+        dest="parts",
+        action="store_false",
+        help="skip the profiled run that gives each part's share of a step",
+    )
     add_seed(b)
     finish(b, cmd_bench_sim)
 
@@ -77,8 +86,13 @@ def cmd_bench_pso(args: argparse.Namespace) -> int:
 
 def cmd_bench_sim(args: argparse.Namespace) -> int:
     """Time the simulator with the full reMARL reward."""
-    from remarl_fc.bench.sim import bench_sim
+    from remarl_fc.bench.sim import bench_sim, format_parts
 
-    result = bench_sim(args.scenario, args.batch, args.actions, args.seconds, args.seed)
-    emit(args, result, SIM_SUMMARY.format_map(result))
+    result = bench_sim(
+        args.scenario, args.batch, args.actions, args.seconds, args.seed, parts=args.parts
+    )
+    human = SIM_SUMMARY.format_map(result)
+    if "parts" in result:
+        human += "\n" + SIM_PARTS.format(parts=format_parts(result["parts"]))
+    emit(args, result, human)
     return 0

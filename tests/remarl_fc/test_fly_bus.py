@@ -57,8 +57,8 @@ def fly_swarm(tmp_path: Path, broker, speedup: float, outage=None) -> tuple[list
     truth = tmp_path / "truth.json"
     mock = subprocess.Popen(
         [*CLI, "sitl", "--quick-start", "--scenario", "3u2o", "--base-port", "0",
-         "--out", f"127.0.0.1:{port}", "--out-step", "1", "--speedup", str(speedup), "--timeout", "600", "--summary",
-         str(truth), "--json"],
+         "--out", f"127.0.0.1:{port}", "--out-step", "1", "--speedup", str(speedup),
+         "--timeout", "600", "--summary", str(truth), "--json"],
         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
     )  # fmt: skip
     flyers = [

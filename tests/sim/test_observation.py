@@ -137,3 +137,13 @@ def test_far_targets_are_clipped():
         np.zeros((1, 0, 2)),
     )
     assert obs.rows[0, 0, ROW_SELF, 0] == pytest.approx(CLIP)
+
+
+def test_flat_is_a_copy_of_the_rows_then_the_mask():
+    w = world(np.random.default_rng(3), b=3, n=2, m=4)
+    obs = build_observations(LAYOUT, **w)
+    flat = obs.flat()
+    b, n = obs.rows.shape[:2]
+    np.testing.assert_array_equal(flat, np.concatenate([obs.rows.reshape(b, n, -1), obs.mask], -1))
+    flat[...] = 7.0
+    assert not (obs.rows == 7.0).any()  # flat() hands out a new array

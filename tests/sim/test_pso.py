@@ -87,3 +87,28 @@ def test_crowded_swarms_become_feasible_without_being_made_worse(n, seed, spread
     shift = np.hypot(*(res.positions_m[0] - pos[0]).T).max()
     assert shift == pytest.approx(res.max_shift_m.item())
     assert res.cost.item() < INFEASIBLE_COST
+
+
+def test_close_pairs_sharing_no_uav_are_settled_by_the_certified_repair_without_a_search():
+    # Two close pairs (12 m and 20 m apart, threshold 30 m) far from each other: the optimum
+    # moves each pair's UAVs half its deficit apart; nothing else moves.
+    pos = np.array([[[0.0, 0.0], [12.0, 0.0], [200.0, 0.0], [200.0, 20.0], [100.0, 100.0]]])
+    rng = np.random.default_rng(0)
+    state = rng.bit_generator.state
+    res = pso_separate(pos, PSOConfig(), rng)
+    assert rng.bit_generator.state == state  # no search: no randomness drawn
+    assert not res.searched.item() and res.feasible.item()
+    assert res.max_shift_m.item() == pytest.approx(9.0, abs=0.05)  # (30 − 12) / 2
+    assert min_pairwise_distance(res.positions_m[0]) >= 30.0
+    np.testing.assert_array_equal(res.positions_m[0, 4], pos[0, 4])
+    shift = np.hypot(*(res.positions_m[0] - pos[0]).T)
+    np.testing.assert_allclose(shift[2:4], 5.0, atol=0.05)  # (30 − 20) / 2
+    assert res.cost.item() == pytest.approx(30.0 + res.max_shift_m.item())
+
+
+def test_a_chain_of_close_uavs_is_searched_and_beats_its_repair():
+    pos = np.array([[[0.0, 0.0], [21.0, 0.0], [42.0, 0.0], [63.0, 0.0]]])
+    res = run(pos)
+    assert res.searched.item() and res.feasible.item()
+    # The repair alone pushes the end UAVs out by the whole chain's deficit.
+    assert res.max_shift_m.item() < 14.0
