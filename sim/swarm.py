@@ -34,7 +34,7 @@ from numpy.typing import NDArray
 from sim.arrays import BoolArray
 from sim.config import ScenarioConfig
 from sim.contour import ArcWindow
-from sim.dynamics import draw_response, is_ideal
+from sim.dynamics import ResponseSpec
 from sim.kinematics import heading_velocity, scale_action
 from sim.metrics import substep_fractions
 from sim.observation import ObservationLayout, Observations, build_observations
@@ -89,7 +89,8 @@ class SwarmSim:
         self.fractions = substep_fractions(cfg.substeps)
         self.pairs = np.triu_indices(cfg.uav.count, k=1)
         self.difference_op = difference_operator(cfg.uav.count, cfg.obstacles.count)
-        self.ideal = is_ideal(cfg)
+        self.response = ResponseSpec.from_scenario(cfg)
+        self.ideal = self.response is None
 
     def initial_state(self, rng: np.random.Generator, num_envs: int) -> SwarmState:
         """B new episodes of the scenario (`sim.spawn.spawn_episodes`), levels by PSO."""
@@ -128,7 +129,7 @@ class SwarmSim:
             vel_m_s=heading_velocity(heading, cfg.uav.speed_m_s),
             speed_m_s=np.full((b, n), cfg.uav.speed_m_s),
             last_turn_rad=np.zeros((b, n)),
-            response=draw_response(cfg, b, n, rng),
+            response=None if self.response is None else self.response.draw(b, n, rng),
             tracks=None,
             gps_error_m=np.zeros((b, n, 2)),
         )

@@ -29,13 +29,13 @@ from sim.state import EpisodeStats, SwarmState
 
 
 def difference_operator(n: int, m: int) -> Float32Array:
-    """The difference operator of the swept checks, (N + M, N·M + P + N).
+    """The difference operator of the swept checks, (N + M + N, N·M + P + N).
 
-    It maps [UAV, obstacle] coordinates to UAV i − obstacle k, UAV i − UAV j (i < j) and
-    UAV i itself (its target is subtracted afterwards).
+    It maps [UAV, obstacle, target] coordinates to UAV i − obstacle k, UAV i − UAV j (i < j)
+    and UAV i − its target: one matrix product gives every relative position of a step.
     """
     i, j = np.triu_indices(n, k=1)
-    op = np.zeros((n + m, n * m + len(i) + n), dtype=np.float32)
+    op = np.zeros((n + m + n, n * m + len(i) + n), dtype=np.float32)
     col = np.arange(n * m)
     op[col // m, col] = 1.0  # UAV of the UAV–obstacle pair
     op[n + col % m, col] = -1.0  # obstacle of the pair
@@ -43,6 +43,7 @@ def difference_operator(n: int, m: int) -> Float32Array:
     op[i, pairs], op[j, pairs] = 1.0, -1.0
     own = n * m + len(i) + np.arange(n)
     op[np.arange(n), own] = 1.0
+    op[n + m + np.arange(n), own] = -1.0  # its target
     return op
 
 
@@ -173,24 +174,23 @@ def closest_approaches(
     """Every kind of closest approach of a step in one float32 call (step 2).
 
     UAV–obstacle (N·M), UAV–UAV pairs (P, ``pairs`` i < j), UAV–own target (N): the relative
-    positions of all of them come from one matrix product with ``difference_op``
-    (`difference_operator`). Separations count for every UAV ``present`` (flying, or hovering
-    where it arrived) — a pair of UAVs when at least one of them flies; the approach to the
-    target only for the UAVs that ``acted``.
+    positions of all of them come from one matrix product per coordinate with
+    ``difference_op`` (`difference_operator`). Separations count for every UAV ``present``
+    (flying, or hovering where it arrived) — a pair of UAVs when at least one of them flies;
+    the approach to the target only for the UAVs that ``acted``.
     """
     i, j = pairs
     steps, b, n = flight.uav_x.shape
     m = flight.obstacle_x.shape[-1]
     k_uo, k_uu = n * m, len(i)
     rel = []
+    movers = np.empty((steps, b, n + m + n), dtype=np.float32)  # [UAVs, obstacles, targets]
     for p, o, t in (
         (flight.uav_x, flight.obstacle_x, target_m[..., 0]),
         (flight.uav_y, flight.obstacle_y, target_m[..., 1]),
     ):
-        movers = np.concatenate([p, o], axis=-1).reshape(steps * b, n + m)
-        r = (movers @ difference_op).reshape(steps, b, -1)  # (T + 1, B, K)
-        r[..., k_uo + k_uu :] -= t.astype(np.float32)
-        rel.append(r)
+        movers[..., :n], movers[..., n : n + m], movers[..., n + m :] = p, o, t
+        rel.append((movers.reshape(steps * b, -1) @ difference_op).reshape(steps, b, -1))
     swept = swept_min_distance_xy(*rel).astype(np.float64)  # (B, N·M + P + N)
     d_uo = swept[:, :k_uo].reshape(b, n, m)
     counted = present[:, i] & present[:, j] & (acted[:, i] | acted[:, j])

@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from sim.arrays import FloatArray
 from sim.datafiles import read_toml, shipped_names
@@ -124,17 +125,37 @@ def follow_velocity(
     max_accel_m_s2: float | FloatArray,
     dt_s: float,
 ) -> FloatArray:
-    """`track_velocity` with the time constant and the cap as numbers or arrays (...).
-
-    The one implementation of the response, for a profile (the mock) or per vehicle (the
-    simulator, where each UAV may draw its own).
-    """
-    error = command_m_s - velocity_m_s
-    step = error * -np.expm1(-dt_s / np.asarray(tau_s))[..., None]
-    norm = np.hypot(step[..., 0], step[..., 1])
+    """`track_velocity` with the time constant and the cap as numbers or arrays (...)."""
+    velocity = velocity_m_s[..., 0] + 1j * velocity_m_s[..., 1]
+    command = command_m_s[..., 0] + 1j * command_m_s[..., 1]
     cap = np.asarray(max_accel_m_s2) * dt_s
-    scale = np.minimum(1.0, cap / np.maximum(norm, 1e-300))
-    new: FloatArray = velocity_m_s + step * scale[..., None]
+    new = approach(velocity, command, closing_fraction(tau_s, dt_s), cap)
+    return np.stack([new.real, new.imag], axis=-1)
+
+
+def closing_fraction(tau_s: float | FloatArray, dt_s: float) -> FloatArray:
+    """The share of a velocity error a first-order response closes in ``dt_s``: 1 − e^(−dt/τ)."""
+    fraction: FloatArray = -np.expm1(-dt_s / np.asarray(tau_s, dtype=np.float64))
+    return fraction
+
+
+def approach(
+    velocity: NDArray[np.complex128],
+    command: NDArray[np.complex128],
+    fraction: float | FloatArray,
+    cap_m_s: float | FloatArray,
+) -> NDArray[np.complex128]:
+    """One step of the response, on horizontal velocities as complex numbers (x + iy).
+
+    The one implementation of the model: the velocity closes ``fraction`` of its error to the
+    command (`closing_fraction`: exact for a first-order response over the step), by at most
+    ``cap_m_s`` (the acceleration cap times the step). Any shapes that broadcast.
+    """
+    step = (command - velocity) * fraction
+    norm = np.abs(step)
+    new: NDArray[np.complex128] = velocity + step * np.minimum(
+        1.0, cap_m_s / np.maximum(norm, 1e-300)
+    )
     return new
 
 

@@ -1,8 +1,11 @@
 """Simulator throughput sweep, with reference simulators measured in the same run if installed.
 
-    python tools/bench_sim.py [--scenario 5u1o] [--batches 1 64 1024 4096] [--seconds 2] [--json]
+    python tools/bench_sim.py [--scenario 5u1o] [--batches 1 64 1024 4096] [--seconds 2]
+        [--worlds paper real] [--json]
 
-Measures remarl-fc (full reMARL reward, autoreset) with uniform random actions and with
+Measures remarl-fc (full reMARL reward, autoreset) in each world (`remarl_fc.bench.sim.WORLDS`:
+"paper", ideal vehicles and exact sensing; "real", the fitted ArduCopter/PX4 response randomised
+per UAV, ADS-B intruders and GPS noise) with uniform random actions and with
 N(0, 0.1) exploration around straight flight, and each part's share of a step with uniform
 actions (a separate profiled run, `remarl_fc.bench.sim.part_shares`; the throughput is timed
 without the profiler). If `vmas` is importable, VMAS "navigation" with
@@ -18,7 +21,8 @@ import json
 import time
 from typing import Any
 
-from remarl_fc.bench.sim import bench_sim, format_parts
+from remarl_fc.bench.sim import WORLDS, bench_sim, format_parts
+from sim.heap import keep_freed_memory
 
 
 def vmas_agent_steps(agents: int, batch: int, seconds: float) -> float | None:
@@ -63,26 +67,33 @@ def main() -> None:
     parser.add_argument("--scenario", default="5u1o")
     parser.add_argument("--batches", type=int, nargs="+", default=[1, 64, 1024, 4096])
     parser.add_argument("--seconds", type=float, default=2.0)
+    parser.add_argument("--worlds", nargs="+", default=["paper", "real"], choices=list(WORLDS))
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
+    keep_freed_memory()  # the simulator's steps reuse their temporaries
     rows: list[dict[str, Any]] = []
     mpe2 = mpe2_agent_steps(args.seconds)
     for batch in args.batches:
-        uniform = bench_sim(args.scenario, batch, "uniform", args.seconds)
-        noise = bench_sim(args.scenario, batch, "noise", args.seconds, parts=False)
-        vmas = vmas_agent_steps(uniform["agents"], batch, args.seconds)
-        row = {
-            "batch": batch,
-            "remarl_uniform": uniform["agent_steps_per_s"],
-            "remarl_noise": noise["agent_steps_per_s"],
-            "vmas_navigation": vmas,
-            "ratio_vs_vmas": None if vmas is None else uniform["agent_steps_per_s"] / vmas,
-            "parts": uniform["parts"],
-        }
-        if batch == 1:
-            row["mpe2_simple_spread"] = mpe2
-            row["ratio_vs_mpe2"] = None if mpe2 is None else uniform["agent_steps_per_s"] / mpe2
-        rows.append(row)
+        vmas: float | None = None
+        for world in args.worlds:
+            uniform = bench_sim(args.scenario, batch, "uniform", args.seconds, world=world)
+            noise = bench_sim(args.scenario, batch, "noise", args.seconds, parts=False, world=world)
+            if vmas is None:
+                vmas = vmas_agent_steps(uniform["agents"], batch, args.seconds)
+            row = {
+                "batch": batch,
+                "world": world,
+                "remarl_uniform": uniform["agent_steps_per_s"],
+                "remarl_noise": noise["agent_steps_per_s"],
+                "vmas_navigation": vmas,
+                "ratio_vs_vmas": None if vmas is None else uniform["agent_steps_per_s"] / vmas,
+                "parts": uniform["parts"],
+            }
+            if batch == 1:
+                row["mpe2_simple_spread"] = mpe2
+                rate = uniform["agent_steps_per_s"]
+                row["ratio_vs_mpe2"] = None if mpe2 is None else rate / mpe2
+            rows.append(row)
     if args.json:
         print(json.dumps({"benchmark": "sim_sweep", "scenario": args.scenario, "rows": rows}))
         return
@@ -91,16 +102,16 @@ def main() -> None:
         return "—" if x is None else f"{x:,.0f}"
 
     print(f"scenario {args.scenario}: agent-steps/s")
-    print(f"{'batch':>6} {'uniform':>10} {'noise':>10} {'VMAS nav':>10} {'ratio':>6}")
+    print(f"{'batch':>6} {'world':>6} {'uniform':>10} {'noise':>10} {'VMAS nav':>10} {'ratio':>6}")
     for r in rows:
         ratio = "—" if r["ratio_vs_vmas"] is None else f"{r['ratio_vs_vmas']:.1f}x"
         print(
-            f"{r['batch']:>6} {fmt(r['remarl_uniform']):>10} {fmt(r['remarl_noise']):>10} "
-            f"{fmt(r['vmas_navigation']):>10} {ratio:>6}"
+            f"{r['batch']:>6} {r['world']:>6} {fmt(r['remarl_uniform']):>10} "
+            f"{fmt(r['remarl_noise']):>10} {fmt(r['vmas_navigation']):>10} {ratio:>6}"
         )
     print("share of a step (uniform actions, profiled separately):")
     for r in rows:
-        print(f"{r['batch']:>6} {format_parts(r['parts'])}")
+        print(f"{r['batch']:>6} {r['world']:>6} {format_parts(r['parts'])}")
     if mpe2 is not None:
         first = rows[0]
         print(f"MPE2 simple_spread_v3, batch 1: {mpe2:,.0f} agent-steps/s", end="")

@@ -23,6 +23,7 @@ from pathlib import Path
 from remarl_fc.offline.evaluate import evaluate_policy, world_overrides
 from remarl_fc.policy_io import zoo_names
 from sim.evaluation import evaluation_seed
+from sim.heap import keep_freed_memory
 
 WORLDS: dict[str, tuple[str, str, str]] = {
     "paper": ("ideal", "exact", "leave"),
@@ -43,6 +44,7 @@ def main() -> None:
     parser.add_argument("--episodes", type=int, default=1000)
     parser.add_argument("--json", default=None, help="write every result to this file")
     args = parser.parse_args()
+    keep_freed_memory()  # the simulator's steps reuse their temporaries
     policies = args.policies or zoo_names()
     rows: list[dict[str, object]] = []
     print("| policy | " + " | ".join(WORLDS) + " |")

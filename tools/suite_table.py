@@ -21,6 +21,7 @@ from typing import Any
 
 from remarl_fc.offline.suite import MethodSpec, evaluate_suite
 from remarl_fc.offline.suite_report import draw_suite
+from sim.heap import keep_freed_memory
 from sim.suite import load_suite
 
 METHODS = ("zoo", "orca", "potential-field", "straight")
@@ -86,6 +87,7 @@ def main() -> None:
     parser.add_argument("--plot", default=None, help="folder for the heatmap and worst episodes")
     parser.add_argument("--json", default=None, help="also write the raw results here")
     args = parser.parse_args()
+    keep_freed_memory()  # the simulator's steps reuse their temporaries
     suite = load_suite(args.suite)
     specs = [MethodSpec("method", m) for m in args.methods.split(",")]
     t0 = time.perf_counter()

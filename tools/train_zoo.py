@@ -24,6 +24,7 @@ from policies.export import export_policy
 from policies.train import train
 from remarl_fc.offline.evaluate import evaluate_policy
 from sim.evaluation import evaluation_seed
+from sim.heap import keep_freed_memory
 
 ZOO = Path(__file__).resolve().parents[1] / "policies" / "zoo"
 PAPER = ["2u1o", "3u1o", "5u1o", "7u1o", "10u1o", "3u2o", "5u2o", "7u2o"]
@@ -43,6 +44,7 @@ def main() -> None:
         "--from-run", default=None, help="publish this existing run folder instead of training"
     )
     args = parser.parse_args()
+    keep_freed_memory()  # the simulator's steps reuse their temporaries
     zoo = Path(args.zoo)
     zoo.mkdir(parents=True, exist_ok=True)
     for scenario in args.scenarios:

@@ -223,13 +223,36 @@ def _qualnames() -> Callable[[_Key], str]:
     return qualname
 
 
-def _vector_env(scenario: str, batch: int, actions: str, seed: int) -> tuple[Any, np.ndarray]:
+WORLDS: dict[str, dict[str, Any]] = {
+    "paper": {},
+    "real": {
+        "dynamics": "arducopter",
+        "dynamics_randomisation": {
+            "profiles": ["arducopter", "px4"],
+            "delay_scale": [0.7, 1.5],
+            "velocity_tau_scale": [0.8, 1.5],
+            "max_accel_scale": [0.8, 1.25],
+        },
+        "sensors": {"model": "adsb"},
+    },
+}
+"""``bench sim`` worlds, as scenario overrides: "paper" (ideal vehicles, exact sensing: the
+scenario as shipped) and "real" (each UAV ArduCopter's or PX4's fitted response, randomised
+per UAV, intruders through ADS-B, GPS noise: what the robust policies train on,
+``policies/zoo/robust/3u2o.toml``)."""
+
+
+def _vector_env(
+    scenario: str, batch: int, actions: str, seed: int, world: str = "paper"
+) -> tuple[Any, np.ndarray]:
     """A reset vector env of the scenario and 16 pre-drawn joint actions, (16, B, N) float32."""
     from sim.env import make_vector_env
 
     if actions not in ACTION_MODES:
         raise ValueError(f"actions must be one of {', '.join(ACTION_MODES)}, got {actions!r}")
-    env = make_vector_env(scenario, batch)
+    if world not in WORLDS:
+        raise ValueError(f"world must be one of {', '.join(WORLDS)}, got {world!r}")
+    env = make_vector_env(scenario, batch, **WORLDS[world])
     env.reset(seed=seed)
     rng = np.random.default_rng(seed)
     shape = (16, batch, env.num_agents)
@@ -248,6 +271,7 @@ def bench_sim(
     seed: int = 0,
     *,
     parts: bool = True,
+    world: str = "paper",
 ) -> dict[str, Any]:
     """Agent-steps per second of the batched simulator with the full reMARL reward.
 
@@ -255,8 +279,9 @@ def bench_sim(
     on pre-drawn actions for about ``seconds``. With ``parts``, a second, separate run of
     `PROFILED_STEPS` steps under cProfile gives each part's share of a step (`PARTS`,
     `part_shares`); the throughput comes from the first run only, without the profiler.
+    ``world`` (`WORLDS`): the paper's, or vehicles and sensors as in flight.
     """
-    env, drawn = _vector_env(scenario, batch, actions, seed)
+    env, drawn = _vector_env(scenario, batch, actions, seed, world)
     n = env.num_agents
     for k in range(3):  # warm-up
         env.step(drawn[k])
@@ -270,6 +295,7 @@ def bench_sim(
     result: dict[str, Any] = {
         "benchmark": "sim",
         "scenario": env.cfg.name,
+        "world": world,
         "batch": batch,
         "agents": n,
         "actions": actions,

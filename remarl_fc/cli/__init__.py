@@ -29,6 +29,7 @@ from remarl_fc._version import __version__
 from remarl_fc.cli import bench, fly, learn, scenario, sitl, suite
 from remarl_fc.cli.common import EXIT_BROKEN_PIPE, EXIT_USAGE, Handler
 from remarl_fc.errors import RemarlError
+from sim.heap import keep_freed_memory
 
 __all__ = ["EXIT_USAGE", "build_parser", "main"]
 
@@ -60,6 +61,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the exit status."""
     args = build_parser().parse_args(argv)
     handler: Handler = args.handler
+    keep_freed_memory()  # the simulator's steps reuse their temporaries (sim.heap)
     try:
         return handler(args)
     except RemarlError as exc:

@@ -20,7 +20,7 @@ PSO_SUMMARY = (
 """``bench pso``'s line for people, filled from its result."""
 
 SIM_SUMMARY = (
-    "{scenario}, batch {batch}, {actions} actions: "
+    "{scenario} ({world} world), batch {batch}, {actions} actions: "
     "{agent_steps_per_s:,.0f} agent-steps/s ({ms_per_step:.2f} ms/step)"
 )
 """``bench sim``'s line for people, filled from its result."""
@@ -58,6 +58,13 @@ def add_bench(sub: Any) -> None:
         help="uniform in [-1, 1] (default) or N(0, 0.1) around straight flight",
     )
     b.add_argument("--seconds", type=float, default=2.0, help="how long to time")
+    add_choice(
+        b,
+        "--world",
+        ["paper", "real"],
+        help="paper: ideal vehicles, exact sensing (default); real: fitted ArduCopter/PX4 "
+        "response randomised per UAV, ADS-B intruders, GPS noise",
+    )
     b.add_argument(
         "--no-parts",
         dest="parts",
@@ -89,7 +96,13 @@ def cmd_bench_sim(args: argparse.Namespace) -> int:
     from remarl_fc.bench.sim import bench_sim, format_parts
 
     result = bench_sim(
-        args.scenario, args.batch, args.actions, args.seconds, args.seed, parts=args.parts
+        args.scenario,
+        args.batch,
+        args.actions,
+        args.seconds,
+        args.seed,
+        parts=args.parts,
+        world=args.world,
     )
     human = SIM_SUMMARY.format_map(result)
     if "parts" in result:
