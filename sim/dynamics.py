@@ -197,37 +197,62 @@ def fly_response(
     fraction = closing_fraction(response.tau_s, h) * moving_f  # a still UAV keeps its velocity
     cap = response.accel_m_s2 * h
     # The delayed command at the middle of integration step k, s_k = (k + ½)·h, is the arc sent
-    # at s_k − delay: this step's arc once s_k ≥ delay, the last step's before. Each arc's
-    # direction turns by a fixed angle per integration step: a complex rotation, no trigonometry
-    # inside the loop.
+    # at s_k − delay: this step's arc once s_k ≥ delay, the last step's before (only in the
+    # first few steps: the delay is below the decision step). Each arc's direction turns by a
+    # fixed angle per integration step: a complex rotation, no trigonometry in the loop. Only
+    # the velocity response needs a loop over the steps; the commands before it and the
+    # positions after it are computed for all steps at once, with the same operations in the
+    # same order as step by step.
     start = (0.5 * h - response.delay_s) / dt_s  # (B, N): fraction of the arc at s_0
-    now_dir = np.exp(1j * (cmd.heading_rad + cmd.turn_rad * start))
-    last_dir = np.exp(1j * (cmd.heading_rad + cmd.last_turn_rad * start))
-    now_turn = np.exp(1j * cmd.turn_rad * (h / dt_s))
-    last_turn = np.exp(1j * cmd.last_turn_rad * (h / dt_s))
+    shape = moving.shape
+    middles = (np.arange(steps) + 0.5) * h  # s_k
+    lagging = int(np.count_nonzero(middles < response.delay_s.max(initial=0.0)))
+    now_dir = np.empty((steps, *shape), dtype=np.complex128)  # (k, B, N) at each s_k
+    last_dir = np.empty((lagging, *shape), dtype=np.complex128)  # where it may still hold
+    now_turn = np.empty(shape, dtype=np.complex128)
+    last_turn = np.empty_like(now_turn)
+    rotations = [
+        (now_dir[0], cmd.heading_rad + cmd.turn_rad * start),
+        (now_turn, cmd.turn_rad * (h / dt_s)),
+    ]
+    if lagging:
+        rotations.append((last_dir[0], cmd.heading_rad + cmd.last_turn_rad * start))
+    if lagging > 1:
+        rotations.append((last_turn, cmd.last_turn_rad * (h / dt_s)))
+    for out, angle in rotations:
+        np.cos(angle, out=out.real)  # e^(i·angle)
+        np.sin(angle, out=out.imag)
+    for k in range(1, steps):
+        np.multiply(now_dir[k - 1], now_turn, out=now_dir[k])
+    for k in range(1, lagging):
+        np.multiply(last_dir[k - 1], last_turn, out=last_dir[k])
+    commands = cmd.speed_m_s * now_dir
+    late = middles[:lagging, None, None] < response.delay_s  # (lagging, B, N)
+    np.copyto(commands[:lagging], cmd.last_speed_m_s * last_dir, where=late)
 
-    pos = pos_m[..., 0] + 1j * pos_m[..., 1]
-    vel = vel_m_s[..., 0] + 1j * vel_m_s[..., 1]
-    flown = np.zeros(moving.shape)
-    xs = np.empty((substeps + 1, *moving.shape), dtype=np.float32)
-    ys = np.empty_like(xs)
-    xs[0], ys[0] = pos.real, pos.imag
+    # Only the velocity needs a loop; the positions follow from it by the trapezoid rule.
+    vel = np.empty((steps + 1, *shape), dtype=np.complex128)  # at the integration instants
+    vel[0] = vel_m_s[..., 0] + 1j * vel_m_s[..., 1]
     for k in range(steps):
-        late = (k + 0.5) * h < response.delay_s
-        command = np.where(late, cmd.last_speed_m_s * last_dir, cmd.speed_m_s * now_dir)
-        new_vel = approach(vel, command, fraction, cap)
-        move = (0.5 * h) * (vel + new_vel) * moving_f
-        pos += move
-        flown += np.abs(move)
-        vel = new_vel
-        now_dir *= now_turn
-        last_dir *= last_turn
-        if (k + 1) % per_sub == 0:
-            xs[(k + 1) // per_sub], ys[(k + 1) // per_sub] = pos.real, pos.imag
+        vel[k + 1] = approach(vel[k], commands[k], fraction, cap)
+    move = (0.5 * h) * (vel[:-1] + vel[1:])  # (k, B, N)
+    if not moving.all():
+        move *= moving_f
+    track = np.empty((steps + 1, *shape), dtype=np.complex128)
+    track[0] = pos_m[..., 0] + 1j * pos_m[..., 1]
+    length = np.abs(move)
+    flown = np.zeros(shape)
+    for k in range(steps):
+        np.add(track[k], move[k], out=track[k + 1])
+        flown += length[k]
+    at_substeps = track[::per_sub]
+    xs = at_substeps.real.astype(np.float32)  # (T + 1, B, N)
+    ys = at_substeps.imag.astype(np.float32)
+    pos, vel_end = track[-1], vel[-1]
     return Track(
         xs,
         ys,
         np.stack([pos.real, pos.imag], axis=-1),
-        np.stack([vel.real, vel.imag], axis=-1),
+        np.stack([vel_end.real, vel_end.imag], axis=-1),
         flown,
     )

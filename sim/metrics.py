@@ -33,9 +33,10 @@ def substep_fractions(substeps: int = SUBSTEPS) -> FloatArray:
     return np.linspace(0.0, 1.0, substeps + 1)
 
 
-CHUNK_COLUMNS = 4096
+CHUNK_COLUMNS = 16384
 """Columns per time slice processed at once by `swept_min_distance_xy`: the temporaries of a
-chunk stay in cache (1.6× faster at 4096 environments than one pass over everything)."""
+chunk stay small (5u1o, 1,024 environments, 20,480 columns: 0.60 ms a step against 0.74 ms in
+chunks of 4,096; 4,096 environments: 2.4 ms against 2.9 ms, one pass 2.5 ms)."""
 
 
 def swept_min_distance_xy(

@@ -109,6 +109,7 @@ def build_observations(
     obstacle_pos_m: FloatArray,
     obstacle_vel_m_s: FloatArray,
     obstacle_valid: BoolArray | None = None,
+    heading_cos_sin: tuple[FloatArray, FloatArray] | None = None,
 ) -> Observations:
     """Build every UAV's observation from plain arrays.
 
@@ -119,6 +120,8 @@ def build_observations(
         centre_m: (B, 2) the virtual centre p*.
         obstacle_pos_m, obstacle_vel_m_s: (B, M, 2).
         obstacle_valid: (B, M) False for obstacle slots that hold nothing.
+        heading_cos_sin: cos and sin of ``own_heading_rad``, where the caller has them (None:
+            computed).
 
     Returns:
         `Observations` (rows, mask, sensed).
@@ -143,7 +146,9 @@ def build_observations(
     vbar = layout.speed_m_s / np.where(dist_t > 0, dist_t, np.inf)
     np.multiply(tx, vbar, out=wx[ROW_SWARM, 1])  # pre-planned velocity v̄
     np.multiply(ty, vbar, out=wy[ROW_SWARM, 1])
-    cos_h, sin_h = np.cos(own_heading_rad), np.sin(own_heading_rad)  # (B, N)
+    if heading_cos_sin is None:
+        heading_cos_sin = np.cos(own_heading_rad), np.sin(own_heading_rad)
+    cos_h, sin_h = heading_cos_sin  # (B, N)
 
     # One flat float32 array holds every observation; rows and mask are views of it.
     storage = np.zeros((b, n, layout.size), dtype=np.float32)

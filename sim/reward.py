@@ -50,9 +50,15 @@ def preplanned_direction(pos_m: FloatArray, target_m: FloatArray) -> FloatArray:
 
 
 def swarming_reward(
-    heading_rad: FloatArray, pos_m: FloatArray, target_m: FloatArray, collided: BoolArray
+    heading_rad: FloatArray,
+    pos_m: FloatArray,
+    target_m: FloatArray,
+    collided: BoolArray,
+    heading_cos_sin: tuple[FloatArray, FloatArray] | None = None,
 ) -> FloatArray:
     """r_form·r_collide, (B, N): cos∠(v, v̄), zeroed for UAVs that collided.
+
+    ``heading_cos_sin``: cos and sin of ``heading_rad``, where the caller has them.
 
     >>> swarming_reward(np.array([[0.0, np.pi / 2]]), np.zeros((1, 2, 2)),
     ...                 np.array([[[1.0, 0.0], [1.0, 0.0]]]), np.array([[False, False]])).round(6)
@@ -64,8 +70,11 @@ def swarming_reward(
     norm = np.hypot(dx, dy)
     moving = norm > 0
     safe = np.where(moving, norm, 1.0)
-    r_form = np.cos(heading_rad) * np.where(moving, dx / safe, 0.0)
-    r_form += np.sin(heading_rad) * np.where(moving, dy / safe, 0.0)
+    if heading_cos_sin is None:
+        heading_cos_sin = np.cos(heading_rad), np.sin(heading_rad)
+    cos_h, sin_h = heading_cos_sin
+    r_form = cos_h * np.where(moving, dx / safe, 0.0)
+    r_form += sin_h * np.where(moving, dy / safe, 0.0)
     return np.where(collided, 0.0, r_form)
 
 
@@ -108,6 +117,7 @@ def reward(
     collided: BoolArray,
     max_turn_rad: float,
     reward_cfg: RewardConfig,
+    heading_cos_sin: tuple[FloatArray, FloatArray] | None = None,
 ) -> RewardTerms:
     """The reMARL reward of every UAV after a step, in one pass.
 
@@ -119,10 +129,11 @@ def reward(
         target_m: (B, N, 2) targets.
         collided: (B, N) whether each UAV collided during the step.
         max_turn_rad: a_max.
+        heading_cos_sin: cos and sin of ``heading_rad``, where the caller has them.
     """
     terms = window_terms(window, max_turn_rad)
     contour = -(reward_cfg.w_internal * terms.internal - reward_cfg.w_external * terms.external)
-    swarming = swarming_reward(heading_rad, pos_m, target_m, collided)
+    swarming = swarming_reward(heading_rad, pos_m, target_m, collided, heading_cos_sin)
     return RewardTerms(
         internal=terms.internal,
         external=terms.external,

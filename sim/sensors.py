@@ -105,6 +105,17 @@ def gps_noise(pos: FloatArray, sigma_m: float, rng: np.random.Generator) -> Floa
     return out
 
 
+def gps_error(shape: tuple[int, ...], sigma_m: float, rng: np.random.Generator) -> FloatArray:
+    """Gaussian GPS errors of ``sigma_m`` per axis, (shape); zero σ: zeros, no draw.
+
+    What `gps_noise` adds: the same draws and numbers as ``gps_noise(np.zeros(shape), ...)``.
+    """
+    if sigma_m == 0.0:
+        return np.zeros(shape)
+    error: FloatArray = sigma_m * rng.standard_normal(shape)
+    return error
+
+
 @dataclass(frozen=True)
 class AdsbTracks:
     """ADS-B of M intruders in B environments, and the report each UAV's tracker holds.

@@ -176,12 +176,16 @@ def obstacle_nominal_positions(obstacles: ObstacleConfig) -> FloatArray:
 
 
 def spawn_obstacles(
-    cfg: ScenarioConfig, rng: np.random.Generator, num_envs: int
+    cfg: ScenarioConfig,
+    rng: np.random.Generator,
+    num_envs: int,
+    layout: SwarmLayout | None = None,
 ) -> tuple[FloatArray, FloatArray]:
     """Random obstacle spawns for a batch of environments.
 
     Each obstacle starts on the spawn line (nominal y plus a uniform lateral jitter) and heads
-    toward the swarm's spawn centroid, perturbed by a uniform heading jitter.
+    toward the swarm's spawn centroid, perturbed by a uniform heading jitter. ``layout``: the
+    scenario's `swarm_layout`, where the caller keeps it (None: computed).
 
     Returns:
         (positions_m (B, M, 2), velocities_m_s (B, M, 2)).
@@ -191,7 +195,9 @@ def spawn_obstacles(
     jitter = rng.uniform(-o.lateral_jitter_m, o.lateral_jitter_m, size=(num_envs, o.count))
     pos = np.broadcast_to(nominal, (num_envs, o.count, 2)).copy()
     pos[..., 1] += jitter
-    aim = swarm_layout(cfg).positions_m.mean(axis=0)  # (2,)
+    if layout is None:
+        layout = swarm_layout(cfg)
+    aim = layout.positions_m.mean(axis=0)  # (2,)
     to_swarm = aim - pos  # (B, M, 2)
     heading = np.arctan2(to_swarm[..., 1], to_swarm[..., 0])
     heading += rng.uniform(-o.heading_jitter_rad, o.heading_jitter_rad, size=heading.shape)
@@ -332,20 +338,27 @@ def appear_step(appear_s: NDArray[Any], dt_s: float) -> IntArray:
     return steps
 
 
-def spawn_episodes(cfg: ScenarioConfig, rng: np.random.Generator, num_envs: int) -> EpisodeStart:
+def spawn_episodes(
+    cfg: ScenarioConfig,
+    rng: np.random.Generator,
+    num_envs: int,
+    layout: SwarmLayout | None = None,
+) -> EpisodeStart:
     """B episodes of a scenario: its swarm layout and its obstacles.
 
     Obstacles come from the ``[[intruders]]`` geometry, or else are drawn on the spawn line
-    (`spawn_obstacles`, the only use of ``rng``).
+    (`spawn_obstacles`, the only use of ``rng``). ``layout``: the scenario's `swarm_layout`,
+    where the caller keeps it (None: computed).
     """
-    layout = swarm_layout(cfg)
+    if layout is None:
+        layout = swarm_layout(cfg)
     b, n, m = num_envs, cfg.uav.count, cfg.obstacles.count
     if cfg.intruders:
         pos, vel, appear = _intruder_spawn(cfg, layout)
         obs_pos, obs_vel = (np.broadcast_to(a, (b, m, 2)).copy() for a in (pos, vel))
         obs_appear = np.broadcast_to(appear, (b, m)).copy()
     else:
-        obs_pos, obs_vel = spawn_obstacles(cfg, rng, b)
+        obs_pos, obs_vel = spawn_obstacles(cfg, rng, b, layout)
         obs_appear = np.zeros((b, m), dtype=np.int64)
     return EpisodeStart(
         start_m=np.broadcast_to(layout.positions_m, (b, n, 2)).copy(),

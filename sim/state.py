@@ -188,14 +188,22 @@ def merge_where(old: T, new: T, mask: BoolArray) -> T:
     Recursive over dataclasses of arrays (a `SwarmState`, its window and stats); anything else
     is kept from ``old``.
     """
+    return _merge_at(old, new, np.flatnonzero(mask))
+
+
+def _merge_at(old: T, new: T, envs: IntArray) -> T:
+    """`merge_where` with the selected environments as indices, ``envs`` (count,).
+
+    Found once, used by every array: an index assignment skips the search a mask makes.
+    """
+    if isinstance(old, np.ndarray):
+        out = old.copy()
+        out[envs] = new
+        return out
     if dataclasses.is_dataclass(old) and not isinstance(old, type):
         fields = {
-            f.name: merge_where(getattr(old, f.name), getattr(new, f.name), mask)
+            f.name: _merge_at(getattr(old, f.name), getattr(new, f.name), envs)
             for f in dataclasses.fields(old)
         }
         return dataclasses.replace(old, **fields)
-    if isinstance(old, np.ndarray):
-        out = old.copy()
-        out[mask] = new
-        return out
     return old

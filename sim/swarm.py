@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from sim.arrays import BoolArray
+from sim.arrays import BoolArray, FloatArray
 from sim.config import ScenarioConfig
 from sim.contour import ArcWindow
 from sim.dynamics import ResponseSpec
@@ -39,7 +39,7 @@ from sim.kinematics import heading_velocity, scale_action
 from sim.metrics import substep_fractions
 from sim.observation import ObservationLayout, Observations, build_observations
 from sim.reward import RewardTerms, assign_contour_levels
-from sim.sensors import AdsbTracks, gps_noise, picture
+from sim.sensors import AdsbTracks, gps_error, picture
 from sim.sensors import update as sensor_update
 from sim.spawn import EpisodeStart, obstacle_speeds, spawn_episodes, swarm_layout
 from sim.state import EpisodeStats, StepResult, SwarmState, merge_where
@@ -51,6 +51,7 @@ from sim.transition import (
     fly,
     fly_with_response,
     outcome,
+    pair_members,
     score,
 )
 
@@ -89,12 +90,13 @@ class SwarmSim:
         self.fractions = substep_fractions(cfg.substeps)
         self.pairs = np.triu_indices(cfg.uav.count, k=1)
         self.difference_op = difference_operator(cfg.uav.count, cfg.obstacles.count)
+        self.pair_members = pair_members(cfg.uav.count)
         self.response = ResponseSpec.from_scenario(cfg)
         self.ideal = self.response is None
 
     def initial_state(self, rng: np.random.Generator, num_envs: int) -> SwarmState:
         """B new episodes of the scenario (`sim.spawn.spawn_episodes`), levels by PSO."""
-        return self.start(spawn_episodes(self.cfg, rng, num_envs), rng)
+        return self.start(spawn_episodes(self.cfg, rng, num_envs, self.layout), rng)
 
     def start(self, episodes: EpisodeStart, rng: np.random.Generator) -> SwarmState:
         """New episodes from given starts, targets and obstacles; contour levels by PSO.
@@ -145,10 +147,21 @@ class SwarmSim:
         self, state: SwarmState, mask: BoolArray, rng: np.random.Generator
     ) -> SwarmState:
         """Start new episodes in the environments selected by ``mask`` (B,); others untouched."""
+        return self.restart_where(state, mask, rng)[0]
+
+    def restart_where(
+        self, state: SwarmState, mask: BoolArray, rng: np.random.Generator
+    ) -> tuple[SwarmState, SwarmState | None]:
+        """`reset_where`, and the new episodes alone (their count first; None if none).
+
+        The autoreset observes the new episodes from the second (the same numbers as observing
+        them in the first, without selecting them again).
+        """
         count = int(mask.sum())
         if count == 0:
-            return state
-        return merge_where(state, self.initial_state(rng, count), mask)
+            return state, None
+        fresh = self.initial_state(rng, count)
+        return merge_where(state, fresh, mask), fresh
 
     def _sense(self, state: SwarmState, rng: np.random.Generator) -> SwarmState:
         """What the UAVs know at this decision: new ADS-B reports and GPS errors.
@@ -171,10 +184,15 @@ class SwarmSim:
         tracks = sensor_update(
             tracks, state.obstacle_pos_m, state.obstacle_vel_m_s, now, since, sensors, rng
         )
-        error = gps_noise(np.zeros_like(state.pos_m), sensors.gps_sigma_m, rng)
+        error = gps_error(state.pos_m.shape, sensors.gps_sigma_m, rng)
         return dataclasses.replace(state, tracks=tracks, gps_error_m=error)
 
-    def observe(self, state: SwarmState, envs: BoolArray | None = None) -> Observations:
+    def observe(
+        self,
+        state: SwarmState,
+        envs: BoolArray | None = None,
+        heading_cos_sin: tuple[FloatArray, FloatArray] | None = None,
+    ) -> Observations:
         """Every UAV's observation of the current state (the shared builder).
 
         With exact sensing the obstacles are where they are; with ADS-B they are the tracks'
@@ -183,17 +201,23 @@ class SwarmSim:
 
         Args:
             envs: (B,) observe only these environments (the result has their count first).
+            heading_cos_sin: cos and sin of the observed UAVs' headings, where the caller has
+                them (None: computed).
         """
         sel: slice | BoolArray = slice(None) if envs is None else envs
         heading = state.heading_rad[sel]
-        velocity = heading_velocity(heading, self.cfg.uav.speed_m_s)
+        if heading_cos_sin is None:
+            heading_cos_sin = np.cos(heading), np.sin(heading)
+        cos_h, sin_h = heading_cos_sin
+        # `heading_velocity`, from the cos and sin at hand: the same numbers.
+        velocity = self.cfg.uav.speed_m_s * np.stack([cos_h, sin_h], axis=-1)
         if state.tracks is None:
             obstacle_pos = state.obstacle_pos_m[sel]
             obstacle_vel = state.obstacle_vel_m_s[sel]
             seen = state.obstacle_visible[sel]
         else:
             now = (state.steps[sel] * self.cfg.dt_s).astype(np.float64)[:, None]
-            picked = _select(state.tracks, sel)
+            picked = state.tracks if envs is None else _select(state.tracks, sel)
             pos, vel, seen = picture(picked, now)
             obstacle_pos = np.where(seen[..., None], pos, 0.0)
             obstacle_vel = np.where(seen[..., None], vel, 0.0)
@@ -207,6 +231,7 @@ class SwarmSim:
             obstacle_pos,
             obstacle_vel,
             seen,
+            heading_cos_sin,
         )
 
     def step(
@@ -249,11 +274,18 @@ class SwarmSim:
         else:
             flight = fly_with_response(state, turn, speed, acted, present, self.fractions, dt)
         near = closest_approaches(
-            flight, state.target_m, acted, present, self.pairs, self.difference_op
+            flight,
+            state.target_m,
+            acted,
+            present,
+            self.pairs,
+            self.difference_op,
+            self.pair_members,
         )
         out = outcome(state, acted, near, cfg.d_col_m, cfg.max_steps)
+        heading_cos_sin = np.cos(flight.heading_rad), np.sin(flight.heading_rad)
         if self.scored:
-            window, terms = score(state, flight, turn, acted, out.collided, cfg)
+            window, terms = score(state, flight, turn, acted, out.collided, cfg, heading_cos_sin)
         else:
             window, terms = state.window, _unscored(turn)
         moved = dataclasses.replace(
@@ -272,7 +304,7 @@ class SwarmSim:
             last_turn_rad=np.where(present, turn, state.last_turn_rad),
         )
         moved = self._sense(moved, rng)
-        obs = self.observe(moved)
+        obs = self.observe(moved, heading_cos_sin=heading_cos_sin)
         if self.scored:
             new_state, begin = begin_avoidance(moved, obs, out.over, cfg, rng)
         else:

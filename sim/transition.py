@@ -47,6 +47,19 @@ def difference_operator(n: int, m: int) -> Float32Array:
     return op
 
 
+def pair_members(n: int) -> IntArray:
+    """(N, N − 1): the indices of the pairs (`np.triu_indices` order, i < j) of each UAV.
+
+    >>> pair_members(3).tolist()
+    [[0, 1], [0, 2], [1, 2]]
+    """
+    i, j = np.triu_indices(n, k=1)
+    member = np.concatenate([i, j])
+    pair = np.concatenate([np.arange(len(i)), np.arange(len(i))])
+    table: IntArray = np.sort(pair[np.argsort(member, kind="stable")].reshape(n, n - 1), axis=1)
+    return table
+
+
 @dataclass(frozen=True)
 class Flight:
     """Where everything is during one step (step 1 of the module docstring).
@@ -170,6 +183,7 @@ def closest_approaches(
     present: BoolArray,
     pairs: tuple[IntArray, IntArray],
     difference_op: Float32Array,
+    members: IntArray,
 ) -> Approaches:
     """Every kind of closest approach of a step in one float32 call (step 2).
 
@@ -177,7 +191,8 @@ def closest_approaches(
     positions of all of them come from one matrix product per coordinate with
     ``difference_op`` (`difference_operator`). Separations count for every UAV ``present``
     (flying, or hovering where it arrived) — a pair of UAVs when at least one of them flies;
-    the approach to the target only for the UAVs that ``acted``.
+    the approach to the target only for the UAVs that ``acted``. ``members`` (N, N − 1)
+    (`pair_members`) lists the pairs of each UAV.
     """
     i, j = pairs
     steps, b, n = flight.uav_x.shape
@@ -194,13 +209,12 @@ def closest_approaches(
     swept = swept_min_distance_xy(*rel).astype(np.float64)  # (B, N·M + P + N)
     d_uo = swept[:, :k_uo].reshape(b, n, m)
     counted = present[:, i] & present[:, j] & (acted[:, i] | acted[:, j])
-    d_pair = np.where(counted, swept[:, k_uo : k_uo + k_uu], np.inf)
-    d_uu = np.full((b, n, n), np.inf)
-    d_uu[:, i, j] = d_pair
-    d_uu[:, j, i] = d_pair
+    d_pair = np.where(counted, swept[:, k_uo : k_uo + k_uu], np.inf).T  # (P, B)
+    # Each UAV's pairs gathered pair-major, (N, N − 1, B): the minimum runs along the batch.
+    min_uu = np.ascontiguousarray(d_pair[members].min(axis=1, initial=np.inf).T)
     return Approaches(
         min_u2o_m=np.where(present, d_uo.min(axis=-1, initial=np.inf), np.inf),
-        min_u2u_m=d_uu.min(axis=-1),
+        min_u2u_m=min_uu,
         target_m=np.where(acted, swept[:, k_uo + k_uu :], np.inf),
     )
 
@@ -282,8 +296,11 @@ def score(
     acted: BoolArray,
     collided: BoolArray,
     cfg: ScenarioConfig,
+    heading_cos_sin: tuple[FloatArray, FloatArray] | None = None,
 ) -> tuple[ArcWindow, RewardTerms]:
     """Score the new arcs on the mid-step field, push them into the windows, reward (step 4).
+
+    ``heading_cos_sin``: cos and sin of the headings after the step, where the caller has them.
 
     Returns:
         The contour windows with this step's arcs, and every reward term (B, N), zero for the
@@ -310,8 +327,10 @@ def score(
         collided,
         cfg.uav.max_turn_rad,
         cfg.reward,
+        heading_cos_sin,
     )
-    return window, RewardTerms(*(np.where(acted, t, 0.0) for t in dataclasses.astuple(terms)))
+    zeroed = (np.where(acted, getattr(terms, f.name), 0.0) for f in dataclasses.fields(terms))
+    return window, RewardTerms(*zeroed)
 
 
 def accumulate(

@@ -50,19 +50,20 @@ def episode_metrics(
 ) -> dict[str, Any]:
     """Per-environment episode metrics (SPEC §9) for the environments in ``done`` (B,)."""
     s = state.stats
+    envs = np.flatnonzero(done)  # every metric is per environment: select them first
     # Detour measure: distance flown over the straight line to where each UAV arrived.
-    ratio = path_length_ratio(s.flown_m, state.start_m, state.pos_m)
+    ratio = path_length_ratio(s.flown_m[envs], state.start_m[envs], state.pos_m[envs])
     return {
-        "success": result.success[done],
-        "collision_u2o": np.asarray(result.collided_u2o.any(axis=-1))[done],
-        "collision_u2u": np.asarray(result.collided_u2u.any(axis=-1))[done],
-        "min_d_u2o_m": s.min_u2o_m[done],
-        "min_d_u2u_m": s.min_u2u_m[done],
-        "energy_rad": s.energy_rad.mean(axis=-1)[done],
-        "path_length_ratio": np.where(state.reached, ratio, np.nan)[done],
-        "swarming_return": s.swarming_return.sum(axis=-1)[done],
-        "total_return": s.total_return.sum(axis=-1)[done],
-        "length": state.steps[done],
+        "success": result.success[envs],
+        "collision_u2o": np.asarray(result.collided_u2o[envs].any(axis=-1)),
+        "collision_u2u": np.asarray(result.collided_u2u[envs].any(axis=-1)),
+        "min_d_u2o_m": s.min_u2o_m[envs],
+        "min_d_u2u_m": s.min_u2u_m[envs],
+        "energy_rad": s.energy_rad[envs].mean(axis=-1),
+        "path_length_ratio": np.where(state.reached[envs], ratio, np.nan),
+        "swarming_return": s.swarming_return[envs].sum(axis=-1),
+        "total_return": s.total_return[envs].sum(axis=-1),
+        "length": state.steps[envs],
     }
 
 
@@ -178,8 +179,9 @@ class SwarmVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float32], NDArray
             infos["episode"] = episode_metrics(state, result, done)
             infos["final_obs"] = obs.copy()
             infos["_final_obs"] = done.copy()
-            state = self.sim.reset_where(state, done, self._rng)
-            obs[done] = self.sim.observe(state, done).flat()
+            state, fresh = self.sim.restart_where(state, done, self._rng)
+            assert fresh is not None
+            obs[done] = self.sim.observe(fresh).flat()
         self._state = state
         infos["active"] = state.active.copy()
         if self.render_mode is not None:

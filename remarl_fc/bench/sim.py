@@ -109,6 +109,7 @@ PART_OF_MODULE: Mapping[str, str] = {
 
 PART_OF_FUNCTION: Mapping[tuple[str, str], str] = {
     ("sim.swarm", "SwarmSim.reset_where"): "reset",
+    ("sim.swarm", "SwarmSim.restart_where"): "reset",
     ("sim.swarm", "SwarmSim.initial_state"): "reset",
     ("sim.swarm", "SwarmSim.start"): "reset",
     ("sim.swarm", "SwarmSim.observe"): "observation",
