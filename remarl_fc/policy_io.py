@@ -13,6 +13,7 @@ metadata and every weight is finite and within ±`sim.policy_file.WEIGHT_BOUND`.
 from __future__ import annotations
 
 import importlib.util
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -54,6 +55,11 @@ __all__ = [
 ]
 
 
+ZOO_SUBFOLDER_NAME = re.compile(r"[A-Za-z0-9_-]+/[A-Za-z0-9_-]+")
+"""A zoo name inside one of the zoo's subfolders ("robust/3u2o"): one folder, one name, no
+path tricks."""
+
+
 def zoo_dir() -> Path:
     """Folder of the shipped policies (located without importing the torch-based package)."""
     spec = importlib.util.find_spec("policies")
@@ -69,8 +75,15 @@ def zoo_names() -> list[str]:
 
 
 def resolve(name_or_path: str | Path) -> Path:
-    """The file of a zoo name or a path; a clear error if there is none."""
+    """The file of a zoo name or a path; a clear error if there is none.
+
+    A zoo name is a policy of the zoo ("3u2o") or of one of its subfolders ("robust/3u2o").
+    """
     text = str(name_or_path)
+    if not isinstance(name_or_path, Path) and ZOO_SUBFOLDER_NAME.fullmatch(text):
+        shipped = zoo_dir() / f"{text}.safetensors"
+        if shipped.is_file():
+            return shipped
     if isinstance(name_or_path, Path) or text.endswith(".safetensors") or "/" in text:
         path = Path(name_or_path)
         if not path.is_file():

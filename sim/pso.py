@@ -108,13 +108,19 @@ class _Pairs:
     @classmethod
     def of(cls, n: int) -> _Pairs:
         """The pairs of N UAVs, in `np.triu_indices` order."""
-        pairs = [(a, b) for a in range(n) for b in range(a + 1, n)]
-        i = np.array([a for a, _ in pairs], dtype=np.intp)
-        j = np.array([b for _, b in pairs], dtype=np.intp)
-        difference = np.zeros((len(pairs), n))
-        k = np.arange(len(pairs))
+        i, j = _pair_indices(n)
+        k = np.arange(len(i))
+        difference = np.zeros((len(i), n))
         difference[k, i], difference[k, j] = 1.0, -1.0
         return cls(i, j, difference, 0.5 * difference.T)
+
+
+def _pair_indices(n: int) -> tuple[IntArray, IntArray]:
+    """(i, j) of the pairs i < j of N UAVs, in `np.triu_indices` order (a fraction of its cost)."""
+    pairs = [(a, b) for a in range(n) for b in range(a + 1, n)]
+    i = np.array([a for a, _ in pairs], dtype=np.intp)
+    j = np.array([b for _, b in pairs], dtype=np.intp)
+    return i, j
 
 
 def pso_separate(
@@ -137,24 +143,37 @@ def pso_separate(
     """
     q = np.asarray(positions_m, dtype=np.float64)
     b, n, _ = q.shape
-    act = np.ones((b, n), dtype=bool) if active is None else np.asarray(active, dtype=bool)
-    pairs = _Pairs.of(n)
+    i, j = _pair_indices(n)
     qt = np.ascontiguousarray(q.transpose(2, 1, 0))  # (2, N, B): coordinate-major
-    pair_active = (act[:, pairs.i] & act[:, pairs.j]).T  # (pairs, B)
-    dist = _pair_distances(qt, pairs, pair_active)  # (pairs, B)
+    diff = qt.take(i, axis=1)
+    diff -= qt.take(j, axis=1)  # (2, pairs, B)
+    dist = np.hypot(diff[0], diff[1])  # (pairs, B)
+    act: BoolArray | None = None
+    pair_active: BoolArray | None = None
+    if active is not None:
+        act = np.asarray(active, dtype=bool)
+        act_t = act.T  # (N, B)
+        pair_active = act_t.take(i, axis=0) & act_t.take(j, axis=0)
+        if pair_active.all():
+            pair_active = None
+        else:
+            dist[~pair_active] = np.inf
     dmin: FloatArray = dist.min(axis=0, initial=np.inf)
+    feasible = dmin >= cfg.threshold_m
     positions, cost = q.copy(), np.full(b, cfg.threshold_m)
-    shift, feasible = np.zeros(b), dmin >= cfg.threshold_m
-    searched = np.zeros(b, dtype=bool)
+    shift, searched = np.zeros(b), np.zeros(b, dtype=bool)
     close = np.flatnonzero(~feasible)
-    if not len(close):
+    if not len(close):  # the common case at episode start: nothing to separate
         return PSOResult(positions, cost, shift, dmin, feasible, searched, cfg.evaluations)
 
-    sub_q, sub_act, sub_pairs = qt[:, :, close], act[close], pair_active[:, close]
-    repaired = _spread(sub_q, pairs, sub_pairs, cfg.threshold_m)
+    pairs = _Pairs.of(n)
+    sub_q = qt.take(close, axis=2)  # (2, N, B')
+    sub_act = np.ones((len(close), n), dtype=bool) if act is None else act[close]
+    sub_pairs = None if pair_active is None else pair_active[:, close]  # (pairs, B')
+    repaired, rep_dist = _spread(sub_q, pairs, sub_pairs, cfg.threshold_m)
     rep_shift = _max_shift(repaired, sub_q)
-    rep_dmin = _pair_distances(repaired, pairs, sub_pairs).min(axis=0)
-    bound = 0.5 * np.maximum(cfg.threshold_m - dist[:, close], 0.0).max(axis=0)
+    rep_dmin = rep_dist.min(axis=0)
+    bound = 0.5 * np.maximum(cfg.threshold_m - dist.take(close, axis=1), 0.0).max(axis=0)
     certified = (rep_dmin >= cfg.threshold_m) & (
         rep_shift <= bound + CERTIFIED_GAP * cfg.threshold_m
     )
@@ -174,15 +193,6 @@ def pso_separate(
     return PSOResult(positions, cost, shift, dmin, feasible, searched, cfg.evaluations)
 
 
-def _pair_distances(q: FloatArray, pairs: _Pairs, pair_active: BoolArray) -> FloatArray:
-    """Distances (pairs, B) of positions (2, N, B); +inf for a pair with an inactive UAV."""
-    diff = q[:, pairs.i] - q[:, pairs.j]  # (2, pairs, B)
-    dist: FloatArray = np.hypot(diff[0], diff[1])
-    if not pair_active.all():
-        dist[~pair_active] = np.inf
-    return dist
-
-
 def _max_shift(x: FloatArray, q: FloatArray) -> FloatArray:
     """Largest displacement (B,) from positions q to x, both (2, N, B)."""
     d = x - q
@@ -190,43 +200,67 @@ def _max_shift(x: FloatArray, q: FloatArray) -> FloatArray:
     return shift
 
 
-def _spread(q: FloatArray, pairs: _Pairs, pair_active: BoolArray, threshold_m: float) -> FloatArray:
+def _spread(
+    q: FloatArray, pairs: _Pairs, pair_active: BoolArray | None, threshold_m: float
+) -> tuple[FloatArray, FloatArray]:
     """Push every pair closer than the threshold apart, half the deficit each, repeatedly.
 
     A cheap constructive candidate (position-based projection, vectorised over environments);
-    positions (2, N, B) → (2, N, B), ``pair_active`` (pairs, B). Coincident UAVs are separated
-    along fixed directions. Each sweep works only on the environments that still have a deficit
-    above the tolerance (`REPAIR_TOLERANCE`); most need one sweep.
+    positions (2, N, B) → (2, N, B), ``pair_active`` (pairs, B) or None where every pair takes
+    part. Coincident UAVs are separated along fixed directions. An environment whose deficits
+    are all within the tolerance (`REPAIR_TOLERANCE`) stops there (most after one sweep) and
+    keeps its place while the others go on: its pushes are zeroed while at least half the
+    environments still move, and once most are done the sweeps go on with the others only.
+
+    Returns:
+        The repaired positions (2, N, B) and their pair distances (pairs, B), +inf for a pair
+        with an inactive UAV.
     """
     goal = threshold_m * (1 + REPAIR_MARGIN)
     tolerance = REPAIR_TOLERANCE * REPAIR_MARGIN * threshold_m
     out = q.copy()
+    out_dist = np.empty((len(pairs.i), q.shape[2]))
     envs = np.arange(q.shape[2])
     x = out
-    weight = None if pair_active.all() else pair_active.astype(np.float64)
-    for _ in range(REPAIR_SWEEPS):
-        diff = np.matmul(pairs.difference, x)  # (2, pairs, B')
+    weight = None if pair_active is None else pair_active.astype(np.float64)
+    for sweep in range(REPAIR_SWEEPS + 1):
+        diff = np.matmul(pairs.difference, x)  # (2, pairs, B'): exact differences
         dist = np.hypot(diff[0], diff[1])
-        deficit = goal - dist
+        if sweep == REPAIR_SWEEPS:
+            break
+        deficit = np.subtract(goal, dist)
         if weight is not None:
             deficit *= weight  # pairs with an inactive UAV: no deficit
         todo = deficit.max(axis=0, initial=0.0) > tolerance
-        if not todo.all():
-            out[:, :, envs] = x
-            if not todo.any():
-                return out
+        left = np.count_nonzero(todo)
+        moving = None
+        if 2 * left <= len(todo):  # most are done: go on with the others only
+            out[:, :, envs], out_dist[:, envs] = x, dist
+            if not left:
+                return out, _inactive_apart(out_dist, pair_active)
             envs, x = envs[todo], x[:, :, todo]
             diff, dist, deficit = diff[:, :, todo], dist[:, todo], deficit[:, todo]
             weight = None if weight is None else weight[:, todo]
+        elif left < len(todo):
+            moving = todo
         np.maximum(deficit, 0.0, out=deficit)
+        if moving is not None:
+            deficit *= moving  # the environments that are done keep their place
         if dist.all():
             diff /= dist
         else:  # coincident UAVs: apart along fixed directions
             diff = np.where(dist > 0, diff / np.where(dist > 0, dist, 1.0), _fallback(pairs))
         diff *= deficit
         x = x + np.matmul(pairs.push, diff)
-    out[:, :, envs] = x
-    return out
+    out[:, :, envs], out_dist[:, envs] = x, dist
+    return out, _inactive_apart(out_dist, pair_active)
+
+
+def _inactive_apart(dist: FloatArray, pair_active: BoolArray | None) -> FloatArray:
+    """Pair distances (pairs, B) with +inf where a pair has an inactive UAV."""
+    if pair_active is not None:
+        dist[~pair_active] = np.inf
+    return dist
 
 
 def _fallback(pairs: _Pairs) -> FloatArray:
@@ -244,52 +278,63 @@ def _fallback(pairs: _Pairs) -> FloatArray:
 
 
 class _Cost:
-    """f_pso of particles against reference positions (2, N, B).
+    """f_pso of particles against reference positions q (2, N, B).
 
-    Particles are (2, N, P, B): coordinates, UAVs, particles, environments last. One matrix
-    product with [pair-difference operator; identity] (pairs + N, N) gives every pairwise
-    difference and every position at once; every reduction (over pairs, over UAVs) runs along
-    a leading axis, and every per-environment constant broadcasts along the contiguous last
-    one.
+    A particle state is (4N, P, B): rows 0..2N−1 the particles' coordinates (x of every UAV,
+    then y), rows 2N..4N−1 the reference q repeated over the P particles. Two row gathers and
+    one subtraction give every pairwise difference and every displacement at once (exact, as
+    x_i − x_j is one rounding however it is formed); every reduction (over pairs, over UAVs)
+    runs along the leading axis, over contiguous rows.
     """
 
     def __init__(
         self, reference: FloatArray, active: BoolArray, pairs: _Pairs, threshold_m: float
     ) -> None:
         n = reference.shape[1]
+        self.n = n
         self.pairs = len(pairs.i)
-        self.operator = np.concatenate([pairs.difference, np.eye(n)])  # (pairs + N, N)
-        self.reference = reference[:, :, None]  # (2, N, 1, B)
-        pair_active = active[:, pairs.i] & active[:, pairs.j]  # (B, pairs)
-        self.pair_penalty = (
-            None if pair_active.all() else np.where(pair_active, 0.0, np.inf).T[:, None]
-        )  # (pairs, 1, B)
-        self.moving = None if active.all() else active.T[:, None].astype(np.float64)
+        # Rows of the differences, per coordinate: the pairs (x_i − x_j), then the UAVs' shifts
+        # (x_u − q_u, q in the second half of the state).
+        plus = pairs.i.tolist() + list(range(n))
+        minus = pairs.j.tolist() + list(range(2 * n, 3 * n))
+        self.plus = np.array(plus + [r + n for r in plus], dtype=np.intp)
+        self.minus = np.array(minus + [r + n for r in minus], dtype=np.intp)
+        self.reference = reference.reshape(2 * n, -1)  # (2N, B)
+        self.pair_penalty: FloatArray | None = None
+        self.moving: FloatArray | None = None
+        if not active.all():
+            pair_active = active[:, pairs.i] & active[:, pairs.j]  # (B, pairs)
+            if not pair_active.all():
+                self.pair_penalty = np.where(pair_active, 0.0, np.inf).T[:, None]  # (pairs, 1, B)
+            self.moving = active.T[:, None].astype(np.float64)  # (N, 1, B)
         self.threshold = threshold_m
         self.threshold2 = threshold_m**2
 
-    def _squares(self, x: FloatArray) -> tuple[FloatArray, FloatArray]:
-        """(squared pair distances (pairs, P, B), squared shifts (N, P, B)) of particles x."""
-        _, n, p, b = x.shape
-        d = np.matmul(self.operator, x.reshape(2, n, p * b)).reshape(2, -1, p, b)
-        d[:, self.pairs :] -= self.reference
+    def _squares(self, state: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """(squared pair distances (pairs, P, B), squared shifts (N, P, B)) of a state."""
+        rows, p, b = state.shape
+        flat = state.reshape(rows, p * b)
+        d = flat.take(self.plus, axis=0)
+        d -= flat.take(self.minus, axis=0)
         d *= d
-        sq = d[0]
-        sq += d[1]
-        d2, shift2 = sq[: self.pairs], sq[self.pairs :]
+        half = self.pairs + self.n
+        sq = d[:half]
+        sq += d[half:]
+        sq3 = sq.reshape(half, p, b)
+        d2, shift2 = sq3[: self.pairs], sq3[self.pairs :]
         if self.pair_penalty is not None:
             d2 += self.pair_penalty
         if self.moving is not None:
             shift2 *= self.moving  # inactive UAVs never move; their (zero) shift stays zero
         return d2, shift2
 
-    def rank(self, x: FloatArray) -> FloatArray:
-        """f_pso (P, B) of particles (2, N, P, B), feasibility read off the total violation.
+    def rank(self, state: FloatArray) -> FloatArray:
+        """f_pso (P, B) of a state's particles (4N, P, B), feasibility read off the violation.
 
-        The same cost as `__call__` but for a particle whose smallest distance rounds onto the
+        The same cost as `exact` but for a particle whose smallest distance rounds onto the
         threshold itself; the search ranks with it, the result is re-evaluated exactly.
         """
-        d2, shift2 = self._squares(x)
+        d2, shift2 = self._squares(state)
         np.subtract(self.threshold2, d2, out=d2)
         violation = np.maximum(d2, 0.0, out=d2).sum(axis=0)  # Σ max(0, d̄² − d_ij²), m²
         cost: FloatArray = np.sqrt(shift2.max(axis=0))
@@ -300,19 +345,19 @@ class _Cost:
         cost += self.threshold
         return cost
 
-    def __call__(self, x: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
-        """(cost (P, B), max shift (P, B), min distance (P, B)) of particles (2, N, P, B)."""
-        d2, shift2 = self._squares(x)
-        p, b = x.shape[2:]
-        if not d2.shape[0]:  # a single UAV: nothing to separate
-            dmin = np.full((p, b), np.inf)
-            violation = np.zeros((p, b))
+    def exact(self, x: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """(cost (B,), max shift (B,), min distance (B,)) of one particle x (2N, B) each."""
+        d2, shift2 = self._squares(np.concatenate([x, self.reference])[:, None])
+        b = x.shape[1]
+        if not self.pairs:  # a single UAV: nothing to separate
+            dmin = np.full(b, np.inf)
+            violation = np.zeros(b)
         else:
-            dmin = np.sqrt(d2.min(axis=0))
+            dmin = np.sqrt(d2.min(axis=0)[0])
             # Total violation, in m², ranks infeasible particles: Σ max(0, d̄² − d_ij²).
             np.subtract(self.threshold2, d2, out=d2)
-            violation = np.maximum(d2, 0.0, out=d2).sum(axis=0)
-        shift = np.sqrt(shift2.max(axis=0))
+            violation = np.maximum(d2, 0.0, out=d2).sum(axis=0)[0]
+        shift = np.sqrt(shift2.max(axis=0)[0])
         violation += INFEASIBLE_COST
         f_thres = np.where(dmin >= self.threshold, self.threshold, violation)
         f_thres += shift
@@ -343,9 +388,11 @@ def _search(
     cfg: PSOConfig,
     rng: np.random.Generator,
 ) -> PSOResult:
-    """The particle swarm itself, on positions (2, N, B), particles (2, N, P, B).
+    """The particle swarm itself, on positions (2, N, B), particles (2N, P, B).
 
     ``repaired`` (2, N, B) is the constructive repair of q (`_spread`), the second particle.
+    The particles live in the first half of a `_Cost` state (4N, P, B), the reference in the
+    second, so that every update works in place on contiguous rows.
     """
     _, n, b = q.shape
     p = cfg.particles
@@ -353,27 +400,34 @@ def _search(
     reference = q[:, :, None]  # (2, N, 1, B)
     move = None if act.all() else act.T[:, None].astype(np.float64)  # (N, 1, B)
 
+    state = np.empty((4 * n, p, b))
+    state[2 * n :] = cost_fn.reference[:, None]
+    x4 = state[: 2 * n].reshape(2, n, p, b)
     z = rng.standard_normal((2, 2, n, p, b))
-    x = z[0]
-    x *= cfg.init_noise_m
-    x += reference
-    x[:, :, 0] = q  # the current positions are a candidate
+    np.multiply(z[0], cfg.init_noise_m, out=x4)
+    x4 += reference
+    x4[:, :, 0] = q  # the current positions are a candidate
     if p > 1:
-        x[:, :, 1] = repaired  # and so is a constructive repair of them
-    v = z[1]
-    v *= cfg.init_speed_m
+        x4[:, :, 1] = repaired  # and so is a constructive repair of them
     if move is not None:
-        x = reference + (x - reference) * move
+        x4 -= reference
+        x4 *= move
+        x4 += reference
+    x = state[: 2 * n]  # (2N, P, B), contiguous
+    v = z[1].reshape(2 * n, p, b)
+    v *= cfg.init_speed_m
+    move2 = None if move is None else np.concatenate([move, move])  # (2N, 1, B)
     # Rows of each iteration's coefficients: c₁·r₁ (2N), c₂·r₂ (2N), μ (1).
     rows = 4 * n + 1
     unit = 2.0**-COEFFICIENT_BITS
-    scale = np.repeat([cfg.c1 * unit, cfg.c2 * unit, unit], [2 * n, 2 * n, 1])[:, None, None]
+    scale = np.array([cfg.c1 * unit] * (2 * n) + [cfg.c2 * unit] * (2 * n) + [unit])[:, None, None]
     per_block = max(1, COEFFICIENT_BLOCK // (rows * p * b))
 
-    pbest_cost = cost_fn.rank(x)
+    pbest_cost = cost_fn.rank(state)
     pbest = x.copy()
+    flat_pbest = pbest.reshape(2 * n, p * b)
     envs = np.arange(b)
-    gbest = pbest[:, :, pbest_cost.argmin(axis=0), envs][:, :, None]  # (2, N, 1, B)
+    gbest = flat_pbest.take(pbest_cost.argmin(axis=0) * b + envs, axis=1)[:, None]  # (2N, 1, B)
     pull = np.empty_like(x)
     steps = cfg.iterations - 1
     for t in range(steps):
@@ -382,23 +436,24 @@ def _search(
         coef = block[t % per_block]
         v *= coef[-1]  # μ ~ U[0, 1) per particle
         np.subtract(pbest, x, out=pull)
-        pull *= coef[: 2 * n].reshape(2, n, p, b)  # c₁·r₁
+        pull *= coef[: 2 * n]  # c₁·r₁
         v += pull
         np.subtract(gbest, x, out=pull)
-        pull *= coef[2 * n : 4 * n].reshape(2, n, p, b)  # c₂·r₂
+        pull *= coef[2 * n : 4 * n]  # c₂·r₂
         v += pull
-        if move is not None:
-            v *= move
+        if move2 is not None:
+            v *= move2
         x += v
-        cost = cost_fn.rank(x)
+        cost = cost_fn.rank(state)
         np.copyto(pbest, x, where=cost < pbest_cost)
         np.minimum(pbest_cost, cost, out=pbest_cost)
-        gbest = pbest[:, :, pbest_cost.argmin(axis=0), envs][:, :, None]
+        gbest = flat_pbest.take(pbest_cost.argmin(axis=0) * b + envs, axis=1)[:, None]
 
-    gcost, gshift, gdmin = (a[0] for a in cost_fn(gbest))
+    found = gbest[:, 0]  # (2N, B)
+    gcost, gshift, gdmin = cost_fn.exact(found)
     return PSOResult(
         searched=np.ones(b, dtype=bool),
-        positions_m=np.ascontiguousarray(gbest[:, :, 0].transpose(2, 1, 0)),
+        positions_m=np.ascontiguousarray(found.reshape(2, n, b).transpose(2, 1, 0)),
         cost=gcost,
         max_shift_m=gshift,
         min_distance_m=gdmin,

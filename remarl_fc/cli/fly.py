@@ -147,6 +147,12 @@ def add_parsers(sub: Any) -> None:
         help="fly the shipped policy on the built-in mock fleet (no SITL, no training)",
     )
     p.add_argument("--scenario", default="3u2o", help="scenario with a zoo policy (default 3u2o)")
+    p.add_argument(
+        "--policy",
+        default=None,
+        help="zoo name or .safetensors file (default: the zoo policy of the scenario; "
+        "robust/3u2o is trained on fitted vehicles and ADS-B)",
+    )
     add_choice(p, "--flavour", FLAVOURS)
     p.add_argument("--speedup", type=float, default=2.0, help="simulated s per wall s")
     p.add_argument("--out", default="flight.png", help="the flight plot (default flight.png)")
@@ -302,6 +308,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
         flight = asyncio.run(
             fly_on_mock(
                 args.scenario,
+                args.policy,
                 flavour=args.flavour,
                 speedup=args.speedup,
                 log_dir=log_dir,
@@ -325,8 +332,17 @@ def cmd_demo(args: argparse.Namespace) -> int:
             f"{overall['min_vehicle_vehicle_m']} m between vehicles (d_col {overall['d_col_m']} m)"
             f"\nwrote {figure['out']}"
         )
-    ok = overall["reached_targets"] == len(truth["vehicles"]) and not (
-        overall["collisions_vehicle_intruder"] or overall["collisions_vehicle_vehicle"]
+    return demo_exit_status(truth)
+
+
+def demo_exit_status(truth: dict[str, Any]) -> int:
+    """The exit status of ``demo`` for the mock's ground truth.
+
+    0 when every vehicle reached its target and nothing came within d_col, else
+    `EXIT_NOT_ALL_REACHED`.
+    """
+    ok = truth["reached_targets"] == len(truth["vehicles"]) and not (
+        truth["collisions_vehicle_intruder"] or truth["collisions_vehicle_vehicle"]
     )
     return 0 if ok else EXIT_NOT_ALL_REACHED
 

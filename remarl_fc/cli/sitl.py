@@ -100,9 +100,10 @@ def add_sitl_parser(sub: Any) -> None:
     p.add_argument("--gust", type=float, default=0.0, help="gust velocity σ, m/s")
     p.add_argument(
         "--vehicle",
-        default="responsive",
-        help="vehicle profile: responsive (default), flavour (fitted to the flavour's real "
-        "SITL traces), arducopter, px4, px4-sluggish, ideal, or a .toml path",
+        default="flavour",
+        help="vehicle profile: flavour (default: fitted to the flavour's real SITL traces, "
+        "arducopter or px4), arducopter, px4, px4-sluggish, responsive (the mock's tuning "
+        "before the fits), ideal, or a .toml path",
     )
     p.add_argument(
         "--quick-start",

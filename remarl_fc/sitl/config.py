@@ -183,13 +183,12 @@ class VehicleModelConfig:
     """The simulated multirotor beyond its horizontal response.
 
     Horizontal velocity and yaw follow a vehicle profile (`sim.vehicle`, the simulator's own
-    model): ``responsive`` by default, the mock's tuning before the SITL fits, until the zoo
-    policies are trained on the fitted dynamics; ``--vehicle flavour`` flies the profile fitted
-    to the flavour's real SITL traces (``arducopter`` or ``px4``). The vertical axis, the
+    model): by default the profile fitted to the flavour's real SITL traces (``arducopter`` or
+    ``px4``); ``responsive`` is the mock's tuning from before the fits. The vertical axis, the
     limits, gusts and GPS noise are set here.
     """
 
-    profile: str = "responsive"
+    profile: str = "flavour"
     """Vehicle profile name or file (``sim/vehicles``); "flavour": the flavour's fitted one."""
     max_speed_m_s: float = 20.0
     """Horizontal speed limit."""

@@ -97,7 +97,10 @@ async def test_link_cut_is_detected_within_a_second_and_the_vehicle_is_held():
         seen["cut_at"] = runtime.clock.now()
         fleet.faults.cut_link(1, fleet.now_s(), 5.0)  # vehicle 2 (index 1)
 
-    flight = await fly_on_mock("3u2o", speedup=SPEEDUP, during=cut)
+    # The robust 3u2o policy, trained on fitted vehicles: with the mock's fitted ArduCopter
+    # response the ideal-trained zoo policy passes 8.1 m from an intruder in this flight while
+    # vehicle 2 holds (measured), the robust one 22.2 m (docs/RESULTS.md).
+    flight = await fly_on_mock("3u2o", "robust/3u2o", speedup=SPEEDUP, during=cut)
     v2 = next(v for v in flight.runtime["vehicles"] if v["system_id"] == 2)
     lost = [t for t, e in v2["events"] if e.startswith("telemetry stale")]
     assert lost, v2["events"]

@@ -112,3 +112,29 @@ def test_a_chain_of_close_uavs_is_searched_and_beats_its_repair():
     assert res.searched.item() and res.feasible.item()
     # The repair alone pushes the end UAVs out by the whole chain's deficit.
     assert res.max_shift_m.item() < 14.0
+
+
+def test_certified_repairs_do_not_depend_on_the_rest_of_the_batch():
+    # A lone close pair is settled after one sweep of the repair while a crowded swarm in the
+    # same call needs many: the pair's answer is the same alone and in the batch.
+    pair = [[0.0, 0.0], [12.0, 0.0], [200.0, 0.0], [300.0, 0.0], [400.0, 0.0]]
+    crowd = [[0.0, 0.0], [3.0, 0.0], [6.0, 0.0], [9.0, 1.0], [12.0, 0.0]]
+    far = [[0.0, 0.0], [100.0, 0.0], [200.0, 0.0], [300.0, 0.0], [400.0, 0.0]]
+    batch = run([pair, crowd, pair, far] + [pair] * 3)
+    alone = run([pair])
+    assert not batch.searched[[0, 2, 3, 4, 5, 6]].any()
+    for k in (0, 2, 4, 5, 6):
+        np.testing.assert_array_equal(batch.positions_m[k], alone.positions_m[0])
+        assert batch.cost[k] == alone.cost[0]
+    assert batch.feasible.all()
+    np.testing.assert_array_equal(batch.positions_m[3], far)
+
+
+def test_inactive_uavs_are_ignored_where_others_are_separated():
+    pos = np.array([[[0.0, 0.0], [0.0, 0.0], [10.0, 0.0], [5.0, 5.0]]] * 2)
+    active = np.array([[True, False, True, False], [True, True, True, True]])
+    res = pso_separate(pos, PSOConfig(), np.random.default_rng(0), active)
+    assert res.feasible.all()
+    np.testing.assert_array_equal(res.positions_m[0, [1, 3]], pos[0, [1, 3]])
+    assert res.max_shift_m[0] == pytest.approx(10.0, abs=0.05)  # (30 − 10) / 2
+    assert min_pairwise_distance(res.positions_m[1]) >= 30.0

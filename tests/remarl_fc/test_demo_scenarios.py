@@ -1,0 +1,29 @@
+"""`remarl-fc demo --scenario S` succeeds for every scenario with a zoo policy, on both flavours.
+
+Each flight is the demo's own (`remarl_fc.demo.fly_on_mock`, the mock's fitted vehicles), run
+4× faster than real time with ArduCopter's slow start skipped; the exit status is the demo's,
+judged on the mock's ground truth.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from remarl_fc.cli.fly import demo_exit_status
+from remarl_fc.demo import fly_on_mock
+from remarl_fc.policy_io import zoo_names
+
+pytestmark = [pytest.mark.asyncio, pytest.mark.network, pytest.mark.timeout(180)]
+
+SPEEDUP = 4.0
+
+
+@pytest.mark.parametrize("flavour", ["ardupilot", "px4"])
+@pytest.mark.parametrize("scenario", zoo_names())
+async def test_the_demo_exits_0_on_every_scenario_with_a_zoo_policy(scenario, flavour):
+    flight = await fly_on_mock(scenario, flavour=flavour, speedup=SPEEDUP, quick_start=True)
+    truth = flight.ground_truth
+    overall = {k: v for k, v in truth.items() if k != "vehicles"}
+    assert demo_exit_status(truth) == 0, overall
+    assert truth["min_vehicle_intruder_m"] >= truth["d_col_m"], overall
+    assert truth["min_vehicle_vehicle_m"] >= truth["d_col_m"], overall
