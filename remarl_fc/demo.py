@@ -26,7 +26,7 @@ from remarl_fc.flight.mission import Geofence, Mission
 from remarl_fc.flight.runtime import SwarmRuntime
 from remarl_fc.flight.status import Status
 from remarl_fc.mavlink.codec import SigningConfig
-from remarl_fc.policy_io import load_policy
+from remarl_fc.policy_io import load_policy, zoo_dir
 from remarl_fc.sitl.attacker import Attacker
 from remarl_fc.sitl.config import ARDUPILOT_QUICK_START, DEFAULT_HOME, Flavour, SitlConfig
 from remarl_fc.sitl.faults import Faults
@@ -105,6 +105,20 @@ def free_udp_port(host: str = "127.0.0.1") -> int:
         return int(s.getsockname()[1])
 
 
+ROBUST_ZOO = "robust"
+"""The zoo folder of the policies trained on fitted vehicles and ADS-B (`policies/zoo/robust`)."""
+
+
+def demo_policy(scenario: str) -> str:
+    """The policy the demo flies on a scenario.
+
+    The zoo's robust one where there is one (the mock's vehicles answer like real autopilots),
+    else the zoo policy of the scenario.
+    """
+    robust = f"{ROBUST_ZOO}/{scenario}"
+    return robust if (zoo_dir() / f"{robust}.safetensors").is_file() else scenario
+
+
 async def fly_on_mock(
     scenario: str = "3u2o",
     policy: str | None = None,
@@ -124,7 +138,7 @@ async def fly_on_mock(
     sitl_options: dict[str, Any] | None = None,
     quick_start: bool = False,
 ) -> MockFlight:
-    """Fly ``policy`` (default: the zoo policy of ``scenario``) on a mock of ``scenario``.
+    """Fly ``policy`` (default: `demo_policy` of ``scenario``) on a mock of ``scenario``.
 
     Args:
         during: a coroutine run alongside the flight (tests inject faults with it); it is
@@ -141,7 +155,7 @@ async def fly_on_mock(
             climb at once after the take-off ACK): for tests that do not exercise the start.
     """
     cfg = load_scenario(scenario)
-    pol = load_policy(policy or scenario)
+    pol = load_policy(policy or demo_policy(scenario))
     pol.check_scenario(cfg)
     port = free_udp_port()
     options: dict[str, Any] = {"ardupilot": ARDUPILOT_QUICK_START} if quick_start else {}

@@ -25,6 +25,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import NDArray
 
 from sim.arrays import BoolArray, Float32Array, FloatArray
 from sim.config import ScenarioConfig
@@ -46,15 +47,32 @@ IDEAL_ACCEL_M_S2 = 1e9
 
 @dataclass(frozen=True)
 class Response:
-    """How each UAV answers its commands, (B, N) each (per UAV and episode).
+    """How each UAV answers its commands: (B, N) arrays (per UAV and episode).
 
     Attributes:
         delay_s: transport delay. tau_s: velocity time constant. accel_m_s2: acceleration cap.
+        step_s: the integration step the next two are for (`fly_response` computes them
+            itself on another one).
+        closing: the share of a velocity error closed over one integration step,
+            ``closing_fraction(tau_s, step_s)``.
+        cap_m_s: the acceleration cap times the integration step.
     """
 
     delay_s: FloatArray
     tau_s: FloatArray
     accel_m_s2: FloatArray
+    step_s: float
+    closing: FloatArray
+    cap_m_s: FloatArray
+
+    @classmethod
+    def of(
+        cls, delay_s: FloatArray, tau_s: FloatArray, accel_m_s2: FloatArray, step_s: float
+    ) -> Response:
+        """The response of these parameters, with its constants for steps of ``step_s``."""
+        return cls(
+            delay_s, tau_s, accel_m_s2, step_s, closing_fraction(tau_s, step_s), accel_m_s2 * step_s
+        )
 
 
 def _values(profile: VehicleProfile) -> tuple[float, float, float]:
@@ -76,11 +94,13 @@ class ResponseSpec:
         table: (P, 3) delay, time constant, acceleration cap of each profile to draw from.
         scales: the (low, high) factor ranges of the three, in that order.
         dt_s: the decision step (every delay must stay below it).
+        step_s: the integration step of `fly_response` in the scenario.
     """
 
     table: FloatArray
     scales: tuple[tuple[float, float], tuple[float, float], tuple[float, float]]
     dt_s: float
+    step_s: float
 
     @classmethod
     def from_scenario(cls, cfg: ScenarioConfig) -> ResponseSpec | None:
@@ -92,7 +112,8 @@ class ResponseSpec:
             return None
         table = np.array([_values(p) for p in profiles])
         scales = (rand.delay_scale, rand.velocity_tau_scale, rand.max_accel_scale)
-        return cls(table, scales, cfg.dt_s)
+        step_s = cfg.dt_s / (cfg.substeps * integration_grid(cfg.substeps, cfg.dt_s))
+        return cls(table, scales, cfg.dt_s, step_s)
 
     def draw(self, b: int, n: int, rng: np.random.Generator) -> Response:
         """Every UAV's response for B new episodes of N UAVs.
@@ -112,7 +133,8 @@ class ResponseSpec:
                 f"a drawn delay reaches the decision step ({self.dt_s} s); lower "
                 "dynamics_randomisation.delay_scale"
             )
-        return Response(delay, chosen[..., 1] * factors[1], chosen[..., 2] * factors[2])
+        tau, accel = chosen[..., 1] * factors[1], chosen[..., 2] * factors[2]
+        return Response.of(delay, tau, accel, self.step_s)
 
 
 def draw_response(cfg: ScenarioConfig, b: int, n: int, rng: np.random.Generator) -> Response | None:
@@ -194,50 +216,55 @@ def fly_response(
     steps = substeps * per_sub
     h = dt_s / steps
     moving_f = moving.astype(np.float64)
-    fraction = closing_fraction(response.tau_s, h) * moving_f  # a still UAV keeps its velocity
-    cap = response.accel_m_s2 * h
+    if response.step_s == h:  # the constants drawn with the response
+        closing, cap = response.closing, response.cap_m_s
+    else:
+        closing, cap = closing_fraction(response.tau_s, h), response.accel_m_s2 * h
+    fraction = closing * moving_f  # a still UAV keeps its velocity
     # The delayed command at the middle of integration step k, s_k = (k + ½)·h, is the arc sent
     # at s_k − delay: this step's arc once s_k ≥ delay, the last step's before (only in the
     # first few steps: the delay is below the decision step). Each arc's direction turns by a
     # fixed angle per integration step: a complex rotation, no trigonometry in the loop. Only
     # the velocity response needs a loop over the steps; the commands before it and the
     # positions after it are computed for all steps at once, with the same operations in the
-    # same order as step by step.
+    # same order as step by step. Real factors of complex numbers are cast to complex once
+    # (what each complex product would do with them).
     start = (0.5 * h - response.delay_s) / dt_s  # (B, N): fraction of the arc at s_0
     shape = moving.shape
     middles = (np.arange(steps) + 0.5) * h  # s_k
     lagging = int(np.count_nonzero(middles < response.delay_s.max(initial=0.0)))
-    now_dir = np.empty((steps, *shape), dtype=np.complex128)  # (k, B, N) at each s_k
-    last_dir = np.empty((lagging, *shape), dtype=np.complex128)  # where it may still hold
-    now_turn = np.empty(shape, dtype=np.complex128)
-    last_turn = np.empty_like(now_turn)
-    rotations = [
-        (now_dir[0], cmd.heading_rad + cmd.turn_rad * start),
-        (now_turn, cmd.turn_rad * (h / dt_s)),
-    ]
+    # e^(i·angle) of this step's first direction and turn, and of the last arc's first direction
+    angles = np.empty((3 if lagging else 2, *shape))
+    np.multiply(cmd.turn_rad, start, out=angles[0])
+    np.add(cmd.heading_rad, angles[0], out=angles[0])
+    np.multiply(cmd.turn_rad, h / dt_s, out=angles[1])
     if lagging:
-        rotations.append((last_dir[0], cmd.heading_rad + cmd.last_turn_rad * start))
-    if lagging > 1:
-        rotations.append((last_turn, cmd.last_turn_rad * (h / dt_s)))
-    for out, angle in rotations:
-        np.cos(angle, out=out.real)  # e^(i·angle)
-        np.sin(angle, out=out.imag)
+        np.multiply(cmd.last_turn_rad, start, out=angles[2])
+        np.add(cmd.heading_rad, angles[2], out=angles[2])
+    rotations = np.empty(angles.shape, dtype=np.complex128)
+    np.cos(angles, out=rotations.real)
+    np.sin(angles, out=rotations.imag)
+    now_dir = np.empty((steps, *shape), dtype=np.complex128)  # (k, B, N) at each s_k
+    now_dir[0] = rotations[0]
     for k in range(1, steps):
-        np.multiply(now_dir[k - 1], now_turn, out=now_dir[k])
-    for k in range(1, lagging):
-        np.multiply(last_dir[k - 1], last_turn, out=last_dir[k])
-    commands = cmd.speed_m_s * now_dir
-    late = middles[:lagging, None, None] < response.delay_s  # (lagging, B, N)
-    np.copyto(commands[:lagging], cmd.last_speed_m_s * last_dir, where=late)
+        np.multiply(now_dir[k - 1], rotations[1], out=now_dir[k])
+    commands = np.multiply(cmd.speed_m_s.astype(np.complex128), now_dir)
+    if lagging:
+        late = middles[:lagging, None, None] < response.delay_s  # (lagging, B, N)
+        last_speed = cmd.last_speed_m_s.astype(np.complex128)
+        np.copyto(commands[0], last_speed * rotations[2], where=late[0])
+        if lagging > 1:
+            _last_arc_later(commands, rotations[2], last_speed, late, cmd, h / dt_s)
 
     # Only the velocity needs a loop; the positions follow from it by the trapezoid rule.
     vel = np.empty((steps + 1, *shape), dtype=np.complex128)  # at the integration instants
     vel[0] = vel_m_s[..., 0] + 1j * vel_m_s[..., 1]
+    fraction_c = fraction.astype(np.complex128)
     for k in range(steps):
-        vel[k + 1] = approach(vel[k], commands[k], fraction, cap)
+        approach(vel[k], commands[k], fraction_c, cap, out=vel[k + 1])
     move = (0.5 * h) * (vel[:-1] + vel[1:])  # (k, B, N)
     if not moving.all():
-        move *= moving_f
+        move *= moving_f.astype(np.complex128)
     track = np.empty((steps + 1, *shape), dtype=np.complex128)
     track[0] = pos_m[..., 0] + 1j * pos_m[..., 1]
     length = np.abs(move)
@@ -248,11 +275,39 @@ def fly_response(
     at_substeps = track[::per_sub]
     xs = at_substeps.real.astype(np.float32)  # (T + 1, B, N)
     ys = at_substeps.imag.astype(np.float32)
-    pos, vel_end = track[-1], vel[-1]
-    return Track(
-        xs,
-        ys,
-        np.stack([pos.real, pos.imag], axis=-1),
-        np.stack([vel_end.real, vel_end.imag], axis=-1),
-        flown,
-    )
+    # (B, N) complex as (B, N, 2) [real, imaginary]: the same numbers as stacking the parts
+    return Track(xs, ys, _pairs(track[-1]), _pairs(vel[-1]), flown)
+
+
+def _pairs(z: NDArray[np.complex128]) -> FloatArray:
+    """(..., 2) [real, imaginary] parts of ``z`` (...), a new array."""
+    out: FloatArray = np.ascontiguousarray(z).view(np.float64).reshape(*z.shape, 2).copy()
+    return out
+
+
+def _last_arc_later(
+    commands: NDArray[np.complex128],
+    first_dir: NDArray[np.complex128],
+    last_speed: NDArray[np.complex128],
+    late: BoolArray,
+    cmd: Commands,
+    turn_fraction: float,
+) -> None:
+    """Put the last arc's commands into ``commands`` (k, B, N) for integration steps k ≥ 1.
+
+    Only the UAVs whose delay outlasts the middle of step 1 (``late[1]``) still follow the
+    last arc there, fewer than those at step 0: its direction is turned on from
+    ``first_dir`` (B, N) for them alone, with the numbers of turning it for every UAV.
+    """
+    some = np.flatnonzero(late[1])
+    angle = cmd.last_turn_rad.reshape(-1)[some] * turn_fraction
+    turn = np.empty(angle.shape, dtype=np.complex128)
+    np.cos(angle, out=turn.real)
+    np.sin(angle, out=turn.imag)
+    direction = first_dir.reshape(-1)[some]
+    speed = last_speed.reshape(-1)[some]
+    for k in range(1, len(late)):
+        direction = direction * turn
+        still = late[k].reshape(-1)[some]
+        row = commands[k].reshape(-1)
+        row[some[still]] = (speed * direction)[still]

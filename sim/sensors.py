@@ -221,26 +221,41 @@ def update(
         (`_newest_lost`). The report taken is never older than the one held.
     """
     period, phase, latency = tracks.period_s, tracks.phase_s, tracks.latency_s
-    newest = np.floor((now_s - latency - phase) / period)  # (B, M) newest arrived k
+    # In place where the arrays are this function's own: the same operations, fewer arrays.
+    newest = np.subtract(now_s, latency)
+    newest -= phase
+    newest /= period
+    np.floor(newest, out=newest)  # (B, M) newest arrived k
     # the quotients may round across a whole number: one step back or forward puts k exactly
     newest -= phase + newest * period + latency > now_s  # never one from the future
     newest += phase + (newest + 1.0) * period + latency <= now_s  # nor one left behind
-    first = np.ceil((visible_since_s - phase) / period)  # (B, M) first transmitted k
-    first += phase + first * period < visible_since_s  # never one before it
-    first -= phase + (first - 1.0) * period >= visible_since_s  # nor one left out
-    oldest = np.maximum(tracks.last_index + 1.0, first)  # oldest new candidate
-    count = np.maximum(newest - oldest + 1.0, 0.0)  # new candidates (may be +inf)
+    oldest = tracks.last_index + 1.0  # oldest new candidate
+    if not np.isneginf(visible_since_s).all():  # −inf: every report exists, first k −inf
+        first = np.ceil((visible_since_s - phase) / period)  # (B, M) first transmitted k
+        first += phase + first * period < visible_since_s  # never one before it
+        first -= phase + (first - 1.0) * period >= visible_since_s  # nor one left out
+        np.maximum(oldest, first, out=oldest)
+    count = newest - oldest
+    count += 1.0
+    np.maximum(count, 0.0, out=count)  # new candidates (may be +inf)
     lost = _newest_lost(period.shape, cfg.adsb_drop_probability, rng)
     pos_err = rng.standard_normal(tracks.pos_m.shape)
     vel_err = rng.standard_normal(tracks.vel_m_s.shape)
 
     take = lost < count  # (B, M) a new report got through
-    k = np.where(take, newest - lost, 0.0)
-    t_k = np.where(take, phase + k * period, tracks.t_valid_s)
-    age = np.where(take, now_s - t_k, 0.0)[..., np.newaxis]  # (B, M, 1)
-    pos = true_pos - true_vel * age + tracks.pos_sigma_m[..., np.newaxis] * pos_err
-    vel = true_vel + tracks.vel_sigma_m_s[..., np.newaxis] * vel_err
+    k = np.subtract(newest, lost)
+    k *= period
+    k += phase  # phase + k · period where taken
+    t_k = np.where(take, k, tracks.t_valid_s)
+    age = np.subtract(now_s, t_k)
+    age[~take] = 0.0
+    pos_err *= tracks.pos_sigma_m[..., np.newaxis]
+    pos = true_pos - true_vel * age[..., np.newaxis]
+    pos += pos_err
+    vel_err *= tracks.vel_sigma_m_s[..., np.newaxis]
+    vel = true_vel + vel_err
     keep = take[..., np.newaxis]
+    reported = t_k + latency
     return AdsbTracks(
         period_s=period,
         phase_s=phase,
@@ -249,7 +264,7 @@ def update(
         vel_sigma_m_s=tracks.vel_sigma_m_s,
         last_index=np.where(count > 0, newest, tracks.last_index),
         t_valid_s=t_k,
-        t_report_s=np.where(take, report_time(t_k + latency, ADSB_TSLC_S), tracks.t_report_s),
+        t_report_s=np.where(take, report_time(reported, ADSB_TSLC_S), tracks.t_report_s),
         pos_m=np.where(keep, pos, tracks.pos_m),
         vel_m_s=np.where(keep, vel, tracks.vel_m_s),
     )

@@ -142,21 +142,31 @@ def closing_fraction(tau_s: float | FloatArray, dt_s: float) -> FloatArray:
 def approach(
     velocity: NDArray[np.complex128],
     command: NDArray[np.complex128],
-    fraction: float | FloatArray,
+    fraction: float | FloatArray | NDArray[np.complex128],
     cap_m_s: float | FloatArray,
+    out: NDArray[np.complex128] | None = None,
 ) -> NDArray[np.complex128]:
     """One step of the response, on horizontal velocities as complex numbers (x + iy).
 
     The one implementation of the model: the velocity closes ``fraction`` of its error to the
     command (`closing_fraction`: exact for a first-order response over the step), by at most
-    ``cap_m_s`` (the acceleration cap times the step). Any shapes that broadcast.
+    ``cap_m_s`` (the acceleration cap times the step). Any shapes that broadcast; ``out``: where
+    to put the new velocity (None: a new array), of the shape of the velocity error. ``fraction``
+    may come cast to complex already (the same numbers: the product casts it).
     """
     step = (command - velocity) * fraction
     norm = np.abs(step)
-    new: NDArray[np.complex128] = velocity + step * np.minimum(
-        1.0, cap_m_s / np.maximum(norm, 1e-300)
-    )
-    return new
+    if out is None:
+        new: NDArray[np.complex128] = velocity + step * np.minimum(
+            1.0, cap_m_s / np.maximum(norm, 1e-300)
+        )
+        return new
+    # the same operations into arrays of the caller's shape (``out``'s)
+    np.maximum(norm, 1e-300, out=norm)
+    limit = np.divide(cap_m_s, norm)
+    np.minimum(1.0, limit, out=limit)
+    np.multiply(step, limit, out=step)
+    return np.add(velocity, step, out=out)
 
 
 def track_yaw(

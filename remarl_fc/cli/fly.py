@@ -150,8 +150,9 @@ def add_parsers(sub: Any) -> None:
     p.add_argument(
         "--policy",
         default=None,
-        help="zoo name or .safetensors file (default: the zoo policy of the scenario; "
-        "robust/3u2o is trained on fitted vehicles and ADS-B)",
+        help="zoo name or .safetensors file (default: the zoo's robust policy of the scenario "
+        "where there is one, trained on fitted vehicles and ADS-B, e.g. robust/3u2o; else the "
+        "zoo policy of the scenario)",
     )
     add_choice(p, "--flavour", FLAVOURS)
     p.add_argument("--speedup", type=float, default=2.0, help="simulated s per wall s")
