@@ -216,3 +216,22 @@ def test_rollout_lists_orca_among_its_policies(capsys):
     with pytest.raises(SystemExit):
         main(["rollout", "--help"])
     assert "orca" in capsys.readouterr().out
+
+
+def test_eval_in_the_worlds_of_real_flight(capsys):
+    args = ["eval", "--policy", "3u2o", "--episodes", "4", "--json"]
+    assert main([*args, "--dynamics", "px4", "--sensors", "adsb", "--arrival", "leave"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert (out["dynamics"], out["sensors"], out["arrival"]) == ("px4", "adsb", "leave")
+    assert not out["dynamics_randomised"]
+    assert main(args) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert (out["dynamics"], out["sensors"], out["arrival"]) == ("ideal", "exact", "hover")
+
+
+def test_eval_names_an_unknown_vehicle_profile_and_the_suite_refuses_world_flags(capsys):
+    assert main(["eval", "--policy", "3u2o", "--episodes", "2", "--dynamics", "glider"]) == 2
+    err = capsys.readouterr().err
+    assert "unknown vehicle profile 'glider'" in err and "arducopter" in err
+    assert main(["eval", "--suite", "smoke", "--dynamics", "px4"]) == 2
+    assert "--dynamics" in capsys.readouterr().err
