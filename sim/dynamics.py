@@ -262,16 +262,15 @@ def fly_response(
     fraction_c = fraction.astype(np.complex128)
     for k in range(steps):
         approach(vel[k], commands[k], fraction_c, cap, out=vel[k + 1])
-    move = (0.5 * h) * (vel[:-1] + vel[1:])  # (k, B, N)
+    move = np.add(vel[:-1], vel[1:])  # (k, B, N)
+    move *= 0.5 * h
     if not moving.all():
         move *= moving_f.astype(np.complex128)
     track = np.empty((steps + 1, *shape), dtype=np.complex128)
     track[0] = pos_m[..., 0] + 1j * pos_m[..., 1]
-    length = np.abs(move)
-    flown = np.zeros(shape)
     for k in range(steps):
         np.add(track[k], move[k], out=track[k + 1])
-        flown += length[k]
+    flown = np.abs(move).sum(axis=0)  # along the time axis: added in order, as step by step
     at_substeps = track[::per_sub]
     xs = at_substeps.real.astype(np.float32)  # (T + 1, B, N)
     ys = at_substeps.imag.astype(np.float32)

@@ -28,7 +28,9 @@ def scale_action(action: FloatArray, max_turn_rad: float) -> FloatArray:
     >>> scale_action(np.array([-2.0, 0.5]), np.pi / 4).round(4).tolist()
     [-0.7854, 0.3927]
     """
-    return np.clip(action, -1.0, 1.0) * max_turn_rad
+    # np.clip's numbers without its Python wrapper
+    scaled: FloatArray = np.minimum(np.maximum(action, -1.0), 1.0) * max_turn_rad
+    return scaled
 
 
 def heading_velocity(heading_rad: NDArray[Any], speed_m_s: float | NDArray[Any]) -> FloatArray:

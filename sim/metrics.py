@@ -103,7 +103,8 @@ def _swept_chunk_xy(
     np.maximum(dd, np.finfo(dd.dtype).tiny, out=dd)
     tau /= dd
     np.negative(tau, out=tau)
-    np.clip(tau, 0.0, 1.0, out=tau)  # the closest instant of each sub-interval
+    np.maximum(tau, 0.0, out=tau)  # the closest instant of each sub-interval (np.clip's
+    np.minimum(tau, 1.0, out=tau)  # numbers without its Python wrapper)
     dx *= tau
     dx += x0
     dy *= tau
@@ -156,5 +157,6 @@ def path_length_ratio(
     >>> float(path_length_ratio(np.array(260.0), np.array([0.0, 0.0]), np.array([240.0, 100.0])))
     1.0
     """
-    straight = np.hypot(*np.moveaxis(target_m - start_m, -1, 0))
+    to_target = target_m - start_m
+    straight = np.hypot(to_target[..., 0], to_target[..., 1])
     return flown_length_m / np.where(straight > 0, straight, np.nan)

@@ -98,6 +98,14 @@ class Observations:
         b, n = self.rows.shape[:2]
         return np.concatenate([self.rows.reshape(b, n, -1), self.mask], axis=-1)
 
+    def flat_shared(self) -> NDArray[np.float32]:
+        """`flat`'s numbers, without its copy where there is a flat array.
+
+        Returns ``storage`` itself (writing to it writes to ``rows`` and ``mask``) where there
+        is one, a new array otherwise.
+        """
+        return self.flat() if self.storage is None else self.storage
+
 
 def build_observations(
     layout: ObservationLayout,
@@ -179,25 +187,24 @@ def build_observations(
                 obstacle_vel_m_s[envs, order, 0],
                 obstacle_vel_m_s[envs, order, 1],
             )
-        front = np.moveaxis(chosen, -1, 0).astype(np.float64)  # (keep, B, N): 1 or 0
+        front = chosen.transpose(2, 0, 1).astype(np.float64)  # (keep, B, N): 1 or 0
         for (w, kind), value in zip(((wx, 0), (wy, 0), (wx, 1), (wy, 1)), picked, strict=True):
-            np.multiply(np.moveaxis(value, -1, 0), front, out=w[rows_k, kind])
+            np.multiply(value.transpose(2, 0, 1), front, out=w[rows_k, kind])
         mask[..., :keep] = chosen
 
     scale = np.array([1.0 / layout.range_m, 1.0 / layout.speed_m_s])[:, None, None]  # per kind
-    # Rotate in place, row by row (two (kind, B, N) scratch arrays, not a copy of everything):
-    # x' ahead = (cos·x + sin·y)·scale, y' to the left = (cos·y − sin·x)·scale.
-    sin_y, sin_x = np.empty((2, b, n)), np.empty((2, b, n))
-    for r in range(used):
-        np.multiply(sin_h, wy[r], out=sin_y)
-        np.multiply(sin_h, wx[r], out=sin_x)
-        wx[r] *= cos_h
-        wx[r] += sin_y
-        wy[r] *= cos_h
-        wy[r] -= sin_x
+    # Rotate in place, every row at once: x' ahead = (cos·x + sin·y)·scale, y' to the left =
+    # (cos·y − sin·x)·scale.
+    sin_y = np.multiply(sin_h, wy)
+    sin_x = np.multiply(sin_h, wx)
+    wx *= cos_h
+    wx += sin_y
+    wy *= cos_h
+    wy -= sin_x
     for w in (wx, wy):
         w *= scale
-        np.clip(w, -CLIP, CLIP, out=w)
+        np.maximum(w, -CLIP, out=w)  # np.clip's numbers without its Python wrapper
+        np.minimum(w, CLIP, out=w)
     # Transposing casts into the flat layout: (rows·kind, B·N) → (B·N, rows·kind), x' then y'.
     flat_rows = storage.reshape(b * n, layout.size)[:, : used * COLUMNS].reshape(b * n, -1, 2)
     for xy, w in enumerate((wx, wy)):

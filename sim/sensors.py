@@ -112,7 +112,8 @@ def gps_error(shape: tuple[int, ...], sigma_m: float, rng: np.random.Generator) 
     """
     if sigma_m == 0.0:
         return np.zeros(shape)
-    error: FloatArray = sigma_m * rng.standard_normal(shape)
+    error: FloatArray = rng.standard_normal(shape)
+    error *= sigma_m  # σ · draw, in place
     return error
 
 

@@ -47,7 +47,6 @@ from sim.transition import (
     accumulate,
     begin_avoidance,
     closest_approaches,
-    difference_operator,
     fly,
     fly_with_response,
     outcome,
@@ -89,7 +88,6 @@ class SwarmSim:
         self.obs_layout = ObservationLayout.from_scenario(cfg)
         self.fractions = substep_fractions(cfg.substeps)
         self.pairs = np.triu_indices(cfg.uav.count, k=1)
-        self.difference_op = difference_operator(cfg.uav.count, cfg.obstacles.count)
         self.pair_members = pair_members(cfg.uav.count)
         self.response = ResponseSpec.from_scenario(cfg)
         self.ideal = self.response is None
@@ -279,7 +277,6 @@ class SwarmSim:
             acted,
             present,
             self.pairs,
-            self.difference_op,
             self.pair_members,
         )
         out = outcome(state, acted, near, cfg.d_col_m, cfg.max_steps)

@@ -28,25 +28,6 @@ from sim.reward import RewardTerms, assign_contour_levels, reward
 from sim.state import EpisodeStats, SwarmState
 
 
-def difference_operator(n: int, m: int) -> Float32Array:
-    """The difference operator of the swept checks, (N + M + N, N·M + P + N).
-
-    It maps [UAV, obstacle, target] coordinates to UAV i − obstacle k, UAV i − UAV j (i < j)
-    and UAV i − its target: one matrix product gives every relative position of a step.
-    """
-    i, j = np.triu_indices(n, k=1)
-    op = np.zeros((n + m + n, n * m + len(i) + n), dtype=np.float32)
-    col = np.arange(n * m)
-    op[col // m, col] = 1.0  # UAV of the UAV–obstacle pair
-    op[n + col % m, col] = -1.0  # obstacle of the pair
-    pairs = n * m + np.arange(len(i))
-    op[i, pairs], op[j, pairs] = 1.0, -1.0
-    own = n * m + len(i) + np.arange(n)
-    op[np.arange(n), own] = 1.0
-    op[n + m + np.arange(n), own] = -1.0  # its target
-    return op
-
-
 def pair_members(n: int) -> IntArray:
     """(N, N − 1): the indices of the pairs (`np.triu_indices` order, i < j) of each UAV.
 
@@ -182,40 +163,47 @@ def closest_approaches(
     acted: BoolArray,
     present: BoolArray,
     pairs: tuple[IntArray, IntArray],
-    difference_op: Float32Array,
     members: IntArray,
 ) -> Approaches:
     """Every kind of closest approach of a step in one float32 call (step 2).
 
     UAV–obstacle (N·M), UAV–UAV pairs (P, ``pairs`` i < j), UAV–own target (N): the relative
-    positions of all of them come from one matrix product per coordinate with
-    ``difference_op`` (`difference_operator`). Separations count for every UAV ``present``
-    (flying, or hovering where it arrived) — a pair of UAVs when at least one of them flies;
-    the approach to the target only for the UAVs that ``acted``. ``members`` (N, N − 1)
-    (`pair_members`) lists the pairs of each UAV.
+    positions of all of them, (T + 1, N·M + P + N, B) per coordinate with the batch innermost,
+    are float32 differences (the targets cast to float32 first). Separations count for every
+    UAV ``present`` (flying, or hovering where it arrived) — a pair of UAVs when at least one
+    of them flies; the approach to the target only for the UAVs that ``acted``. ``members``
+    (N, N − 1) (`pair_members`) lists the pairs of each UAV.
     """
     i, j = pairs
     steps, b, n = flight.uav_x.shape
     m = flight.obstacle_x.shape[-1]
     k_uo, k_uu = n * m, len(i)
     rel = []
-    movers = np.empty((steps, b, n + m + n), dtype=np.float32)  # [UAVs, obstacles, targets]
     for p, o, t in (
         (flight.uav_x, flight.obstacle_x, target_m[..., 0]),
         (flight.uav_y, flight.obstacle_y, target_m[..., 1]),
     ):
-        movers[..., :n], movers[..., n : n + m], movers[..., n + m :] = p, o, t
-        rel.append((movers.reshape(steps * b, -1) @ difference_op).reshape(steps, b, -1))
-    swept = swept_min_distance_xy(*rel).astype(np.float64)  # (B, N·M + P + N)
-    d_uo = swept[:, :k_uo].reshape(b, n, m)
+        # (T + 1, kind, B): the batch innermost keeps numpy's inner loops long
+        r = np.empty((steps, k_uo + k_uu + n, b), dtype=np.float32)  # [obstacles, pairs, targets]
+        uav = np.ascontiguousarray(p.transpose(0, 2, 1))  # (T + 1, N, B)
+        np.subtract(
+            uav[:, :, None],
+            o.transpose(0, 2, 1)[:, None],
+            out=r[:, :k_uo].reshape(steps, n, m, b),
+        )
+        np.subtract(uav[:, i], uav[:, j], out=r[:, k_uo : k_uo + k_uu])
+        np.subtract(uav, t.T.astype(np.float32), out=r[:, k_uo + k_uu :])
+        rel.append(r)
+    swept = swept_min_distance_xy(*rel).astype(np.float64)  # (N·M + P + N, B)
+    d_uo = swept[:k_uo].reshape(n, m, b).transpose(2, 0, 1)  # (B, N, M)
     counted = present[:, i] & present[:, j] & (acted[:, i] | acted[:, j])
-    d_pair = np.where(counted, swept[:, k_uo : k_uo + k_uu], np.inf).T  # (P, B)
+    d_pair = np.where(counted.T, swept[k_uo : k_uo + k_uu], np.inf)  # (P, B)
     # Each UAV's pairs gathered pair-major, (N, N − 1, B): the minimum runs along the batch.
     min_uu = np.ascontiguousarray(d_pair[members].min(axis=1, initial=np.inf).T)
     return Approaches(
         min_u2o_m=np.where(present, d_uo.min(axis=-1, initial=np.inf), np.inf),
         min_u2u_m=min_uu,
-        target_m=np.where(acted, swept[:, k_uo + k_uu :], np.inf),
+        target_m=np.where(acted, swept[k_uo + k_uu :].T, np.inf),
     )
 
 

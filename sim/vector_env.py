@@ -165,7 +165,7 @@ class SwarmVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float32], NDArray
         state, result = self.sim.step(self.state, np.asarray(actions), self._rng)
         rewards = self.rewards_of(result)
         done = result.terminated | result.truncated
-        obs = result.obs.flat()
+        obs = result.obs.flat_shared()  # the step's own observations: no copy needed
         infos: dict[str, Any] = {
             "acted": result.acted,
             "agent_done": result.acted & (result.arrived | result.terminated[:, None]),
@@ -181,7 +181,7 @@ class SwarmVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float32], NDArray
             infos["_final_obs"] = done.copy()
             state, fresh = self.sim.restart_where(state, done, self._rng)
             assert fresh is not None
-            obs[done] = self.sim.observe(fresh).flat()
+            obs[done] = self.sim.observe(fresh).flat_shared()
         self._state = state
         infos["active"] = state.active.copy()
         if self.render_mode is not None:
