@@ -36,29 +36,29 @@ PHYSICS_DT_S = 1.0 / 50.0
 CRUISE_DOWN_M = -20.0
 """Height of the replays (the traces were flown at 20 m), NED down, m."""
 
-BOUNDS_M_S: dict[str, dict[str, tuple[float, float]]] = {
-    # profile: trace → (RMS measured on the mock when this test was written, bound), m/s;
+TRACE_BOUNDS: tuple[tuple[str, str, float, float], ...] = (
+    # (profile, trace, RMS measured on the mock when this test was written, bound), m/s;
     # the bound leaves ≈ 10 % for a refit of the profile
-    "arducopter": {
-        "ardupilot-a": (0.106, 0.12),
-        "ardupilot-b": (0.163, 0.18),
-        "ardupilot-c": (0.290, 0.32),
-    },
-    "px4": {
-        "px4-a-fast": (0.111, 0.13),
-        "px4-b-fast": (0.173, 0.19),
-        "px4-c-fast": (0.088, 0.10),
-        "px4-a-gain": (0.254, 0.28),
-        "px4-b-gain": (0.376, 0.42),
-        "px4-c-gain": (0.184, 0.21),
-    },
-    "px4-sluggish": {
-        "px4-a": (0.466, 0.52),
-        "px4-b": (0.852, 0.94),
-        "px4-c": (0.583, 0.65),
-    },
-}
+    ("arducopter", "ardupilot-a", 0.106, 0.12),
+    ("arducopter", "ardupilot-b", 0.163, 0.18),
+    ("arducopter", "ardupilot-c", 0.290, 0.32),
+    ("px4", "px4-a-fast", 0.111, 0.13),
+    ("px4", "px4-b-fast", 0.173, 0.19),
+    ("px4", "px4-c-fast", 0.088, 0.10),
+    ("px4", "px4-a-gain", 0.254, 0.28),
+    ("px4", "px4-b-gain", 0.376, 0.42),
+    ("px4", "px4-c-gain", 0.184, 0.21),
+    ("px4-sluggish", "px4-a", 0.466, 0.52),
+    ("px4-sluggish", "px4-b", 0.852, 0.94),
+    ("px4-sluggish", "px4-c", 0.583, 0.65),
+)
 """Each profile's traces (as `tools/fit_vehicle.py` assigns them) with their RMS bounds."""
+
+BOUNDS_M_S: dict[str, dict[str, tuple[float, float]]] = {
+    profile: {t: (m, b) for p, t, m, b in TRACE_BOUNDS if p == profile}
+    for profile in {row[0] for row in TRACE_BOUNDS}
+}
+"""The same, per profile: trace → (measured, bound)."""
 
 
 def read(name: str) -> tuple[FloatArray, FloatArray, FloatArray]:
