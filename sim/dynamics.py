@@ -51,28 +51,16 @@ class Response:
 
     Attributes:
         delay_s: transport delay. tau_s: velocity time constant. accel_m_s2: acceleration cap.
-        step_s: the integration step the next two are for (`fly_response` computes them
-            itself on another one).
-        closing: the share of a velocity error closed over one integration step,
-            ``closing_fraction(tau_s, step_s)``.
-        cap_m_s: the acceleration cap times the integration step.
+        closing: the share of a velocity error closed over one integration step of the
+            scenario (`ResponseSpec.step_s`), ``closing_fraction(tau_s, step_s)``.
+        cap_m_s: the acceleration cap times that step.
     """
 
     delay_s: FloatArray
     tau_s: FloatArray
     accel_m_s2: FloatArray
-    step_s: float
     closing: FloatArray
     cap_m_s: FloatArray
-
-    @classmethod
-    def of(
-        cls, delay_s: FloatArray, tau_s: FloatArray, accel_m_s2: FloatArray, step_s: float
-    ) -> Response:
-        """The response of these parameters, with its constants for steps of ``step_s``."""
-        return cls(
-            delay_s, tau_s, accel_m_s2, step_s, closing_fraction(tau_s, step_s), accel_m_s2 * step_s
-        )
 
 
 def _values(profile: VehicleProfile) -> tuple[float, float, float]:
@@ -81,25 +69,19 @@ def _values(profile: VehicleProfile) -> tuple[float, float, float]:
     return profile.delay_s, profile.velocity_tau_s, profile.max_accel_m_s2
 
 
-def is_ideal(cfg: ScenarioConfig) -> bool:
-    """Whether every UAV of the scenario flies the paper's exact arcs (no response to model)."""
-    return ResponseSpec.from_scenario(cfg) is None
-
-
 @dataclass(frozen=True)
 class ResponseSpec:
     """What a scenario draws each UAV's response from, resolved once (profiles read, scaled).
 
     Attributes:
         table: (P, 3) delay, time constant, acceleration cap of each profile to draw from.
-        scales: the (low, high) factor ranges of the three, in that order.
-        dt_s: the decision step (every delay must stay below it).
+        scales: the (low, high) factor ranges of the three, in that order (every delay they
+            can give is below the decision step: checked here once).
         step_s: the integration step of `fly_response` in the scenario.
     """
 
     table: FloatArray
     scales: tuple[tuple[float, float], tuple[float, float], tuple[float, float]]
-    dt_s: float
     step_s: float
 
     @classmethod
@@ -110,10 +92,15 @@ class ResponseSpec:
         profiles = [load_profile(name) for name in names]
         if all(p.ideal for p in profiles) and not rand.randomised:
             return None
+        if longest_delay_s(cfg) >= cfg.dt_s:  # the loader says so first, naming the key
+            raise ValueError(
+                f"a vehicle delay can reach the decision step ({cfg.dt_s} s); lower "
+                "dynamics_randomisation.delay_scale"
+            )
         table = np.array([_values(p) for p in profiles])
         scales = (rand.delay_scale, rand.velocity_tau_scale, rand.max_accel_scale)
         step_s = cfg.dt_s / (cfg.substeps * integration_grid(cfg.substeps, cfg.dt_s))
-        return cls(table, scales, cfg.dt_s, step_s)
+        return cls(table, scales, step_s)
 
     def draw(self, b: int, n: int, rng: np.random.Generator) -> Response:
         """Every UAV's response for B new episodes of N UAVs.
@@ -128,22 +115,8 @@ class ResponseSpec:
             for lo, hi in self.scales
         ]
         delay = chosen[..., 0] * factors[0]
-        if (delay >= self.dt_s).any():
-            raise ValueError(
-                f"a drawn delay reaches the decision step ({self.dt_s} s); lower "
-                "dynamics_randomisation.delay_scale"
-            )
         tau, accel = chosen[..., 1] * factors[1], chosen[..., 2] * factors[2]
-        return Response.of(delay, tau, accel, self.step_s)
-
-
-def draw_response(cfg: ScenarioConfig, b: int, n: int, rng: np.random.Generator) -> Response | None:
-    """Every UAV's response for B new episodes of ``cfg``; None where the scenario is ideal.
-
-    (`ResponseSpec.draw`; a simulator resolves the spec once.)
-    """
-    spec = ResponseSpec.from_scenario(cfg)
-    return None if spec is None else spec.draw(b, n, rng)
+        return Response(delay, tau, accel, closing_fraction(tau, self.step_s), accel * self.step_s)
 
 
 def longest_delay_s(cfg: ScenarioConfig) -> float:
@@ -207,7 +180,7 @@ def fly_response(
     Args:
         pos_m, vel_m_s: (B, N, 2) positions and velocities at the start of the step.
         cmd: this step's and the previous step's arcs.
-        response: each UAV's response.
+        response: each UAV's response, drawn for this scenario's integration step.
         moving: (B, N) UAVs that fly this step (flying or braking to a hover); the others
             stay where they are, velocity unchanged (episodes that ended).
         substeps: T; dt_s: the decision step.
@@ -216,11 +189,8 @@ def fly_response(
     steps = substeps * per_sub
     h = dt_s / steps
     moving_f = moving.astype(np.float64)
-    if response.step_s == h:  # the constants drawn with the response
-        closing, cap = response.closing, response.cap_m_s
-    else:
-        closing, cap = closing_fraction(response.tau_s, h), response.accel_m_s2 * h
-    fraction = closing * moving_f  # a still UAV keeps its velocity
+    fraction = response.closing * moving_f  # a still UAV keeps its velocity
+    cap = response.cap_m_s
     # The delayed command at the middle of integration step k, s_k = (k + ½)·h, is the arc sent
     # at s_k − delay: this step's arc once s_k ≥ delay, the last step's before (only in the
     # first few steps: the delay is below the decision step). Each arc's direction turns by a

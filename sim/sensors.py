@@ -97,18 +97,10 @@ def extrapolate(
     return out
 
 
-def gps_noise(pos: FloatArray, sigma_m: float, rng: np.random.Generator) -> FloatArray:
-    """``pos`` (..., 2) plus Gaussian noise of ``sigma_m`` per axis; zero σ: ``pos``, no draw."""
-    if sigma_m == 0.0:
-        return pos
-    out: FloatArray = pos + sigma_m * rng.standard_normal(pos.shape)
-    return out
-
-
 def gps_error(shape: tuple[int, ...], sigma_m: float, rng: np.random.Generator) -> FloatArray:
     """Gaussian GPS errors of ``sigma_m`` per axis, (shape); zero σ: zeros, no draw.
 
-    What `gps_noise` adds: the same draws and numbers as ``gps_noise(np.zeros(shape), ...)``.
+    The simulator's error of every UAV position and the mock's error of a reported one.
     """
     if sigma_m == 0.0:
         return np.zeros(shape)

@@ -113,23 +113,10 @@ def track_velocity(
     """
     if profile.ideal:
         return command_m_s.copy()
-    return follow_velocity(
-        velocity_m_s, command_m_s, profile.velocity_tau_s, profile.max_accel_m_s2, dt_s
-    )
-
-
-def follow_velocity(
-    velocity_m_s: FloatArray,
-    command_m_s: FloatArray,
-    tau_s: float | FloatArray,
-    max_accel_m_s2: float | FloatArray,
-    dt_s: float,
-) -> FloatArray:
-    """`track_velocity` with the time constant and the cap as numbers or arrays (...)."""
     velocity = velocity_m_s[..., 0] + 1j * velocity_m_s[..., 1]
     command = command_m_s[..., 0] + 1j * command_m_s[..., 1]
-    cap = np.asarray(max_accel_m_s2) * dt_s
-    new = approach(velocity, command, closing_fraction(tau_s, dt_s), cap)
+    fraction = closing_fraction(profile.velocity_tau_s, dt_s)
+    new = approach(velocity, command, fraction, profile.max_accel_m_s2 * dt_s)
     return np.stack([new.real, new.imag], axis=-1)
 
 
@@ -151,17 +138,17 @@ def approach(
     The one implementation of the model: the velocity closes ``fraction`` of its error to the
     command (`closing_fraction`: exact for a first-order response over the step), by at most
     ``cap_m_s`` (the acceleration cap times the step). Any shapes that broadcast; ``out``: where
-    to put the new velocity (None: a new array), of the shape of the velocity error. ``fraction``
-    may come cast to complex already (the same numbers: the product casts it).
+    to put the new velocity, of the shape of the velocity error (None: a new array or number).
+    ``fraction`` may come cast to complex already (the same numbers: the product casts it).
     """
     step = (command - velocity) * fraction
     norm = np.abs(step)
-    if out is None:
+    if out is None:  # numbers or arrays of any shape
         new: NDArray[np.complex128] = velocity + step * np.minimum(
             1.0, cap_m_s / np.maximum(norm, 1e-300)
         )
         return new
-    # the same operations into arrays of the caller's shape (``out``'s)
+    # the simulator's hot loop: the same operations, in place on the step's own arrays
     np.maximum(norm, 1e-300, out=norm)
     limit = np.divide(cap_m_s, norm)
     np.minimum(1.0, limit, out=limit)

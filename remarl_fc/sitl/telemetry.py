@@ -43,6 +43,7 @@ from remarl_fc.mavlink.consts import (
 )
 from remarl_fc.sitl.flavour import FlavourSpec
 from remarl_fc.sitl.vehicle import Airframes
+from sim.sensors import gps_error
 
 SENSORS_PRESENT = 0x0020_002F
 """MAV_SYS_STATUS_SENSOR bits reported present/enabled/healthy: 3-D gyro (1), accel (2),
@@ -171,8 +172,7 @@ class TelemetryBuilder:
         g = self.gps[i]
         pos[0] += g.offset_ne_m[0]
         pos[1] += g.offset_ne_m[1]
-        if self.gps_noise_m > 0:
-            pos[:2] += self.rng.normal(0.0, self.gps_noise_m, size=2)
+        pos[:2] += gps_error((2,), self.gps_noise_m, self.rng)  # no draw at zero noise
         return pos
 
     def _geodetic(self, i: int) -> tuple[int, int, int]:

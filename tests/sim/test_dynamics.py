@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from sim.dynamics import INTEGRATION_STEP_S, draw_response, integration_grid, is_ideal
+from sim.dynamics import INTEGRATION_STEP_S, ResponseSpec, integration_grid
 from sim.errors import ScenarioError
 from sim.scenarios import load_scenario
 from sim.swarm import SwarmSim
@@ -27,9 +27,12 @@ def run(cfg, actions, steps, seed=0, envs=4):
 
 def test_ideal_is_the_default_and_draws_nothing():
     cfg = load_scenario("3u2o")
-    assert cfg.dynamics == "ideal" and is_ideal(cfg)
+    assert cfg.dynamics == "ideal" and ResponseSpec.from_scenario(cfg) is None
+    assert SwarmSim(cfg).initial_state(np.random.default_rng(0), 2).response is None
+    fitted = ResponseSpec.from_scenario(load_scenario("3u2o", dynamics="arducopter"))
+    assert fitted is not None
     rng = np.random.default_rng(0)
-    assert draw_response(cfg, 2, 3, rng) is None
+    fitted.draw(2, 3, rng)  # one profile, no ranges: nothing to draw
     assert rng.random() == np.random.default_rng(0).random()  # nothing consumed
 
 
@@ -77,9 +80,10 @@ def test_randomisation_is_seeded_and_within_its_ranges():
             "max_accel_scale": [0.7, 1.2],
         },
     )
-    a = draw_response(cfg, 64, 3, np.random.default_rng(5))
-    b = draw_response(cfg, 64, 3, np.random.default_rng(5))
-    assert a is not None and b is not None
+    spec = ResponseSpec.from_scenario(cfg)
+    assert spec is not None
+    a = spec.draw(64, 3, np.random.default_rng(5))
+    b = spec.draw(64, 3, np.random.default_rng(5))
     np.testing.assert_array_equal(a.tau_s, b.tau_s)
     ardu, px4 = load_profile("arducopter"), load_profile("px4")
     lo_d, hi_d = 0.5 * min(ardu.delay_s, px4.delay_s), 2.0 * max(ardu.delay_s, px4.delay_s)
@@ -98,8 +102,9 @@ def test_a_delay_reaching_the_decision_step_is_refused():
     fixed = load_scenario(
         "3u2o", dynamics="arducopter", dynamics_randomisation={"delay_scale": [2.0, 2.0]}
     )
-    response = draw_response(fixed, 1, 3, np.random.default_rng(0))
-    assert response is not None
+    spec = ResponseSpec.from_scenario(fixed)
+    assert spec is not None
+    response = spec.draw(1, 3, np.random.default_rng(0))
     np.testing.assert_allclose(response.delay_s, 2.0 * load_profile("arducopter").delay_s)
 
 

@@ -17,7 +17,7 @@ from sim.sensors import (
     TRACK_MAX_AGE_S,
     AdsbTracks,
     extrapolate,
-    gps_noise,
+    gps_error,
     is_fresh,
     picture,
     report_time,
@@ -325,15 +325,15 @@ def test_draws_do_not_depend_on_the_data():
     assert after[0] == after[1]
 
 
-def test_gps_noise():
+def test_gps_error():
     rng = np.random.default_rng(10)
-    pos = rng.uniform(-10, 10, (1000, 3, 2))
     state = rng.bit_generator.state
-    assert gps_noise(pos, 0.0, rng) is pos
+    assert not gps_error((1000, 3, 2), 0.0, rng).any()
     assert rng.bit_generator.state == state  # no draw
-    noisy = gps_noise(pos, 1.5, rng)
-    assert noisy.shape == pos.shape
-    assert (noisy - pos).std() == pytest.approx(1.5, rel=0.05)
+    error = gps_error((1000, 3, 2), 1.5, rng)
+    assert error.shape == (1000, 3, 2)
+    assert error.std() == pytest.approx(1.5, rel=0.05)
+    assert abs(error.mean()) < 0.05
 
 
 # -- shared with the runtime -----------------------------------------------------------------
