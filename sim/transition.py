@@ -124,14 +124,15 @@ def fly_with_response(
 ) -> Flight:
     """Fly one step (step 1) with each UAV's fitted response (`sim.dynamics`).
 
-    The UAVs that ``acted`` are commanded along the arc of ``turn`` at ``speed_m_s``; the
-    others still ``present`` (arrived, hovering) are commanded to stop; the rest stay put.
+    The UAVs that ``acted`` are commanded along the arc of ``turn`` at ``speed_m_s``, which
+    the caller has set to 0 for every other UAV: those still ``present`` (arrived, hovering)
+    are commanded to stop; the rest stay put.
     """
     assert state.response is not None
     cmd = Commands(
         heading_rad=state.heading_rad,
         turn_rad=turn,
-        speed_m_s=np.where(acted, speed_m_s, 0.0),
+        speed_m_s=speed_m_s,
         last_turn_rad=state.last_turn_rad,
         last_speed_m_s=state.speed_m_s,
     )
