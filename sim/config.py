@@ -360,8 +360,27 @@ class SensingConfig:
     max_obstacles: int = 4
     """m: obstacle rows in the observation (nearest first, masked when fewer are seen)."""
 
+    observation: int = 1
+    """Observation version (`sim.observation`): 1, the paper's rows (own state, swarm, the m
+    nearest obstacles); 2, those plus the k nearest neighbouring UAVs, every other vehicle as
+    relative position, relative velocity and distance."""
+
+    max_neighbours: int = 0
+    """k: neighbouring-UAV rows of a version-2 observation (nearest first, masked); 0 in v1."""
+
     def __post_init__(self) -> None:
         _positive(self, "range_m")
+        _require(
+            self.observation in (1, 2),
+            "observation",
+            f"must be 1 (the paper's rows) or 2 (with neighbours), got {self.observation!r}",
+        )
+        _integer(self, "max_neighbours", minimum=0)
+        _require(
+            self.observation == 2 or self.max_neighbours == 0,
+            "max_neighbours",
+            "needs observation = 2 (version 1 has no neighbour rows)",
+        )
         _require(
             0 < self.aperture_rad <= 2 * math.pi,
             "aperture_rad",

@@ -190,6 +190,7 @@ class SwarmSim:
         state: SwarmState,
         envs: BoolArray | None = None,
         heading_cos_sin: tuple[FloatArray, FloatArray] | None = None,
+        layout: ObservationLayout | None = None,
     ) -> Observations:
         """Every UAV's observation of the current state (the shared builder).
 
@@ -201,6 +202,8 @@ class SwarmSim:
             envs: (B,) observe only these environments (the result has their count first).
             heading_cos_sin: cos and sin of the observed UAVs' headings, where the caller has
                 them (None: computed).
+            layout: the observation to build (None: the scenario's): a policy brings its own
+                (a generalist's version 2 on a scenario of version 1).
         """
         sel: slice | BoolArray = slice(None) if envs is None else envs
         heading = state.heading_rad[sel]
@@ -219,8 +222,14 @@ class SwarmSim:
             pos, vel, seen = picture(picked, now)
             obstacle_pos = np.where(seen[..., None], pos, 0.0)
             obstacle_vel = np.where(seen[..., None], vel, 0.0)
+        layout = self.obs_layout if layout is None else layout
+        neighbours: dict[str, Any] = {}
+        if layout.version == 2:  # the other UAVs still in the episode, and where they head
+            present = state.active[sel] | state.hovering(self.cfg.arrival)[sel]
+            neighbours = {"uav_valid": present, "commanded_heading_rad": heading}
+            velocity = velocity * (state.speed_m_s[sel] / self.cfg.uav.speed_m_s)[..., None]
         return build_observations(
-            self.obs_layout,
+            layout,
             state.pos_m[sel] + state.gps_error_m[sel],
             heading,
             velocity,
@@ -230,6 +239,7 @@ class SwarmSim:
             obstacle_vel,
             seen,
             heading_cos_sin,
+            **neighbours,
         )
 
     def step(
