@@ -106,3 +106,130 @@ class TrainConfig:
         check_at_least(self, 1, "num_envs", "total_steps", "eval_every", "eval_episodes")
         check(self.minutes >= 0, "minutes", "must be >= 0")
         check(self.reward in ("remarl", "swarming"), "reward", 'must be "remarl" or "swarming"')
+
+
+@dataclass(frozen=True)
+class GeneralistConfig:
+    """The generalist: one shared set-encoder policy trained on a mixture of encounters.
+
+    The mixture is every family of ``suites`` (`sim.suite`), their episodes drawn from the
+    run's own seed (never the suites' evaluation seeds); each family runs
+    ceil(``agents_per_family`` / N) environments, so every family feeds about as many UAV
+    transitions. See `policies.generalist_train` and ``docs/MODEL.md``.
+    """
+
+    suites: tuple[str, ...] = ("standard", "generalist-extra")
+    """Suites whose families make up the training mixture."""
+
+    agents_per_family: int = 24
+    """UAVs stepped per family and iteration (environments = ceil(this / N), at least 1)."""
+
+    max_neighbours: int = 6
+    """k: neighbour rows of the observation (version 2)."""
+
+    max_intruders: int = 8
+    """m: intruder rows of the observation (version 2)."""
+
+    max_uavs: int = 50
+    """Largest swarm the exported policy declares it flies (the smallest is 1)."""
+
+    hidden: int = 64
+    """Units of every hidden layer of the set networks (`sim.setnet`)."""
+
+    actor_lr: float = 3e-4
+    """Adam learning rate of the actor."""
+
+    critic_lr: float = 1e-3
+    """Adam learning rate of the twin critics."""
+
+    gamma: float = 0.95
+    """Discount per decision step, as the per-scenario policies."""
+
+    tau: float = 0.005
+    """Soft target update rate."""
+
+    batch_size: int = 512
+    """UAV transitions per gradient step."""
+
+    buffer_size: int = 1_000_000
+    """Replay capacity, UAV transitions."""
+
+    warmup_transitions: int = 20_000
+    """UAV transitions of uniform random actions before learning starts."""
+
+    updates_per_iteration: int = 4
+    """Critic gradient steps per iteration (one step of every family)."""
+
+    policy_delay: int = 2
+    """Critic steps per actor step (TD3)."""
+
+    target_noise: float = 0.2
+    """Std of the target-policy smoothing noise on normalised actions (TD3)."""
+
+    target_noise_clip: float = 0.5
+    """Bound of that noise."""
+
+    noise_start: float = 0.3
+    """Std of the Gaussian exploration noise at the start ..."""
+
+    noise_end: float = 0.05
+    """... and at the end of the run (linear in the run's fraction done)."""
+
+    grad_clip: float = 1.0
+    """Max gradient norm per network."""
+
+    separation_weight: float = 0.5
+    """w_sep: reward lost per step at a UAV–UAV closest approach of d_col, falling linearly to
+    0 at ``separation_factor``·d_col (the evidence: without it, UAVs of one swarm learn to
+    meet; see docs/MODEL.md)."""
+
+    separation_factor: float = 1.5
+    """Where the separation term starts, in d_col (the PSO threshold d̄_U2U and the spacing
+    targets keep)."""
+
+    real_share: float = 0.35
+    """Share of families flown in the real world (fitted ArduCopter/PX4 responses randomised
+    per UAV, ADS-B intruders, GPS noise) rather than the paper's ideal one."""
+
+    minutes: float = 170.0
+    """Wall-clock budget of the run (resumes count the time already spent)."""
+
+    total_iterations: int = 1_000_000
+    """Upper bound on iterations (the budget usually ends the run first)."""
+
+    eval_minutes: float = 15.0
+    """Wall-clock minutes between validation evaluations."""
+
+    eval_episodes: int = 10
+    """Validation episodes per family (seeds of their own)."""
+
+    seed: int = 0
+    """Seed of the networks, the noise and the training episodes."""
+
+    device: str = "auto"
+    """"cpu", "cuda" or "auto" (cuda when available)."""
+
+    def __post_init__(self) -> None:
+        for name in ("actor_lr", "critic_lr", "tau", "grad_clip", "separation_factor"):
+            check(getattr(self, name) > 0, name, "must be > 0")
+        check(0 < self.gamma < 1, "gamma", "must be in (0, 1)")
+        check(0.0 <= self.real_share <= 1.0, "real_share", "must be in [0, 1]")
+        check(self.separation_weight >= 0, "separation_weight", "must be >= 0")
+        check(self.minutes >= 0 and self.eval_minutes > 0, "minutes", "must be >= 0")
+        check_at_least(
+            self,
+            1,
+            "agents_per_family",
+            "max_intruders",
+            "max_uavs",
+            "hidden",
+            "batch_size",
+            "buffer_size",
+            "updates_per_iteration",
+            "policy_delay",
+            "total_iterations",
+            "eval_episodes",
+        )
+        check_at_least(self, 0, "max_neighbours", "warmup_transitions")
+        check(0 <= self.noise_end <= self.noise_start, "noise_end", "must be in [0, noise_start]")
+        check(self.device in ("cpu", "cuda", "auto"), "device", 'must be "cpu", "cuda" or "auto"')

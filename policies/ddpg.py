@@ -98,6 +98,19 @@ class DDPGNets:
             torch.optim.Adam(critic.parameters(), lr=cfg.critic_lr),
         )
 
+    def modules(self) -> dict[str, nn.Module]:
+        """Every network by checkpoint name."""
+        return {
+            "actor": self.actor,
+            "critic": self.critic,
+            "actor_target": self.actor_target,
+            "critic_target": self.critic_target,
+        }
+
+    def optimisers(self) -> dict[str, torch.optim.Optimizer]:
+        """Every optimiser by checkpoint name."""
+        return {"actor_opt": self.actor_opt, "critic_opt": self.critic_opt}
+
 
 def soft_update(target: nn.Module, source: nn.Module, tau: float) -> None:
     """θ' ← τθ + (1 − τ)θ'."""

@@ -29,7 +29,7 @@ import math
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 import torch
@@ -66,35 +66,44 @@ def policy_actions(nets: DDPGNets, obs: NDArray[np.float32], shared: bool) -> ND
     return actions
 
 
-def save_checkpoint(path: Path, nets: DDPGNets, meta: dict[str, Any]) -> None:
+class Checkpointable(Protocol):
+    """Networks and optimisers by checkpoint name (`DDPGNets`, `policies.generalist.TD3Nets`)."""
+
+    def modules(self) -> dict[str, torch.nn.Module]:
+        """Every network by name."""
+        ...
+
+    def optimisers(self) -> dict[str, torch.optim.Optimizer]:
+        """Every optimiser by name."""
+        ...
+
+
+def save_checkpoint(path: Path, nets: Checkpointable, meta: dict[str, Any]) -> None:
     """Networks and optimiser moments as safetensors, counters as JSON metadata (atomic)."""
     tensors: dict[str, torch.Tensor] = {}
-    for name in ("actor", "critic", "actor_target", "critic_target"):
-        for key, value in getattr(nets, name).state_dict().items():
-            tensors[f"{name}.{key}"] = value.contiguous()
-    for name in ("actor_opt", "critic_opt"):
-        opt: torch.optim.Optimizer = getattr(nets, name)
+    for name, module in nets.modules().items():
+        for key, value in module.state_dict().items():
+            tensors[f"{name}.{key}"] = value.detach().cpu().contiguous()
+    for name, opt in nets.optimisers().items():
         for i, state in opt.state_dict()["state"].items():
             for key, value in state.items():
-                tensors[f"{name}.{i}.{key}"] = torch.as_tensor(value).contiguous()
+                tensors[f"{name}.{i}.{key}"] = torch.as_tensor(value).detach().cpu().contiguous()
     tmp = path.with_name(path.name + ".part")
     save_file(tensors, str(tmp), metadata={"remarl_checkpoint": json.dumps(meta)})
     tmp.replace(path)
 
 
-def load_checkpoint(path: Path, nets: DDPGNets) -> dict[str, Any]:
+def load_checkpoint(path: Path, nets: Checkpointable) -> dict[str, Any]:
     """Restore networks and optimiser moments; returns the saved counters."""
     from safetensors import safe_open
 
     tensors = load_file(str(path))
-    for name in ("actor", "critic", "actor_target", "critic_target"):
-        module: torch.nn.Module = getattr(nets, name)
+    for name, module in nets.modules().items():
         prefix = f"{name}."
         module.load_state_dict(
             {k[len(prefix) :]: v for k, v in tensors.items() if k.startswith(prefix)}
         )
-    for name in ("actor_opt", "critic_opt"):
-        opt: torch.optim.Optimizer = getattr(nets, name)
+    for name, opt in nets.optimisers().items():
         sd = opt.state_dict()
         state: dict[int, dict[str, torch.Tensor]] = {}
         for key, value in tensors.items():
@@ -142,7 +151,7 @@ def train(
         meta = load_checkpoint(last_path, nets)
         step, best, elapsed_before = meta["step"], meta["best_success"], meta["elapsed_s"]
         rng = np.random.default_rng([cfg.seed, step])
-    writer = _summary_writer(out_dir)
+    writer = summary_writer(out_dir)
     curve = CurveWriter(out_dir / "curve.csv", resume=resume)
 
     def checkpoint(path: Path) -> None:
@@ -283,7 +292,8 @@ def train(
     return summary
 
 
-def _summary_writer(out_dir: Path) -> Any:
+def summary_writer(out_dir: Path) -> Any:
+    """A TensorBoard writer logging to ``out_dir``; None where tensorboard is not installed."""
     try:
         from torch.utils.tensorboard import SummaryWriter
     except ImportError:  # tensorboard is optional

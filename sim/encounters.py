@@ -262,8 +262,19 @@ def sample_family(
         ConfigError: the family cannot be drawn (e.g. its intruders always start on a UAV).
     """
     cfg = family_scenario(family)
+    return cfg, draw_episodes(family, cfg, seed, episodes)
+
+
+def draw_episodes(
+    family: Family, cfg: ScenarioConfig, seed: int, episodes: range | list[int]
+) -> EpisodeStart:
+    """Episodes of a family whose scenario ``cfg`` (`family_scenario`) the caller holds.
+
+    The same episodes as `sample_family`'s; a training run draws its stream from a seed of its
+    own this way, without building the scenario again for every batch.
+    """
     parts = [_episode(family, cfg, episode_rng(seed, family.name, k)) for k in episodes]
-    return cfg, EpisodeStart.concat(parts)
+    return EpisodeStart.concat(parts)
 
 
 def _episode(family: Family, cfg: ScenarioConfig, rng: np.random.Generator) -> EpisodeStart:

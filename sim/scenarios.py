@@ -67,6 +67,23 @@ SECTIONS: dict[str, type[Any]] = {
 _RAD, _DEG = "_rad", "_deg"
 
 
+REAL_WORLD: dict[str, Any] = {
+    "dynamics": "arducopter",
+    "dynamics_randomisation": {
+        "profiles": ["arducopter", "px4"],
+        "delay_scale": [0.7, 1.5],
+        "velocity_tau_scale": [0.8, 1.5],
+        "max_accel_scale": [0.8, 1.25],
+    },
+    "sensors": {"model": "adsb"},
+}
+"""Scenario overrides of the world as flown (`load_scenario(name, **REAL_WORLD)`): each UAV
+ArduCopter's or PX4's fitted response (`sim.vehicle`), scaled per parameter by factors drawn per
+episode, intruders through ADS-B, GPS noise. What the robust and generalist policies train on
+(``policies/zoo/robust/3u2o.toml`` spells it out) and ``bench sim``'s "real" world. Only read:
+callers copy it."""
+
+
 def scenario_names() -> list[str]:
     """Names of the scenarios shipped with the package, sorted by UAV then obstacle count."""
     names = [

@@ -4,8 +4,9 @@ A version-2 observation (`sim.observation`) holds the UAV's own block, k neighbo
 intruder rows with masks. The network reads each set with a permutation-invariant encoder (deep
 sets): every row through the same two-layer ReLU encoder, then the max and the mean over the
 rows the mask keeps. The max is exact in any order (the encodings are ≥ 0, so the masked rows,
-zeroed, never win, and an empty set gives 0); the mean differs between orders only by the
-rounding of a sum. So neither the number of neighbours or intruders nor their order matters:
+zeroed, never win, and an empty set gives 0), and the mean sums the rows' encodings sorted,
+so its additions are the same in any order. So neither the number of neighbours or intruders
+nor their order matters (the action is the same to the last bit):
 
     own block → self (ReLU)                                                     h
     each neighbour row → nb1 (ReLU) → nb2 (ReLU), pooled max and mean           2h
@@ -53,9 +54,9 @@ def set_shapes(hidden: int, critic: bool) -> dict[str, tuple[int, int]]:
     }
 
 
-def _dense(x: NDArray[np.float32], layer: Layer, relu: bool = True) -> NDArray[np.float32]:
+def _dense(x: NDArray[np.float64], layer: Layer, relu: bool = True) -> NDArray[np.float64]:
     w, b = layer
-    y: NDArray[np.float32] = np.matmul(x, w[0])
+    y: NDArray[np.float64] = np.matmul(x, w[0].astype(np.float64))
     y += b[0, 0]
     if relu:
         np.maximum(y, 0.0, out=y)
@@ -63,23 +64,30 @@ def _dense(x: NDArray[np.float32], layer: Layer, relu: bool = True) -> NDArray[n
 
 
 def _pool(
-    rows: NDArray[np.float32], mask: NDArray[np.float32], first: Layer, second: Layer
-) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
+    rows: NDArray[np.float64], mask: NDArray[np.float64], first: Layer, second: Layer
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Max and mean (..., h) of the encodings of the rows (..., R, c) the mask (..., R) keeps."""
     e = _dense(_dense(rows, first), second)  # (..., R, h), ≥ 0
     e *= mask[..., None]
     count = np.maximum(mask.sum(axis=-1, keepdims=True), 1.0)
     if e.shape[-2] == 0:
-        zero = np.zeros((*e.shape[:-2], e.shape[-1]), dtype=np.float32)
+        zero = np.zeros((*e.shape[:-2], e.shape[-1]))
         return zero, zero.copy()
-    return e.max(axis=-2), e.sum(axis=-2) / count
+    # Sorted along the rows before the sum: the same additions in the same order whatever the
+    # order of the rows, so the mean is exactly order-free too.
+    return e.max(axis=-2), np.sort(e, axis=-2).sum(axis=-2) / count
 
 
 def encode(
     params: Mapping[str, Layer], obs: NDArray[np.floating[Any]], layout: ObservationLayout
-) -> NDArray[np.float32]:
-    """(..., 5h) the pooled features of flat version-2 observations (..., D)."""
-    x = np.asarray(obs, dtype=np.float32)
+) -> NDArray[np.float64]:
+    """(..., 5h) the pooled features of flat version-2 observations (..., D), float64.
+
+    numpy computes in float64 (the weights are float32): a row's encoding then rounds the
+    same wherever the row sits in the matrix product, so the order of the rows leaves the
+    action unchanged to float32 precision.
+    """
+    x = np.asarray(obs, dtype=np.float64)
     blocks = layout.blocks()
     k, m = layout.max_neighbours, layout.max_obstacles
     lead = x.shape[:-1]
@@ -96,7 +104,9 @@ def set_actor(
 ) -> NDArray[np.float32]:
     """Normalised actions (...,) in [−1, 1] of flat version-2 observations (..., D)."""
     h = _dense(_dense(encode(params, obs, layout), params["l1"]), params["l2"])
-    out: NDArray[np.float32] = np.tanh(_dense(h, params["out"], relu=False))[..., 0]
+    out: NDArray[np.float32] = np.tanh(_dense(h, params["out"], relu=False))[..., 0].astype(
+        np.float32
+    )
     return out
 
 
@@ -107,8 +117,8 @@ def set_critic(
     layout: ObservationLayout,
 ) -> NDArray[np.float32]:
     """Q-values (...,) of normalised actions (...,) at flat version-2 observations (..., D)."""
-    a = np.asarray(action, dtype=np.float32)[..., None]
+    a = np.asarray(action, dtype=np.float64)[..., None]
     z = np.concatenate([encode(params, obs, layout), a], axis=-1)
     h = _dense(_dense(z, params["l1"]), params["l2"])
-    q: NDArray[np.float32] = _dense(h, params["out"], relu=False)[..., 0]
+    q: NDArray[np.float32] = _dense(h, params["out"], relu=False)[..., 0].astype(np.float32)
     return q

@@ -14,6 +14,7 @@ import numpy as np
 
 from sim.config import PSOConfig
 from sim.pso import pso_separate
+from sim.scenarios import REAL_WORLD
 
 CROWDING = 0.7
 """Bench layout: UAVs on a line at this fraction of the threshold spacing, so PSO must work."""
@@ -226,16 +227,7 @@ def _qualnames() -> Callable[[_Key], str]:
 
 WORLDS: dict[str, dict[str, Any]] = {
     "paper": {},
-    "real": {
-        "dynamics": "arducopter",
-        "dynamics_randomisation": {
-            "profiles": ["arducopter", "px4"],
-            "delay_scale": [0.7, 1.5],
-            "velocity_tau_scale": [0.8, 1.5],
-            "max_accel_scale": [0.8, 1.25],
-        },
-        "sensors": {"model": "adsb"},
-    },
+    "real": REAL_WORLD,
 }
 """``bench sim`` worlds, as scenario overrides: "paper" (ideal vehicles, exact sensing: the
 scenario as shipped) and "real" (each UAV ArduCopter's or PX4's fitted response, randomised

@@ -50,6 +50,19 @@ def add_train(sub: Any) -> None:
     )
     p.add_argument("--eval-every", type=positive_int, default=2_000, help="steps between evals")
     p.add_argument("--eval-episodes", type=positive_int, default=100)
+    p.add_argument(
+        "--generalist",
+        action="store_true",
+        help="train the generalist (one shared set-encoder policy, any N, the encounter "
+        "mixture; --minutes is its budget, default 170; --scenario, --steps, --envs, "
+        "--shared, --reward and --eval-every do not apply)",
+    )
+    add_choice(
+        p,
+        "--device",
+        ["auto", "cpu", "cuda"],
+        help="generalist: where the networks learn (default auto: cuda when present)",
+    )
     finish(p, cmd_train)
 
 
@@ -152,6 +165,8 @@ def add_compare(sub: Any) -> None:
 
 def cmd_train(args: argparse.Namespace) -> int:
     """Train with a progress bar; exit 130 on Ctrl-C (the run folder can be resumed)."""
+    if args.generalist:
+        return cmd_train_generalist(args)
     from policies.config import DDPGConfig, TrainConfig
     from policies.train import train
     from sim.scenarios import load_scenario
@@ -183,6 +198,46 @@ def cmd_train(args: argparse.Namespace) -> int:
         {"config": dataclasses.asdict(cfg), **summary},
         f"trained {summary['env_steps']:,} environment steps in {summary['elapsed_s']:.0f} s; "
         f"best success {summary['best_success']:.1%}; run folder {out}",
+    )
+    return 0
+
+
+def cmd_train_generalist(args: argparse.Namespace) -> int:
+    """``train --generalist``: the mixture run of `policies.generalist_train`."""
+    from policies.config import GeneralistConfig
+    from policies.generalist_train import train_generalist
+
+    defaults = GeneralistConfig()
+    cfg = GeneralistConfig(
+        minutes=args.minutes or defaults.minutes,
+        seed=args.seed,
+        device=args.device or defaults.device,
+    )
+    out = Path(args.out or f"runs/generalist-s{cfg.seed}")
+    with progress_bar(enabled=not args.json) as progress:
+        task = progress.add_task("train", total=cfg.minutes)
+
+        def report(scalars: dict[str, float]) -> None:
+            progress.update(
+                task,
+                completed=scalars["perf/elapsed_min"],
+                description=(
+                    f"success {scalars['charts/success']:.0%}  "
+                    f"UAV-UAV {scalars['charts/collision_u2u']:.0%}  "
+                    f"UAV-obstacle {scalars['charts/collision_u2o']:.0%}"
+                ),
+            )
+
+        try:
+            summary = train_generalist(cfg, out, resume=args.resume, progress=report)
+        except KeyboardInterrupt:
+            print(f"interrupted: resume with --generalist --resume --out {out}", file=sys.stderr)
+            return EXIT_INTERRUPTED
+    emit(
+        args,
+        {"config": dataclasses.asdict(cfg), **summary},
+        f"trained {summary['transitions']:,} UAV transitions in {summary['elapsed_s']:.0f} s; "
+        f"best validation success {summary['best_success']:.1%}; run folder {out}",
     )
     return 0
 

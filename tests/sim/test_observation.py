@@ -1,3 +1,5 @@
+import itertools
+
 import numpy as np
 import pytest
 from hypothesis import given
@@ -147,3 +149,121 @@ def test_flat_is_a_copy_of_the_rows_then_the_mask():
     np.testing.assert_array_equal(flat, np.concatenate([obs.rows.reshape(b, n, -1), obs.mask], -1))
     flat[...] = 7.0
     assert not (obs.rows == 7.0).any()  # flat() hands out a new array
+
+
+# ---------------------------------------------------------------------------- version 2
+
+LAYOUT_V2 = ObservationLayout(
+    max_obstacles=3,
+    range_m=100.0,
+    aperture_rad=np.radians(270),
+    speed_m_s=10.0,
+    max_neighbours=2,
+    version=2,
+)
+
+
+def v2_rows(obs, layout=LAYOUT_V2):
+    """(neighbour rows (B, N, k, 8), intruder rows (B, N, m, 5), masks) of v2 observations."""
+    flat = obs.storage
+    bl = layout.blocks()
+    b, n = flat.shape[:2]
+    nb = flat[..., bl["neighbours"]].reshape(b, n, layout.max_neighbours, 8)
+    it = flat[..., bl["intruders"]].reshape(b, n, layout.max_obstacles, 5)
+    return nb, it, flat[..., bl["neighbour_mask"]], flat[..., bl["intruder_mask"]]
+
+
+def test_v2_layout_size_and_blocks_tile_the_vector():
+    bl = LAYOUT_V2.blocks()
+    assert LAYOUT_V2.size == 8 + 2 * 8 + 3 * 5 + 2 + 3
+    edges = sorted((s.start, s.stop) for s in bl.values())
+    assert edges[0][0] == 0 and edges[-1][1] == LAYOUT_V2.size
+    assert all(a[1] == b[0] for a, b in itertools.pairwise(edges))
+
+
+def test_v2_self_block_is_version_1s_rows():
+    w = world(np.random.default_rng(1))
+    v1 = build_observations(LAYOUT, **w)
+    v2 = build_observations(LAYOUT_V2, **w)
+    np.testing.assert_array_equal(v2.rows, v1.rows[:, :, :ROW_OBSTACLES])
+
+
+def test_v2_neighbours_nearest_first_in_range_and_sector_never_self():
+    # UAV 0 at the origin heading east; the others around it.
+    pos = np.array([[[0.0, 0.0], [0.0, 30.0], [50.0, 0.0], [-40.0, 0.0], [150.0, 0.0]]])
+    heading = np.array([[0.0, 0.5, 0.0, 0.0, 0.0]])
+    vel = np.zeros((1, 5, 2))
+    vel[0, :, 0] = 10.0
+    obs = build_observations(
+        LAYOUT_V2,
+        pos,
+        heading,
+        vel,
+        np.full((1, 5, 2), 300.0),
+        np.zeros((1, 2)),
+        np.zeros((1, 0, 2)),
+        np.zeros((1, 0, 2)),
+        commanded_heading_rad=heading,
+    )
+    nb, _, nb_mask, it_mask = v2_rows(obs)
+    assert nb_mask[0, 0].tolist() == [1.0, 1.0]  # 30 m left, 50 m ahead; behind and far: not
+    np.testing.assert_allclose(nb[0, 0, 0, :5], [0.0, 0.3, 0.0, 0.0, 0.3], atol=1e-6)
+    np.testing.assert_allclose(nb[0, 0, 1, :5], [0.5, 0.0, 0.0, 0.0, 0.5], atol=1e-6)
+    np.testing.assert_allclose(nb[0, 0, 0, 5:], [np.cos(0.5), np.sin(0.5), 1.0], atol=1e-6)
+    assert not it_mask.any()
+    # UAV 4 (150 m out) sees nobody within range
+    assert nb_mask[0, 4].tolist() == [0.0, 0.0] and not nb[0, 4].any()
+
+
+def test_v2_invalid_uavs_and_unknown_headings():
+    pos = np.array([[[0.0, 0.0], [20.0, 0.0], [0.0, 20.0]]])
+    heading = np.zeros((1, 3))
+    common = {
+        "own_pos_m": pos,
+        "own_heading_rad": heading,
+        "own_vel_m_s": np.zeros((1, 3, 2)),
+        "target_m": np.full((1, 3, 2), 300.0),
+        "centre_m": np.zeros((1, 2)),
+        "obstacle_pos_m": np.zeros((1, 0, 2)),
+        "obstacle_vel_m_s": np.zeros((1, 0, 2)),
+    }
+    gone = build_observations(LAYOUT_V2, **common, uav_valid=np.array([[True, False, True]]))
+    nb, _, mask, _ = v2_rows(gone)
+    assert mask[0, 0].tolist() == [1.0, 0.0]
+    np.testing.assert_allclose(nb[0, 0, 0, :2], [0.0, 0.2], atol=1e-6)  # UAV 2, to the left
+    unknown = build_observations(LAYOUT_V2, **common, heading_known=np.array([[True, False, True]]))
+    nb, _, mask, _ = v2_rows(unknown)
+    assert mask[0, 0].tolist() == [1.0, 1.0]
+    # UAV 0's nearest (tie at 20 m: lower index first) is UAV 1, whose heading is unknown
+    assert nb[0, 0, 0, 5:].tolist() == [0.0, 0.0, 0.0]
+    assert nb[0, 0, 1, 7] == 1.0
+
+
+def test_v2_a_single_uav_has_no_neighbours():
+    w = world(np.random.default_rng(2), b=3, n=1, m=2)
+    obs = build_observations(LAYOUT_V2, **w)
+    nb, _, nb_mask, _ = v2_rows(obs)
+    assert not nb.any() and not nb_mask.any()
+
+
+@given(seed=st.integers(0, 2**31), angle=st.floats(-np.pi, np.pi))
+def test_v2_rotating_the_world_and_reordering_the_uavs_leaves_each_observation_unchanged(
+    seed, angle
+):
+    rng = np.random.default_rng(seed)
+    w = world(rng, b=2, n=6, m=5)
+    w["own_pos_m"] = rng.uniform(0, 120, (2, 6, 2))
+    rot = np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]])
+    order = rng.permutation(6)
+    moved = {
+        "own_pos_m": (w["own_pos_m"] @ rot.T)[:, order],
+        "own_heading_rad": (w["own_heading_rad"] + angle)[:, order],
+        "own_vel_m_s": (w["own_vel_m_s"] @ rot.T)[:, order],
+        "target_m": (w["target_m"] @ rot.T)[:, order],
+        "centre_m": w["centre_m"] @ rot.T,
+        "obstacle_pos_m": w["obstacle_pos_m"] @ rot.T,
+        "obstacle_vel_m_s": w["obstacle_vel_m_s"] @ rot.T,
+    }
+    a = build_observations(LAYOUT_V2, **w).storage[:, order]
+    b = build_observations(LAYOUT_V2, **moved).storage
+    np.testing.assert_allclose(a, b, atol=5e-4)

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from sim.scenarios import load_scenario
-from sim.swarm import initial_state, reset_where, step
+from sim.swarm import SwarmSim, initial_state, reset_where, step
 
 NO_OBSTACLES = {"obstacles": {"count": 0}}
 
@@ -192,3 +192,34 @@ def test_the_unscored_simulator_flies_the_same_episodes_without_the_reward():
             np.testing.assert_array_equal(x, y)
     assert np.abs(scored.stats.total_return).sum() > 0
     assert not unscored.stats.total_return.any() and not unscored.levels.any()
+
+
+def test_a_policys_v2_layout_sees_the_other_uavs_of_a_v1_scenario():
+    from sim.observation import ObservationLayout
+
+    cfg = load_scenario("5u1o")
+    sim = SwarmSim(cfg)
+    state = sim.initial_state(np.random.default_rng(0), 4)
+    layout = ObservationLayout(
+        8, cfg.sensing.range_m, cfg.sensing.aperture_rad, cfg.uav.speed_m_s, 4, 2
+    )
+    obs = sim.observe(state, layout=layout)
+    bl = layout.blocks()
+    assert obs.storage.shape == (4, 5, layout.size)
+    assert obs.storage[..., bl["neighbour_mask"]].sum(axis=-1).min() >= 1  # a swarm in formation
+    own_v1 = sim.observe(state)  # the scenario's own observation is untouched
+    assert own_v1.storage.shape[-1] == sim.obs_layout.size
+    np.testing.assert_array_equal(obs.rows, own_v1.rows[:, :, :2])
+
+
+def test_a_v2_scenario_trains_with_neighbours_in_its_observations():
+    from sim.env import make_vector_env
+
+    env = make_vector_env(
+        "3u2o", 3, sensing={"observation": 2, "max_neighbours": 2, "max_obstacles": 4}
+    )
+    obs, _ = env.reset(seed=0)
+    assert obs.shape == (3, 3, env.sim.obs_layout.size)
+    for _ in range(5):
+        obs, *_ = env.step(np.zeros((3, 3), np.float32))
+    assert np.isfinite(obs).all()

@@ -1,0 +1,415 @@
+"""Training the generalist: one shared set-encoder policy on a mixture of encounter families.
+
+Read it top to bottom. Every family of the configured suites (`GeneralistConfig.suites`) is a
+*world*: its scenario with the version-2 observation (k neighbours, m intruders), flown by
+ceil(agents_per_family / N) environments in the scored simulator (the reMARL reward), a share
+of them (``real_share``) in the real world (`sim.scenarios.REAL_WORLD`). One iteration steps
+every world once with the current actor plus exploration noise, stores every UAV's transition
+in one replay buffer, and takes TD3 steps (`policies.generalist`). A world's finished episodes
+restart at once with new episodes of its family, drawn from the run's own seed: the suites'
+evaluation episodes are never drawn in training.
+
+Reward: the reMARL reward (contour + Swarming, as every policy of the zoo) minus a separation
+term between UAVs of the swarm (`separation_penalty`). Terminal values as in `policies.train`:
+an arrival is the absorbing goal, a collision ends with 0.
+
+Run folder (``out``)::
+
+    config.json        the resolved GeneralistConfig and the worlds
+    last.safetensors   networks, optimiser moments, counters (resumable; written at every
+                       validation and on Ctrl-C)
+    best.safetensors   the networks of the best validation so far
+    evals.jsonl        one line per validation: success per family on validation episodes
+    events.*           TensorBoard scalars (when tensorboard is installed)
+
+The replay buffer is not saved; a resumed run refills it with the current policy first.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from numpy.typing import NDArray
+
+from policies.config import GeneralistConfig
+from policies.generalist import AgentReplay, TD3Nets, td3_update
+from policies.train import load_checkpoint, reward_upper_bound, save_checkpoint, summary_writer
+from sim.arrays import BoolArray, FloatArray
+from sim.config import ScenarioConfig
+from sim.encounters import Family, draw_episodes, family_scenario
+from sim.env import episode_metrics
+from sim.evaluation import evaluation_seed
+from sim.observation import ObservationLayout
+from sim.scenarios import REAL_WORLD
+from sim.spawn import EpisodeStart, spawn_episodes
+from sim.state import SwarmState, merge_where
+from sim.suite import load_suite
+from sim.swarm import SwarmSim
+
+CHECKPOINT_SCHEMA = 1
+"""Version of the generalist checkpoint layout."""
+
+VALIDATION_SEED = evaluation_seed(suite="training", offset=7_777)
+"""Seed of the validation episodes: neither the training stream nor a suite's."""
+
+
+def generalist_layout(cfg: GeneralistConfig, base: ScenarioConfig) -> ObservationLayout:
+    """The version-2 layout of the generalist on scenarios with ``base``'s sensing and speed."""
+    s = base.sensing
+    return ObservationLayout(
+        cfg.max_intruders, s.range_m, s.aperture_rad, base.uav.speed_m_s, cfg.max_neighbours, 2
+    )
+
+
+def with_layout(cfg: ScenarioConfig, layout: ObservationLayout) -> ScenarioConfig:
+    """``cfg`` sensing with ``layout``'s version-2 observation."""
+    sensing = dataclasses.replace(
+        cfg.sensing,
+        observation=2,
+        max_neighbours=layout.max_neighbours,
+        max_obstacles=layout.max_obstacles,
+    )
+    return dataclasses.replace(cfg, sensing=sensing)
+
+
+def separation_penalty(
+    min_u2u_m: FloatArray, d_col_m: float, weight: float, factor: float
+) -> FloatArray:
+    """The separation term (B, N) of each UAV's closest approach d to another UAV this step.
+
+    w_sep · clip((factor·d_col − d) / ((factor − 1)·d_col), 0, 1): w_sep at d_col, 0 from
+    factor·d_col on.
+    """
+    start = factor * d_col_m
+    closeness = np.clip((start - min_u2u_m) / max(start - d_col_m, 1e-9), 0.0, 1.0)
+    out: FloatArray = weight * closeness
+    return out
+
+
+@dataclass
+class World:
+    """One family of the mixture and its environments.
+
+    Attributes:
+        family: what its episodes are. cfg: its scenario (version-2 sensing). real: flown in
+        the real world. sim: its scored simulator. state: (B, N) environments. obs: (B, N, D)
+        the current observations. drawn: episodes drawn so far (the next one's index).
+    """
+
+    family: Family
+    cfg: ScenarioConfig
+    real: bool
+    sim: SwarmSim
+    state: SwarmState
+    obs: NDArray[np.float32]
+    drawn: int
+
+    @property
+    def envs(self) -> int:
+        """B."""
+        return int(self.state.pos_m.shape[0])
+
+
+def draw(family: Family, cfg: ScenarioConfig, seed: int, first: int, count: int) -> EpisodeStart:
+    """``count`` episodes of a family from index ``first`` of the stream ``seed``."""
+    if family.encounter is None:  # a scenario's own spawn
+        rng = np.random.default_rng([seed, first])
+        return spawn_episodes(cfg, rng, count)
+    return draw_episodes(family, cfg, seed, range(first, first + count))
+
+
+def make_worlds(
+    cfg: GeneralistConfig, layout: ObservationLayout, rng: np.random.Generator
+) -> list[World]:
+    """Every family of the configured suites, started (the real-world ones drawn by ``rng``)."""
+    families = [f for name in cfg.suites for f in load_suite(name).families]
+    worlds = []
+    for family in families:
+        real = bool(rng.random() < cfg.real_share)
+        if real:
+            family = dataclasses.replace(family, overrides={**family.overrides, **REAL_WORLD})
+        scenario = with_layout(family_scenario(family), layout)
+        n = scenario.uav.count
+        envs = max(1, math.ceil(cfg.agents_per_family / n))
+        sim = SwarmSim(scenario)
+        state = sim.start(draw(family, scenario, cfg.seed, 0, envs), rng)
+        obs = sim.observe(state).flat()
+        worlds.append(World(family, scenario, real, sim, state, obs, envs))
+    return worlds
+
+
+def step_world(
+    world: World,
+    actions: NDArray[np.float32],
+    cfg: GeneralistConfig,
+    goal_value: float,
+    rng: np.random.Generator,
+) -> tuple[dict[str, NDArray[Any]], list[dict[str, Any]]]:
+    """Step one world; returns its UAV transitions and the metrics of the episodes that ended.
+
+    Finished environments restart at once with the family's next episodes.
+    """
+    sim, c = world.sim, world.cfg
+    state, result = sim.step(world.state, actions, rng)
+    acted: BoolArray = result.acted
+    reward = result.reward.total - separation_penalty(
+        result.min_u2u_m, c.d_col_m, cfg.separation_weight, cfg.separation_factor
+    )
+    next_obs = result.obs.flat()
+    terminal = acted & (result.arrived | result.terminated[:, None])
+    transitions = {
+        "obs": world.obs[acted],
+        "action": actions[acted],
+        "reward": reward[acted].astype(np.float32),
+        "next_obs": next_obs[acted],
+        "terminal": terminal[acted],
+        "terminal_value": np.where(result.arrived, goal_value, 0.0)[acted].astype(np.float32),
+    }
+    done = result.terminated | result.truncated
+    ended: list[dict[str, Any]] = []
+    if done.any():
+        metrics = episode_metrics(state, result, done)
+        ended = [{k: v[i] for k, v in metrics.items()} for i in range(int(done.sum()))]
+        count = int(done.sum())
+        fresh = sim.start(draw(world.family, c, cfg.seed, world.drawn, count), rng)
+        world.drawn += count
+        state = merge_where(state, fresh, done)
+        next_obs[done] = sim.observe(fresh).flat()
+    world.state, world.obs = state, next_obs
+    return transitions, ended
+
+
+def actor_actions(nets: TD3Nets, obs: NDArray[np.float32], device: str) -> NDArray[np.float32]:
+    """Deterministic actions (...,) of the actor for flat observations (..., D)."""
+    with torch.no_grad():
+        flat = torch.from_numpy(np.ascontiguousarray(obs.reshape(-1, obs.shape[-1]))).to(device)
+        out = nets.actor(flat).cpu().numpy()
+    actions: NDArray[np.float32] = out.reshape(obs.shape[:-1]).astype(np.float32)
+    return actions
+
+
+def validate(
+    nets: TD3Nets, worlds: list[World], layout: ObservationLayout, episodes: int, device: str
+) -> dict[str, Any]:
+    """Success per family on ``episodes`` validation episodes (ideal world, unscored)."""
+    per_family: dict[str, float] = {}
+    for world in worlds:
+        if world.real:
+            continue
+        cfg = world.cfg
+        sim = SwarmSim(cfg, scored=False)
+        batch = draw(world.family, cfg, VALIDATION_SEED, 0, episodes)
+        state = sim.start(batch, np.random.default_rng(0))
+        success = np.zeros(episodes, dtype=bool)
+        finished = np.zeros(episodes, dtype=bool)
+        for _ in range(cfg.max_steps):
+            actions = actor_actions(nets, sim.observe(state).flat(), device)
+            state, result = sim.step(state, actions, np.random.default_rng(0))
+            done = (result.terminated | result.truncated) & ~finished
+            success |= done & result.success
+            finished |= done
+            if finished.all():
+                break
+        per_family[world.family.name] = float(success.mean())
+    values = list(per_family.values())
+    return {
+        "success_mean": float(np.mean(values)) if values else float("nan"),
+        "success_min": float(np.min(values)) if values else float("nan"),
+        "families": per_family,
+    }
+
+
+def resolve_device(name: str) -> str:
+    """The torch device of a `GeneralistConfig.device`: "auto" is cuda where available."""
+    if name == "auto":
+        return "cuda" if torch.cuda.is_available() else "cpu"
+    if name == "cuda" and not torch.cuda.is_available():
+        raise ValueError("device: cuda was asked for but torch sees no CUDA device")
+    return name
+
+
+def train_generalist(
+    cfg: GeneralistConfig,
+    out_dir: Path,
+    *,
+    resume: bool = False,
+    progress: Callable[[dict[str, float]], None] | None = None,
+) -> dict[str, Any]:
+    """Train (or resume) the generalist; returns the final summary.
+
+    Ctrl-C saves ``last.safetensors`` before it propagates, so the run can be resumed.
+    """
+    out_dir.mkdir(parents=True, exist_ok=True)
+    device = resolve_device(cfg.device)
+    torch.manual_seed(cfg.seed)
+    rng = np.random.default_rng(cfg.seed)
+    base = family_scenario(load_suite(cfg.suites[0]).families[0])
+    layout = generalist_layout(cfg, base)
+    worlds = make_worlds(cfg, layout, np.random.default_rng([cfg.seed, 1]))
+    nets = TD3Nets.create(layout, cfg, device)
+    buffer = AgentReplay(cfg.buffer_size, layout.size)
+    goal_value = reward_upper_bound(base, "remarl") / (1.0 - cfg.gamma)
+
+    iteration, updates, best, elapsed_before = 0, 0, -1.0, 0.0
+    last_path, best_path = out_dir / "last.safetensors", out_dir / "best.safetensors"
+    if resume and last_path.exists():
+        meta = load_checkpoint(last_path, nets)
+        iteration, updates = int(meta["iteration"]), int(meta["updates"])
+        best, elapsed_before = float(meta["best_success"]), float(meta["elapsed_s"])
+        rng = np.random.default_rng([cfg.seed, iteration])
+        for world in worlds:  # new episodes: the stream goes on where the run left it
+            world.drawn += int(meta.get("drawn", {}).get(world.family.name, 0))
+    (out_dir / "config.json").write_text(
+        json.dumps(
+            {
+                "generalist": dataclasses.asdict(cfg),
+                "layout": dataclasses.asdict(layout),
+                "worlds": [
+                    {
+                        "family": w.family.name,
+                        "uavs": w.cfg.uav.count,
+                        "envs": w.envs,
+                        "real": w.real,
+                    }
+                    for w in worlds
+                ],
+            },
+            indent=2,
+        )
+    )
+    writer = summary_writer(out_dir)
+    start = time.monotonic()
+    last_eval = start
+    warm = 0 if resume and iteration > 0 else cfg.warmup_transitions
+    recent: list[dict[str, Any]] = []
+    transitions_seen = 0
+    env_s = learn_s = 0.0
+
+    def elapsed() -> float:
+        return elapsed_before + time.monotonic() - start
+
+    def checkpoint(path: Path) -> None:
+        save_checkpoint(
+            path,
+            nets,
+            {
+                "schema": CHECKPOINT_SCHEMA,
+                "iteration": iteration,
+                "updates": updates,
+                "best_success": best,
+                "elapsed_s": elapsed(),
+                "layout": dataclasses.asdict(layout),
+                "hidden": cfg.hidden,
+                "drawn": {w.family.name: w.drawn for w in worlds},
+            },
+        )
+
+    summary: dict[str, Any] = {}
+    try:
+        while iteration < cfg.total_iterations:
+            if cfg.minutes and elapsed() >= 60 * cfg.minutes:
+                break
+            frac = min(elapsed() / max(60 * cfg.minutes, 1e-9), 1.0) if cfg.minutes else 0.0
+            sigma = cfg.noise_start + (cfg.noise_end - cfg.noise_start) * frac
+            t0 = time.perf_counter()
+            # ---- act in every world (one actor call for all of them), store, restart
+            if warm > 0:
+                actions = [rng.uniform(-1, 1, w.obs.shape[:2]).astype(np.float32) for w in worlds]
+            else:
+                flat = np.concatenate([w.obs.reshape(-1, layout.size) for w in worlds])
+                out = actor_actions(nets, flat, device)
+                out += rng.normal(0.0, sigma, out.shape).astype(np.float32)
+                np.clip(out, -1.0, 1.0, out=out)
+                sizes = np.cumsum([w.obs.shape[0] * w.obs.shape[1] for w in worlds])[:-1]
+                actions = [
+                    a.reshape(w.obs.shape[:2])
+                    for a, w in zip(np.split(out, sizes), worlds, strict=True)
+                ]
+            for world, act in zip(worlds, actions, strict=True):
+                transitions, ended = step_world(world, act, cfg, goal_value, rng)
+                buffer.add(**transitions)
+                count = len(transitions["obs"])
+                transitions_seen += count
+                warm -= count
+                for row in ended:
+                    recent.append({"family": world.family.name, **row})
+            recent = recent[-2000:]
+            iteration += 1
+            env_s += time.perf_counter() - t0
+
+            # ---- learn
+            losses: dict[str, float] = {}
+            if warm <= 0 and buffer.size >= cfg.batch_size:
+                t1 = time.perf_counter()
+                for _ in range(cfg.updates_per_iteration):
+                    updates += 1
+                    batch = buffer.sample(cfg.batch_size, rng, device)
+                    losses |= td3_update(nets, batch, cfg, updates % cfg.policy_delay == 0)
+                learn_s += time.perf_counter() - t1
+
+            # ---- log
+            if iteration % 20 == 0 and recent:
+                success = [float(r["success"]) for r in recent]
+                u2u = [float(r["collision_u2u"]) for r in recent]
+                u2o = [float(r["collision_u2o"]) for r in recent]
+                scalars = {
+                    "iteration": float(iteration),
+                    "charts/success": float(np.mean(success)),
+                    "charts/collision_u2u": float(np.mean(u2u)),
+                    "charts/collision_u2o": float(np.mean(u2o)),
+                    "charts/transitions": float(transitions_seen),
+                    "charts/noise": sigma,
+                    "perf/simulator_share": env_s / max(env_s + learn_s, 1e-9),
+                    "perf/elapsed_min": elapsed() / 60,
+                    **losses,
+                }
+                if writer is not None:
+                    for key, value in scalars.items():
+                        if math.isfinite(value):
+                            writer.add_scalar(key, value, iteration)
+                if progress is not None:
+                    progress(scalars)
+
+            # ---- validate and checkpoint
+            if time.monotonic() - last_eval >= 60 * cfg.eval_minutes:
+                last_eval = time.monotonic()
+                result = validate(nets, worlds, layout, cfg.eval_episodes, device)
+                record = {"iteration": iteration, "elapsed_s": elapsed(), **result}
+                with (out_dir / "evals.jsonl").open("a") as f:
+                    f.write(json.dumps(record) + "\n")
+                if writer is not None:
+                    writer.add_scalar("eval/success_mean", result["success_mean"], iteration)
+                    writer.add_scalar("eval/success_min", result["success_min"], iteration)
+                if result["success_mean"] >= best:
+                    best = result["success_mean"]
+                    checkpoint(best_path)
+                checkpoint(last_path)
+                summary["last_eval"] = record
+    except KeyboardInterrupt:
+        checkpoint(last_path)
+        raise
+    checkpoint(last_path)
+    if not best_path.exists():
+        checkpoint(best_path)
+    if writer is not None:
+        writer.close()
+    summary.update(
+        {
+            "iterations": iteration,
+            "updates": updates,
+            "transitions": transitions_seen,
+            "best_success": best,
+            "elapsed_s": elapsed(),
+            "out": str(out_dir),
+        }
+    )
+    return summary

@@ -1,0 +1,218 @@
+"""The generalist's torch network against its numpy twin, its invariances, and a tiny run."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import torch
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from policies.config import GeneralistConfig
+from policies.generalist import AgentReplay, SetNet, TD3Nets, td3_update
+from policies.generalist_train import separation_penalty, train_generalist
+from sim.observation import INTRUDER_COLUMNS, NEIGHBOUR_COLUMNS, ObservationLayout
+from sim.setnet import SET_LAYERS, set_actor, set_critic
+
+LAYOUT = ObservationLayout(8, 100.0, np.radians(270), 5.0, max_neighbours=6, version=2)
+
+
+def random_obs(rng: np.random.Generator, count: int, layout: ObservationLayout = LAYOUT):
+    """Flat v2 observations with random rows and random masks (masked rows zeroed)."""
+    obs = rng.normal(0, 1, (count, layout.size)).astype(np.float32)
+    bl = layout.blocks()
+    nb_mask = rng.random((count, layout.max_neighbours)) < 0.6
+    in_mask = rng.random((count, layout.max_obstacles)) < 0.5
+    obs[:, bl["neighbour_mask"]] = nb_mask
+    obs[:, bl["intruder_mask"]] = in_mask
+    nb = obs[:, bl["neighbours"]].reshape(count, -1, NEIGHBOUR_COLUMNS)
+    nb *= nb_mask[..., None]
+    it = obs[:, bl["intruders"]].reshape(count, -1, INTRUDER_COLUMNS)
+    it *= in_mask[..., None]
+    return obs
+
+
+def numpy_params(net: SetNet):
+    state = net.numpy_state()
+    return {name: (state[f"{name}.weight"], state[f"{name}.bias"]) for name in SET_LAYERS}
+
+
+def permuted(obs: np.ndarray, rng: np.random.Generator, layout: ObservationLayout = LAYOUT):
+    """The same observations with the neighbour and intruder rows (and masks) shuffled."""
+    out = obs.copy()
+    bl = layout.blocks()
+    for rows, mask, width in (
+        ("neighbours", "neighbour_mask", NEIGHBOUR_COLUMNS),
+        ("intruders", "intruder_mask", INTRUDER_COLUMNS),
+    ):
+        block = out[:, bl[rows]].reshape(len(out), -1, width)
+        order = rng.permutation(block.shape[1])
+        out[:, bl[rows]] = block[:, order].reshape(len(out), -1)
+        out[:, bl[mask]] = out[:, bl[mask]][:, order]
+    return out
+
+
+def test_torch_and_numpy_networks_agree():
+    torch.manual_seed(0)
+    rng = np.random.default_rng(0)
+    obs = random_obs(rng, 64)
+    actor, critic = SetNet(LAYOUT, 32, critic=False), SetNet(LAYOUT, 32, critic=True)
+    for p in (*actor.parameters(), *critic.parameters()):  # beyond the near-zero output init
+        torch.nn.init.normal_(p, 0.0, 0.3)
+    action = rng.uniform(-1, 1, 64).astype(np.float32)
+    with torch.no_grad():
+        a_torch = actor(torch.from_numpy(obs)).numpy()
+        q_torch = critic(torch.from_numpy(obs), torch.from_numpy(action)).numpy()
+    np.testing.assert_allclose(set_actor(numpy_params(actor), obs, LAYOUT), a_torch, atol=1e-5)
+    q_numpy = set_critic(numpy_params(critic), obs, action, LAYOUT)
+    np.testing.assert_allclose(q_numpy, q_torch, rtol=1e-4, atol=1e-4)
+
+
+@settings(max_examples=50, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1))
+def test_action_does_not_depend_on_the_order_of_rows(seed):
+    rng = np.random.default_rng(seed)
+    torch.manual_seed(seed % 1000)
+    net = SetNet(LAYOUT, 16, critic=False)
+    for p in net.parameters():
+        torch.nn.init.normal_(p, 0.0, 0.5)
+    params = numpy_params(net)
+    obs = random_obs(rng, 8)
+    shuffled = permuted(obs, rng)
+    np.testing.assert_allclose(
+        set_actor(params, shuffled, LAYOUT), set_actor(params, obs, LAYOUT), atol=1e-6
+    )
+    with torch.no_grad():
+        a = net(torch.from_numpy(obs)).numpy()
+        b = net(torch.from_numpy(shuffled)).numpy()
+    np.testing.assert_allclose(a, b, atol=1e-5)  # float32 products: rounding by position
+
+
+def test_empty_sets_and_masked_rows_count_for_nothing():
+    rng = np.random.default_rng(3)
+    net = SetNet(LAYOUT, 16, critic=False)
+    for p in net.parameters():
+        torch.nn.init.normal_(p, 0.0, 0.5)
+    params = numpy_params(net)
+    obs = random_obs(rng, 4)
+    bl = LAYOUT.blocks()
+    obs[:, bl["neighbour_mask"]] = 0.0
+    obs[:, bl["intruder_mask"]] = 0.0
+    junk = obs.copy()  # whatever a masked row holds is ignored
+    junk[:, bl["neighbours"]] = rng.normal(0, 5, junk[:, bl["neighbours"]].shape)
+    junk[:, bl["intruders"]] = rng.normal(0, 5, junk[:, bl["intruders"]].shape)
+    np.testing.assert_allclose(set_actor(params, junk, LAYOUT), set_actor(params, obs, LAYOUT))
+
+
+def test_no_neighbour_rows_at_all():
+    layout = ObservationLayout(2, 100.0, np.radians(270), 5.0, max_neighbours=0, version=2)
+    net = SetNet(layout, 8, critic=False)
+    obs = random_obs(np.random.default_rng(0), 5, layout)
+    with torch.no_grad():
+        a = net(torch.from_numpy(obs)).numpy()
+    np.testing.assert_allclose(set_actor(numpy_params(net), obs, layout), a, atol=1e-6)
+
+
+@given(
+    d=st.floats(0.0, 200.0, allow_nan=False),
+    weight=st.floats(0.0, 5.0),
+    factor=st.floats(1.01, 3.0),
+)
+def test_separation_penalty_is_bounded_and_monotone(d, weight, factor):
+    d_col = 20.0
+    p = float(separation_penalty(np.array([d]), d_col, weight, factor)[0])
+    assert 0.0 <= p <= weight + 1e-12
+    if d <= d_col:
+        assert p == pytest.approx(weight)
+    if d >= factor * d_col:
+        assert p == 0.0
+    closer = float(separation_penalty(np.array([0.9 * d]), d_col, weight, factor)[0])
+    assert closer >= p - 1e-12
+
+
+def test_td3_update_lowers_the_critic_loss_on_a_fixed_batch():
+    torch.manual_seed(0)
+    rng = np.random.default_rng(0)
+    cfg = GeneralistConfig(hidden=16, batch_size=64, critic_lr=3e-3)
+    nets = TD3Nets.create(LAYOUT, cfg, "cpu")
+    buffer = AgentReplay(256, LAYOUT.size)
+    obs = random_obs(rng, 256)
+    buffer.add(
+        obs=obs,
+        next_obs=obs,
+        action=rng.uniform(-1, 1, 256).astype(np.float32),
+        reward=rng.normal(0, 1, 256).astype(np.float32),
+        terminal=np.ones(256, dtype=bool),
+        terminal_value=np.zeros(256, dtype=np.float32),
+    )
+    batch = buffer.sample(256, rng, "cpu")
+    first = td3_update(nets, batch, cfg, update_actor=True)["losses/critic"]
+    for k in range(60):
+        last = td3_update(nets, batch, cfg, update_actor=k % 2 == 0)["losses/critic"]
+    assert last < 0.5 * first
+
+
+def test_replay_wraps_around():
+    buffer = AgentReplay(5, 3)
+    for k in range(3):
+        buffer.add(
+            obs=np.full((3, 3), k, np.float32),
+            next_obs=np.zeros((3, 3), np.float32),
+            action=np.zeros(3, np.float32),
+            reward=np.full(3, k, np.float32),
+            terminal=np.zeros(3, bool),
+            terminal_value=np.zeros(3, np.float32),
+        )
+    assert buffer.size == 5 and buffer.pos == 4
+    assert sorted(buffer.reward.tolist()) == [1, 1, 2, 2, 2]
+
+
+TINY_SUITE = """
+name = "tiny"
+episodes = 2
+
+[[family]]
+name = "crossing-2u"
+distribution = "crossing"
+uavs = 2
+formation = "line"
+
+[[family]]
+name = "paper-2u1o"
+distribution = "scenario"
+scenario = "2u1o"
+"""
+
+
+def test_tiny_generalist_run_trains_checkpoints_and_resumes(tmp_path):
+    suite = tmp_path / "tiny.toml"
+    suite.write_text(TINY_SUITE)
+    cfg = GeneralistConfig(
+        suites=(str(suite),),
+        agents_per_family=4,
+        hidden=8,
+        batch_size=32,
+        buffer_size=5_000,
+        warmup_transitions=40,
+        updates_per_iteration=1,
+        minutes=0.0,
+        total_iterations=30,
+        eval_minutes=1e-6,
+        eval_episodes=2,
+        real_share=0.5,
+        device="cpu",
+    )
+    out = tmp_path / "run"
+    summary = train_generalist(cfg, out)
+    assert summary["iterations"] == 30 and summary["updates"] > 0
+    assert (out / "last.safetensors").is_file() and (out / "best.safetensors").is_file()
+    evals = [json.loads(line) for line in (out / "evals.jsonl").read_text().splitlines()]
+    assert evals and set(evals[-1]["families"]) <= {"crossing-2u", "paper-2u1o"}
+    worlds = json.loads((out / "config.json").read_text())["worlds"]
+    assert [w["envs"] for w in worlds] == [2, 2]
+    again = train_generalist(
+        GeneralistConfig(**{**cfg.__dict__, "total_iterations": 35}), out, resume=True
+    )
+    assert again["iterations"] == 35 and again["updates"] > summary["updates"]
