@@ -8,11 +8,16 @@ checksum over all of it (`sim.policy_file`, the format shared with the loader
 `remarl_fc.policy_io`). A file is checked against that format before it is written, and written
 atomically, so the exporter never leaves a file the loader would refuse.
 
+`export_generalist` writes a generalist (a set network, `sim.setnet`, over the version-2
+observation, for any number of UAVs in a range: schema 2) from its actor's and critic's state
+dicts.
+
 Files written before checksums existed get one with `rehash_policy`, or from the shell::
 
     python -m policies.export --rehash FILE [FILE ...]
 
-This module imports torch only inside `export_policy`, so rehashing works without it.
+This module imports torch only inside `export_policy`, so rehashing (and `export_generalist`
+from numpy arrays) works without it.
 """
 
 from __future__ import annotations
@@ -32,6 +37,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from policies.config import DDPGConfig
+from sim.config import ScenarioConfig
 from sim.errors import RemarlError
 from sim.observation import ObservationLayout
 from sim.policy_file import (
@@ -49,6 +55,7 @@ from sim.scenarios import load_scenario
 __all__ = [
     "POLICY_SCHEMA",
     "Rehash",
+    "export_generalist",
     "export_policy",
     "read_policy_file",
     "rehash_policy",
@@ -81,8 +88,6 @@ def export_policy(
         checkpoint: "best" or "last".
         metrics: evaluation figures to embed (e.g. the eval JSON of the shipped policy).
     """
-    import torch
-
     from policies.ddpg import DDPGNets
     from policies.train import load_checkpoint
 
@@ -94,10 +99,10 @@ def export_policy(
     agents = 1 if ddpg.shared else cfg.uav.count
     nets = DDPGNets.create(agents, layout.size, ddpg)
     meta_ckpt = load_checkpoint(run_dir / f"{checkpoint}.safetensors", nets)
-    tensors: dict[str, NDArray[np.float32]] = {}
-    for prefix, module in (("actor", nets.actor), ("critic", nets.critic)):
-        for key, value in module.state_dict().items():
-            tensors[f"{prefix}.{key}"] = value.detach().cpu().contiguous().to(torch.float32).numpy()
+    tensors = {
+        **_prefixed("actor", nets.actor.state_dict()),
+        **_prefixed("critic", nets.critic.state_dict()),
+    }
     meta = build_metadata(
         cfg,
         shared=ddpg.shared,
@@ -107,6 +112,61 @@ def export_policy(
         metrics=_finite_or_null(metrics or {}),
     )
     return write_policy(out, tensors, meta)
+
+
+def export_generalist(
+    out: Path,
+    actor_state: Mapping[str, Any],
+    critic_state: Mapping[str, Any] | None,
+    *,
+    base_cfg: ScenarioConfig,
+    hidden: int,
+    uav_range: tuple[int, int],
+    reward: str,
+    training: Mapping[str, Any],
+    metrics: Mapping[str, Any] | None = None,
+) -> dict[str, Any]:
+    """Write a signed generalist file ``out`` (atomically); returns the metadata written.
+
+    Args:
+        actor_state, critic_state: ``state_dict()`` of `policies.generalist.SetNet` (torch
+            tensors) or numpy arrays: ``<layer>.weight`` (1, in, out), ``<layer>.bias``
+            (1, 1, out) for each of `sim.setnet.SET_LAYERS`; no critic: None.
+        base_cfg: the scenario it was trained (or is published) with; its ``sensing`` is the
+            version-2 observation the policy reads (``observation = 2``, ``max_neighbours``),
+            its ``uav.count`` inside ``uav_range``.
+        hidden: units of every hidden layer. uav_range: (fewest, most) UAVs it flies.
+        reward: the reward it was trained on. training: ``steps`` and ``seed`` (and
+            ``commit``: this checkout's where absent). metrics: evaluation figures.
+
+    Raises:
+        PolicyFileError: the metadata or tensors are not a valid generalist (nothing written),
+            e.g. a base scenario of observation version 1, or weights of other shapes.
+    """
+    tensors = _prefixed("actor", actor_state)
+    if critic_state is not None:
+        tensors |= _prefixed("critic", critic_state)
+    meta = build_metadata(
+        base_cfg,
+        shared=True,
+        hidden=hidden,
+        reward=reward,
+        training={"commit": _commit(), **training},
+        metrics=_finite_or_null(metrics or {}),
+        network="set",
+        uavs=uav_range,
+    )
+    return write_policy(out, tensors, meta)
+
+
+def _prefixed(prefix: str, state: Mapping[str, Any]) -> dict[str, NDArray[np.float32]]:
+    """``prefix.<key>`` → float32 C-ordered numpy array, from torch tensors or arrays."""
+    out = {}
+    for key, value in state.items():
+        if hasattr(value, "detach"):  # a torch tensor (torch itself not imported here)
+            value = value.detach().cpu().float().numpy()
+        out[f"{prefix}.{key}"] = np.ascontiguousarray(value, dtype=np.float32)
+    return out
 
 
 def _finite_or_null(value: Any) -> Any:

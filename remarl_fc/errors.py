@@ -9,6 +9,7 @@ converted where they enter (``raise X from exc``), so callers need to know only 
      │    └── SigningKeyError                a MAVLink signing key file that cannot be used
      ├── PolicyError                         a policy file that cannot be used
      │    ├── PolicySpecMismatch             ... for this scenario or vehicle set
+     │    │    └── PolicyUavRangeMismatch    ... for this number of UAVs (a generalist)
      │    └── PolicyFileInvalid              ... failing a check of its format, schema, weights
      │         └── PolicyChecksumFailed      ... with no checksum or a wrong one
      ├── LinkError                           a MAVLink link that cannot be used
@@ -36,6 +37,7 @@ __all__ = [
     "PolicyError",
     "PolicyFileInvalid",
     "PolicySpecMismatch",
+    "PolicyUavRangeMismatch",
     "RemarlError",
     "ScenarioError",
     "SigningKeyError",
@@ -70,6 +72,23 @@ class PolicySpecMismatch(PolicyError):
             source=source,
         )
         self.field, self.expected, self.actual = field, expected, actual
+
+
+class PolicyUavRangeMismatch(PolicySpecMismatch):
+    """A policy for a range of swarm sizes (a generalist) asked to fly a number outside it.
+
+    ``field`` is "number of UAVs", ``expected`` the (fewest, most) it flies, ``actual`` N.
+    """
+
+    def __init__(self, source: str, uavs: tuple[int, int], actual: int) -> None:
+        low, high = uavs
+        PolicyError.__init__(
+            self,
+            f"{actual} UAVs here but the policy flies {low} to {high}; fly it with {low} to "
+            f"{high} UAVs or use a policy trained for {actual} (remarl-fc train)",
+            source=source,
+        )
+        self.field, self.expected, self.actual = "number of UAVs", uavs, actual
 
 
 class PolicyFileInvalid(PolicyError):

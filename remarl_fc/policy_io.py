@@ -8,10 +8,17 @@ bad key named); the checksum is there and matches; the tensor names, dtypes and 
 metadata and every weight is finite and within ±`sim.policy_file.WEIGHT_BOUND`. With
 `Policy.check_scenario`, the scenario it is asked to fly. A file that fails any of these is a
 `PolicyFileInvalid` (a `PolicyError`) whose one-line message says what to do.
+
+Two kinds of policy run here, with one API (`Policy.act`, `Policy.q_values`): the per-agent MLPs
+of the zoo (version-1 observation, exactly ``agents`` UAVs) and generalists (`Policy.generalist`:
+one set network, `sim.setnet`, for any number of UAVs in `Policy.uav_range`). A generalist
+brings its own observation layout (`Policy.layout`, version 2): the caller builds observations
+with it (``SwarmSim.observe(state, layout=policy.layout)``), whatever the scenario's sensing.
 """
 
 from __future__ import annotations
 
+import functools
 import importlib.util
 import re
 from dataclasses import dataclass
@@ -26,6 +33,7 @@ from remarl_fc.errors import (
     PolicyError,
     PolicyFileInvalid,
     PolicySpecMismatch,
+    PolicyUavRangeMismatch,
 )
 from sim.config import ScenarioConfig
 from sim.observation import ObservationLayout
@@ -37,9 +45,14 @@ from sim.policy_file import (
     PolicyChecksumError,
     PolicyFileError,
     PolicyUnsignedError,
+    network_layers,
+    network_of,
+    observation_layout,
     read_policy_file,
+    uav_range,
     verify_policy,
 )
+from sim.setnet import set_actor, set_critic
 
 __all__ = [
     "ACTOR_LAYERS",
@@ -121,20 +134,55 @@ class Policy:
         return str(self.meta.get(CHECKSUM_KEY, ""))
 
     @property
+    def generalist(self) -> bool:
+        """True for a set network over the version-2 observation (any N in `uav_range`)."""
+        return network_of(self.meta) == "set"
+
+    @property
+    def uav_range(self) -> tuple[int, int]:
+        """(fewest, most) UAVs the policy flies: (agents, agents) for a zoo MLP."""
+        return uav_range(self.meta)
+
+    @property
     def agents(self) -> int:
-        """N, the UAVs the policy flies."""
-        return int(self.meta["agents"])
+        """N, the UAVs the policy flies; for a generalist, the most it flies (`uav_range`)."""
+        return self.uav_range[1] if self.generalist else int(self.meta["agents"])
 
     @property
     def layout(self) -> ObservationLayout:
-        """The observation layout the policy expects."""
-        o = self.meta["observation"]
-        return ObservationLayout(
-            int(o["max_obstacles"]),
-            float(o["range_m"]),
-            float(o["aperture_rad"]),
-            float(o["speed_m_s"]),
-        )
+        """The observation layout the policy expects (version 2, with k, for a generalist)."""
+        return observation_layout(self.meta)
+
+    def _check_uavs(self, n: int) -> None:
+        """Raise `PolicySpecMismatch` unless the policy flies ``n`` UAVs."""
+        if not self.generalist:
+            if n != self.agents:
+                raise PolicySpecMismatch(self.source, "number of UAVs", self.agents, n)
+            return
+        low, high = self.uav_range
+        if not low <= n <= high:
+            raise PolicyUavRangeMismatch(self.source, (low, high), n)
+
+    def _generalist_obs(self, obs: NDArray[np.floating[Any]]) -> NDArray[np.float32]:
+        """``obs`` (..., N, D) as float32, once N and D are checked."""
+        x = np.asarray(obs, dtype=np.float32)
+        self._check_uavs(x.shape[-2])
+        size = self.layout.size
+        if x.shape[-1] != size:
+            raise PolicySpecMismatch(self.source, "observation size", size, x.shape[-1])
+        return x
+
+    @functools.cached_property
+    def _actor64(self) -> dict[str, tuple[NDArray[np.float64], NDArray[np.float64]]]:
+        """The actor's weights as float64, converted once (`sim.setnet` computes in float64)."""
+        return {k: (w.astype(np.float64), b.astype(np.float64)) for k, (w, b) in self.actor.items()}
+
+    @functools.cached_property
+    def _critic64(self) -> dict[str, tuple[NDArray[np.float64], NDArray[np.float64]]]:
+        """The critic's weights as float64, converted once."""
+        return {
+            k: (w.astype(np.float64), b.astype(np.float64)) for k, (w, b) in self.critic.items()
+        }
 
     def _weights(self, layer: tuple[NDArray[np.float32], NDArray[np.float32]], n: int) -> Any:
         w, b = layer
@@ -143,11 +191,19 @@ class Policy:
         return w, b[:, 0]
 
     def act(self, obs: NDArray[np.floating[Any]]) -> NDArray[np.float32]:
-        """Normalised actions (..., N) in [−1, 1] for flat observations (..., N, D)."""
+        """Normalised actions (..., N) in [−1, 1] for flat observations (..., N, D).
+
+        A generalist's observations are version 2 (`layout`), N any number in `uav_range`.
+
+        Raises:
+            PolicySpecMismatch: N the policy does not fly (`PolicyUavRangeMismatch` for a
+                generalist), or (a generalist) observations of another size.
+        """
+        if self.generalist:
+            return set_actor(self._actor64, self._generalist_obs(obs), self.layout)
         x = np.asarray(obs, dtype=np.float32)
         n = x.shape[-2]
-        if n != self.agents:
-            raise PolicySpecMismatch(self.source, "number of UAVs", self.agents, n)
+        self._check_uavs(n)
         w1, b1 = self._weights(self.actor["l1"], n)
         w2, b2 = self._weights(self.actor["out"], n)
         h = np.maximum(np.einsum("...nd,ndh->...nh", x, w1) + b1, 0.0)
@@ -158,6 +214,8 @@ class Policy:
         """Critic values (..., N) of actions (..., N) at flat observations (..., N, D)."""
         if not self.critic:
             raise PolicyError("this policy file holds no critic", source=self.source)
+        if self.generalist:
+            return set_critic(self._critic64, self._generalist_obs(obs), act, self.layout)
         x = np.asarray(obs, dtype=np.float32)
         a = np.asarray(act, dtype=np.float32)[..., None]
         n = x.shape[-2]
@@ -176,15 +234,21 @@ class Policy:
         return (np.einsum("...nh,nho->...no", h, w3) + b3)[..., 0]
 
     def check_scenario(self, cfg: ScenarioConfig) -> None:
-        """Raise `PolicySpecMismatch` unless ``cfg`` matches what the policy was trained on."""
-        layout = ObservationLayout.from_scenario(cfg)
-        checks = [
-            ("number of UAVs", self.agents, cfg.uav.count),
+        """Raise `PolicySpecMismatch` unless ``cfg`` matches what the policy was trained on.
+
+        A zoo MLP: the number of UAVs, dt, speed, turn limit and the scenario's observation
+        layout. A generalist: dt, speed, turn limit and N inside `uav_range`
+        (`PolicyUavRangeMismatch`), not the scenario's sensing: it brings its own layout, and the
+        caller builds its observations with `layout`.
+        """
+        self._check_uavs(cfg.uav.count)
+        checks: list[tuple[str, object, object]] = [
             ("decision step dt_s", float(self.meta["dt_s"]), cfg.dt_s),
             ("UAV speed speed_m_s", float(self.meta["speed_m_s"]), cfg.uav.speed_m_s),
             ("max_turn_rad", float(self.meta["action"]["max_turn_rad"]), cfg.uav.max_turn_rad),
-            ("observation layout", self.layout, layout),
         ]
+        if not self.generalist:
+            checks.append(("observation layout", self.layout, ObservationLayout.from_scenario(cfg)))
         for field, expected, actual in checks:
             if expected != actual:
                 raise PolicySpecMismatch(self.source, field, expected, actual)
@@ -213,9 +277,10 @@ def load_policy(name_or_path: str | Path) -> Policy:
             return {}  # only the critic may be absent (verified)
         return {n: (tensors[w], tensors[b]) for n, (w, b) in zip(names, keys, strict=True)}
 
+    actor_layers, critic_layers = network_layers(meta)
     return Policy(
         source=source,
         meta=meta,
-        actor=layers("actor", ACTOR_LAYERS),
-        critic=layers("critic", CRITIC_LAYERS),
+        actor=layers("actor", actor_layers),
+        critic=layers("critic", critic_layers),
     )

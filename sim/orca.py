@@ -5,8 +5,9 @@ A classical, hand-written baseline: no learning, no field. Per decision step eve
 1. lists C = K + 1 candidate heading changes: K evenly spaced over [−a_max, a_max] (0 included)
    and the turn that points it at its target, clipped to the turn limit;
 2. predicts its own motion for each candidate: the constant-turn-rate arc the simulator flies
-   during the first step (`sim.kinematics`, sampled at `ARC_SEGMENTS` chords), then straight
-   flight on the arc's final heading — the swept arc, not only the velocity held at its end;
+   during the first step (`sim.prediction`, sampled at its `ARC_SEGMENTS` chords), then
+   straight flight on the arc's final heading — the swept arc, not only the velocity held at
+   its end;
 3. checks every candidate against every sensed obstacle and every other active UAV (below);
 4. flies the free candidate whose final heading is nearest the goal heading (the direction to
    its own target); when none is free, see *No free candidate*.
@@ -82,6 +83,7 @@ from numpy.typing import NDArray
 from sim.arrays import BoolArray, FloatArray, IntArray
 from sim.config import ScenarioConfig
 from sim.kinematics import sinc_series, wrap_angle
+from sim.prediction import TINY, closest_approach, displacements, time_points
 from sim.state import SwarmState
 
 HORIZON_S = 10.0
@@ -118,10 +120,6 @@ obstacles spawn 60–100 m apart, the gap between their R-discs shrinks as 60 �
 UAV that no longer fits sidesteps into its wingmen (sweep, defaults otherwise: 100 / 100 / 99.2
 / 99.2% mean success at 0 / 1 / 2.5 / 5 m; plain ORCA 98.2 / 99.0 / 96.1 / 94.7%)."""
 
-ARC_SEGMENTS = 4
-"""Chords per predicted arc (the first decision step): the chord of a 5 m sub-arc turning by at
-most π/16 lies within L·a_max/(8·4²) = 0.12 m of the arc at the defaults."""
-
 RIGHT_OF_WAY_BIAS_RAD = 1e-6
 """Added to the goal-heading error of left (counter-clockwise) turns, rad: breaks exact ties
 toward the right-hand turn (the rules of the air) without changing any other choice — far below
@@ -130,9 +128,6 @@ any heading difference that matters, far above float64 rounding of angles near �
 CLOSING_TOLERANCE_M = 1e-6
 """An obstacle already inside R counts as closing in only when its closest approach falls below
 its current distance by more than this, metres (float64 rounding of the distance itself)."""
-
-TINY = 1e-12
-"""Floor of lengths and squared lengths that divide, in their units (m, m/s, m², m²/s²)."""
 
 
 @dataclass(frozen=True)
@@ -256,7 +251,7 @@ def obstacle_clearance(
     """(B, N, C) min over sensed obstacles of (closest approach over [0, τ_o] − R), +inf if none.
 
     The relative position r(t) = (p_A − p_o) + d_A(t) − v_o·t of every sensed (UAV, obstacle)
-    pair, candidate and instant, (S, C, P), is piecewise linear in t between `_time_points`.
+    pair, candidate and instant, (S, C, P), is piecewise linear in t between `time_points`.
     Only the S sensed pairs are computed (gathered by index, no loop): most of the N·M are not.
     An obstacle already inside R gets its current distance as radius: "do not close in
     further".
@@ -276,15 +271,15 @@ def obstacle_clearance(
     env, uav, obs = np.nonzero(sensed)  # the S sensed pairs
     if env.size:
         pair = (env, uav, obs)
-        times = _time_points(cfg.dt_s, horizon_s)  # (P,)
-        dx, dy = _displacements(
+        times = time_points(cfg.dt_s, horizon_s)  # (P,)
+        dx, dy = displacements(
             heading[env, uav], turn_rad[env, uav], cfg.uav.speed_m_s, cfg.dt_s, horizon_s
         )  # (S, C, P)
         w = state.obstacle_vel_m_s[env, obs]  # (S, 2)
         rx = (cx[pair][:, None] - w[:, 0, None] * times)[:, None] + dx
         ry = (cy[pair][:, None] - w[:, 1, None] * times)[:, None] + dy
         radius = np.minimum(radius_m, dist[pair] - CLOSING_TOLERANCE_M)
-        per_obstacle[pair] = _closest_approach(rx, ry) - radius[:, None]
+        per_obstacle[pair] = closest_approach(rx, ry) - radius[:, None]
     clearance: FloatArray = per_obstacle.min(axis=2, initial=np.inf)
     return clearance
 
@@ -385,33 +380,6 @@ def orca_lines(
     return point, direction, counts
 
 
-def _time_points(dt_s: float, horizon_s: float) -> FloatArray:
-    """(P,) instants of the predicted motion, seconds: the arc's chords, then τ."""
-    arc = np.linspace(0.0, dt_s, ARC_SEGMENTS + 1)
-    return np.append(arc, horizon_s) if horizon_s > dt_s else arc
-
-
-def _displacements(
-    heading_rad: FloatArray, turn_rad: FloatArray, speed_m_s: float, dt_s: float, horizon_s: float
-) -> tuple[FloatArray, FloatArray]:
-    """Own displacement (x, y), each (..., C, P), of every candidate at `_time_points`.
-
-    The arc of the first step as the simulator flies it (chord L·u·sinc(u·a/2) along
-    h + u·a/2), then straight on heading h + a at the same speed until τ.
-    """
-    u = np.linspace(0.0, 1.0, ARC_SEGMENTS + 1)  # (S + 1,)
-    half = 0.5 * turn_rad[..., None] * u  # (..., C, S + 1); |half| ≤ a_max/2 ≤ π/4
-    chord = speed_m_s * dt_s * u * sinc_series(half)
-    direction = heading_rad[..., None, None] + half
-    dx, dy = chord * np.cos(direction), chord * np.sin(direction)
-    if horizon_s > dt_s:
-        final = heading_rad[..., None] + turn_rad  # (B, N, C)
-        rest = speed_m_s * (horizon_s - dt_s)
-        dx = np.concatenate([dx, (dx[..., -1] + rest * np.cos(final))[..., None]], axis=-1)
-        dy = np.concatenate([dy, (dy[..., -1] + rest * np.sin(final))[..., None]], axis=-1)
-    return dx, dy
-
-
 def _mean_velocity(
     heading_rad: FloatArray, turn_rad: FloatArray, speed_m_s: float, dt_s: float, horizon_s: float
 ) -> tuple[FloatArray, FloatArray]:
@@ -427,17 +395,3 @@ def _mean_velocity(
     vx = (chord * np.cos(arc_heading) + rest * np.cos(final)) / horizon_s
     vy = (chord * np.sin(arc_heading) + rest * np.sin(final)) / horizon_s
     return vx, vy
-
-
-def _closest_approach(rx: FloatArray, ry: FloatArray) -> FloatArray:
-    """Closest distance to the origin of piecewise-linear paths (..., P) → (...), closed form.
-
-    On each segment r0 + u·Δ, u ∈ [0, 1], the closest point has u* = clip(−r0·Δ/|Δ|², 0, 1).
-    """
-    x0, y0 = rx[..., :-1], ry[..., :-1]
-    ddx, ddy = rx[..., 1:] - x0, ry[..., 1:] - y0
-    dd = np.maximum(ddx * ddx + ddy * ddy, TINY)
-    u = np.clip(-(x0 * ddx + y0 * ddy) / dd, 0.0, 1.0)
-    qx, qy = x0 + u * ddx, y0 + u * ddy
-    closest: FloatArray = np.sqrt((qx * qx + qy * qy).min(axis=-1))
-    return closest

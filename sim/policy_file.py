@@ -7,7 +7,10 @@ loader, `remarl_fc.policy_io` (the flight path), may not import `policies` or to
 
 A policy file is safetensors: float32 tensors ``actor.*`` (and optionally ``critic.*``) with a
 leading agent dimension (1 when parameters are shared), and one JSON string under the header key
-``remarl_policy`` (`METADATA_KEY`): the metadata of `metadata_problems`. Its ``checksum``
+``remarl_policy`` (`METADATA_KEY`): the metadata of `metadata_problems`. The metadata's
+``network`` says which layers there are: "mlp" (`ACTOR_LAYERS`, `CRITIC_LAYERS`; what a
+schema-1 file implies) or "set" (`sim.setnet.SET_LAYERS` for both, shapes from
+`sim.setnet.set_shapes`, leading dimension 1: one network for any number of UAVs). Its ``checksum``
 (`CHECKSUM_KEY`) is ``"sha256:"`` and the hex digest of `policy_checksum`: SHA-256 over every
 tensor (name, dtype, shape, raw bytes, in sorted name order) and over the canonical JSON of the
 metadata without the checksum, so any change to a weight or a metadata value shows.
@@ -49,18 +52,25 @@ from sim.policy_checksum import (
 )
 from sim.policy_metadata import (
     METADATA_KEY,
+    NETWORKS,
     POLICY_SCHEMA,
+    POLICY_SCHEMAS,
     REQUIRED_KEYS,
+    SCHEMA_2_KEYS,
     PolicyFormatError,
     PolicySchemaError,
     build_metadata,
     check_metadata,
     metadata_problems,
+    network_of,
+    observation_layout,
     parse_metadata,
     scenario_config,
     scenario_hash,
+    uav_range,
 )
 from sim.policy_problems import PolicyFileError, Problem
+from sim.setnet import SET_LAYERS, set_shapes
 
 WEIGHT_BOUND = 1e4
 """Largest |weight| a policy file may hold.
@@ -98,18 +108,31 @@ class PolicyWeightsError(PolicyTensorError):
     )
 
 
+def network_layers(meta: Mapping[str, Any]) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    """(actor layers, critic layers) of valid metadata's ``network``."""
+    if network_of(meta) == "set":
+        return SET_LAYERS, SET_LAYERS
+    return ACTOR_LAYERS, CRITIC_LAYERS
+
+
 def expected_shapes(meta: Mapping[str, Any]) -> dict[str, tuple[int, ...]]:
     """Tensor name → shape that valid metadata implies (actor and critic)."""
-    a = 1 if meta["shared"] else int(meta["agents"])
-    d, h = int(meta["observation"]["size"]), int(meta["hidden"])
-    layers = {
-        "actor.l1": (d, h),
-        "actor.out": (h, 1),
-        "critic.obs_l": (d, h),
-        "critic.act_l": (1, h),
-        "critic.l2": (2 * h, h),
-        "critic.out": (h, 1),
-    }
+    h = int(meta["hidden"])
+    if network_of(meta) == "set":
+        a = 1
+        layers = {f"actor.{k}": v for k, v in set_shapes(h, critic=False).items()}
+        layers |= {f"critic.{k}": v for k, v in set_shapes(h, critic=True).items()}
+    else:
+        a = 1 if meta["shared"] else int(meta["agents"])
+        d = int(meta["observation"]["size"])
+        layers = {
+            "actor.l1": (d, h),
+            "actor.out": (h, 1),
+            "critic.obs_l": (d, h),
+            "critic.act_l": (1, h),
+            "critic.l2": (2 * h, h),
+            "critic.out": (h, 1),
+        }
     shapes: dict[str, tuple[int, ...]] = {}
     for layer, (n_in, n_out) in layers.items():
         shapes[f"{layer}.weight"] = (a, n_in, n_out)
@@ -120,8 +143,13 @@ def expected_shapes(meta: Mapping[str, Any]) -> dict[str, tuple[int, ...]]:
 def tensor_problems(tensors: Mapping[str, NDArray[Any]], meta: Mapping[str, Any]) -> list[Problem]:
     """Missing, unexpected, non-float32 or misshapen tensors (``meta`` must be valid)."""
     shapes = expected_shapes(meta)
+    layers = ", ".join(dict.fromkeys(n.split(".")[1] for n in shapes))
     problems = [
-        Problem(name, "unexpected tensor (this remarl-fc reads actor.* and critic.* only)")
+        Problem(
+            name,
+            f"unexpected tensor (a {network_of(meta)} policy holds actor.* and critic.* of the "
+            f"layers {layers})",
+        )
         for name in sorted(set(tensors) - set(shapes))
     ]
     critic = [n for n in shapes if n.startswith("critic.")]
@@ -237,8 +265,12 @@ __all__ = [
     "CHECKSUM_KEY",
     "CRITIC_LAYERS",
     "METADATA_KEY",
+    "NETWORKS",
     "POLICY_SCHEMA",
+    "POLICY_SCHEMAS",
     "REQUIRED_KEYS",
+    "SCHEMA_2_KEYS",
+    "SET_LAYERS",
     "WEIGHT_BOUND",
     "PolicyChecksumError",
     "PolicyFileError",
@@ -254,6 +286,9 @@ __all__ = [
     "check_tensors",
     "expected_shapes",
     "metadata_problems",
+    "network_layers",
+    "network_of",
+    "observation_layout",
     "parse_metadata",
     "policy_checksum",
     "read_policy_file",
@@ -261,6 +296,7 @@ __all__ = [
     "scenario_hash",
     "sign_policy",
     "tensor_problems",
+    "uav_range",
     "verify_policy",
     "weight_problems",
 ]

@@ -1,10 +1,16 @@
 """The metadata of a policy file: its keys, what each may hold, and how it is checked and built.
 
 The metadata is one JSON object under the safetensors header key ``remarl_policy``
-(`METADATA_KEY`); `metadata_problems` documents every key. `build_metadata` writes it for a
-policy trained on a scenario (`policies.export`), `check_metadata` and `scenario_config` read it
-back (`remarl_fc.policy_io`, through `sim.policy_file.verify_policy`). A header without readable
-metadata is a `PolicyFormatError`; metadata that breaks the schema, a `PolicySchemaError`.
+(`METADATA_KEY`); `metadata_problems` documents every key. Two schemas are read: 1, the zoo's
+MLPs over the version-1 observation for exactly ``agents`` UAVs, and 2, which adds ``network``
+("mlp" or "set"), ``uavs`` (the range of swarm sizes it flies) and ``observation.version``
+(a version-2 observation describes its blocks: k, m and the entries per row). `network_of`,
+`uav_range` and `observation_layout` read them, with schema 1's implied values.
+
+`build_metadata` writes the metadata of a policy trained on a scenario (`policies.export`),
+`check_metadata` and `scenario_config` read it back (`remarl_fc.policy_io`, through
+`sim.policy_file.verify_policy`). A header without readable metadata is a `PolicyFormatError`;
+metadata that breaks the schema, a `PolicySchemaError`.
 """
 
 from __future__ import annotations
@@ -19,12 +25,31 @@ from collections.abc import Mapping
 from typing import Any, get_args, get_origin, get_type_hints
 
 from sim.config import FieldValueError, ScenarioConfig
-from sim.observation import CLIP, COLUMNS, ROW_OBSTACLES, ObservationLayout
+from sim.observation import (
+    CLIP,
+    COLUMNS,
+    INTRUDER_COLUMNS,
+    NEIGHBOUR_COLUMNS,
+    ROW_OBSTACLES,
+    SELF_SIZE,
+    ObservationLayout,
+)
 from sim.policy_checksum import CHECKSUM_KEY, CHECKSUM_PREFIX
 from sim.policy_problems import Checker, PolicyFileError, Problem, show
 
-POLICY_SCHEMA = 1
-"""Version of the policy file layout this module describes (the metadata's ``schema``)."""
+POLICY_SCHEMA = 2
+"""Newest version of the policy file layout (the metadata's ``schema``).
+
+`build_metadata` writes the lowest schema that describes a policy: 1 for an MLP over the
+version-1 observation (every zoo file), 2 for a set network (a generalist). Every schema of
+`POLICY_SCHEMAS` is read."""
+
+POLICY_SCHEMAS = (1, 2)
+"""The schemas this module reads: 1 (the MLP files), 2 (adds ``network`` and ``uavs``)."""
+
+NETWORKS = ("mlp", "set")
+"""``network`` kinds: "mlp" (per-agent or shared MLP over a version-1 observation; what a
+schema-1 file implies) and "set" (`sim.setnet`, one network for any number of UAVs)."""
 
 METADATA_KEY = "remarl_policy"
 """Key of the safetensors header entry that holds the JSON metadata."""
@@ -49,8 +74,12 @@ REQUIRED_KEYS = (
     "training",
     "metrics",
 )
-"""Top-level metadata keys every policy file has; with `CHECKSUM_KEY`, the only ones allowed (an
-unknown key is a problem: it is what a damaged key name looks like)."""
+"""Top-level metadata keys every policy file has; with `CHECKSUM_KEY` (and in schema 2
+`SCHEMA_2_KEYS`), the only ones allowed (an unknown key is a problem: it is what a damaged key
+name looks like)."""
+
+SCHEMA_2_KEYS = ("network", "uavs")
+"""Top-level keys schema 2 adds (required there, unknown in schema 1)."""
 
 OBSERVATION_KEYS = (
     "max_obstacles",
@@ -63,7 +92,26 @@ OBSERVATION_KEYS = (
     "clip",
     "frame",
 )
-"""Keys of ``observation`` (all required)."""
+"""Keys of a version-1 ``observation`` (all required; schema 2 adds ``version``)."""
+
+OBSERVATION_V2_KEYS = (
+    "version",
+    "max_obstacles",
+    "max_neighbours",
+    "range_m",
+    "aperture_rad",
+    "speed_m_s",
+    "size",
+    "self_size",
+    "neighbour_size",
+    "intruder_size",
+    "clip",
+    "frame",
+)
+"""Keys of a version-2 ``observation`` (all required): block sizes instead of rows/columns."""
+
+FRAME = "heading (x ahead, y left); positions / range_m, velocities / speed_m_s"
+"""The ``observation.frame`` the writer stores (informative)."""
 
 ACTION_KEYS = ("normalised_bound", "max_turn_rad")
 """Keys of ``action`` (all required)."""
@@ -243,6 +291,41 @@ def scenario_hash(config: Mapping[str, Any]) -> str:
     return hashlib.sha256(json.dumps(config, sort_keys=True).encode()).hexdigest()
 
 
+def observation_metadata(layout: ObservationLayout, *, versioned: bool) -> dict[str, Any]:
+    """The ``observation`` metadata of a layout (keys: `metadata_problems`).
+
+    Args:
+        versioned: write ``version`` (schema 2; a schema-1 file's observation has none).
+    """
+    common = {
+        "max_obstacles": layout.max_obstacles,
+        "range_m": layout.range_m,
+        "aperture_rad": layout.aperture_rad,
+        "speed_m_s": layout.speed_m_s,
+    }
+    if layout.version == 1:
+        return {
+            **({"version": 1} if versioned else {}),
+            **common,
+            "size": layout.size,
+            "rows": layout.rows,
+            "columns": COLUMNS,
+            "clip": CLIP,
+            "frame": FRAME,
+        }
+    return {
+        "version": layout.version,
+        **common,
+        "max_neighbours": layout.max_neighbours,
+        "size": layout.size,
+        "self_size": SELF_SIZE,
+        "neighbour_size": NEIGHBOUR_COLUMNS,
+        "intruder_size": INTRUDER_COLUMNS,
+        "clip": CLIP,
+        "frame": FRAME,
+    }
+
+
 def build_metadata(
     cfg: ScenarioConfig,
     *,
@@ -251,32 +334,41 @@ def build_metadata(
     reward: str,
     training: Mapping[str, Any],
     metrics: Mapping[str, Any],
+    network: str = "mlp",
+    uavs: tuple[int, int] | None = None,
 ) -> dict[str, Any]:
     """The unsigned metadata of a policy trained on ``cfg`` (its keys: `metadata_problems`).
+
+    An MLP over the version-1 observation gets schema 1 (the metadata every zoo file has);
+    anything else schema 2, with ``network`` and ``uavs``.
 
     Args:
         shared: one set of parameters for every agent. hidden: units of every hidden layer.
         reward: the reward it was trained on. training: ``commit``, ``steps`` and ``seed``.
         metrics: evaluation figures (finite numbers or null).
+        network: "mlp" or "set" (`NETWORKS`); the observation is the scenario's
+            (``[sensing] observation``: a set network needs version 2).
+        uavs: (fewest, most) UAVs the policy flies (None: exactly ``cfg.uav.count``).
     """
     layout = ObservationLayout.from_scenario(cfg)
+    schema = 1 if network == "mlp" and layout.version == 1 else 2
     scenario = dataclasses.asdict(cfg)
-    return {
-        "schema": POLICY_SCHEMA,
+    meta: dict[str, Any] = {
+        "schema": schema,
         "scenario": cfg.name,
         "scenario_config": scenario,
         "scenario_hash": scenario_hash(scenario),
         "agents": cfg.uav.count,
+    }
+    if schema >= 2:
+        low, high = uavs if uavs is not None else (cfg.uav.count, cfg.uav.count)
+        meta["network"] = network
+        meta["uavs"] = [int(low), int(high)]
+    return {
+        **meta,
         "shared": shared,
         "hidden": hidden,
-        "observation": {
-            **dataclasses.asdict(layout),
-            "size": layout.size,
-            "rows": layout.rows,
-            "columns": COLUMNS,
-            "clip": CLIP,
-            "frame": "heading (x ahead, y left); positions / range_m, velocities / speed_m_s",
-        },
+        "observation": observation_metadata(layout, versioned=schema >= 2),
         "action": {"normalised_bound": 1.0, "max_turn_rad": cfg.uav.max_turn_rad},
         "dt_s": cfg.dt_s,
         "speed_m_s": cfg.uav.speed_m_s,
@@ -287,21 +379,142 @@ def build_metadata(
     }
 
 
+def network_of(meta: Mapping[str, Any]) -> str:
+    """The ``network`` of valid metadata: "mlp" (implied by schema 1) or "set"."""
+    return str(meta.get("network", "mlp"))
+
+
+def uav_range(meta: Mapping[str, Any]) -> tuple[int, int]:
+    """(fewest, most) UAVs a policy of valid metadata flies (schema 1: exactly ``agents``)."""
+    if "uavs" in meta:
+        low, high = meta["uavs"]
+        return int(low), int(high)
+    return int(meta["agents"]), int(meta["agents"])
+
+
+def observation_layout(meta: Mapping[str, Any]) -> ObservationLayout:
+    """The `ObservationLayout` of valid metadata's ``observation`` (version 1 where none)."""
+    o = meta["observation"]
+    return ObservationLayout(
+        int(o["max_obstacles"]),
+        float(o["range_m"]),
+        float(o["aperture_rad"]),
+        float(o["speed_m_s"]),
+        int(o.get("max_neighbours", 0)),
+        int(o.get("version", 1)),
+    )
+
+
+def _schema(meta: Mapping[str, Any], check: Checker) -> int | None:
+    """The schema of the metadata (1 where missing, noted); None for one this module can't read."""
+    readable = " or ".join(str(s) for s in POLICY_SCHEMAS)
+    if "schema" not in meta:
+        check.add("schema", f"required key is missing (expected {readable})")
+        return 1
+    value = meta["schema"]
+    if type(value) is not int or value not in POLICY_SCHEMAS:
+        check.add(
+            "schema",
+            f"this remarl-fc reads policy schema {readable}, the file has {show(value)} "
+            "(use the remarl-fc that wrote it)",
+        )
+        return None
+    return value
+
+
+def _uavs(meta: Mapping[str, Any], check: Checker) -> tuple[int, int] | None:
+    """``uavs`` as (fewest, most): two integers, 1 <= fewest <= most; else None (noted)."""
+    value = check.get(meta, "uavs", "", "[fewest, most]")
+    if "uavs" not in meta:
+        return None
+    ok = isinstance(value, list) and len(value) == 2
+    ok = ok and all(type(v) is int and v >= 1 for v in value) and value[0] <= value[1]
+    if not ok:
+        check.add(
+            "uavs", f"must be [fewest, most], integers with 1 <= fewest <= most, got {show(value)}"
+        )
+        return None
+    return int(value[0]), int(value[1])
+
+
+def _observation(obs: Mapping[str, Any], schema: int, check: Checker) -> dict[str, Any]:
+    """Check ``observation``; returns the layout fields it read (``version`` among them)."""
+    p = "observation."
+    layout: dict[str, Any] = {"version": 1}
+    if schema >= 2:
+        version = check.integer(obs, "version", p)
+        if version is not None and version not in (1, 2):
+            check.add(p + "version", f"must be 1 or 2 (sim.observation), got {show(version)}")
+            version = None
+        if version is None:
+            return {}
+        layout["version"] = version
+    v2 = layout["version"] == 2
+    keys = (
+        OBSERVATION_V2_KEYS if v2 else (*OBSERVATION_KEYS, *(("version",) if schema >= 2 else ()))
+    )
+    check.known(obs, keys, p)
+    m = check.integer(obs, "max_obstacles", p)
+    layout["range_m"] = check.number(obs, "range_m", p)
+    layout["aperture_rad"] = check.number(obs, "aperture_rad", p, high=2 * math.pi)
+    layout["speed_m_s"] = check.number(obs, "speed_m_s", p)
+    size = check.integer(obs, "size", p)
+    if v2:
+        k = check.integer(obs, "max_neighbours", p, minimum=0)
+        for key, want in (
+            ("self_size", SELF_SIZE),
+            ("neighbour_size", NEIGHBOUR_COLUMNS),
+            ("intruder_size", INTRUDER_COLUMNS),
+        ):
+            check.equal(p + key, check.integer(obs, key, p), want, f"sim.observation's {key}")
+        if m is not None and k is not None:
+            layout["max_neighbours"] = k
+            want = ObservationLayout(m, 1.0, 1.0, 1.0, k, 2).size
+            check.equal(p + "size", size, want, "8 + 9·max_neighbours + 6·max_obstacles")
+    else:
+        rows, columns = (check.integer(obs, k, p) for k in ("rows", "columns"))
+        check.equal(p + "columns", columns, COLUMNS, "the observation's columns")
+        if m is not None:
+            check.equal(p + "rows", rows, ROW_OBSTACLES + m, "2 + max_obstacles")
+            check.equal(p + "size", size, (ROW_OBSTACLES + m) * COLUMNS + m, "rows·4 + m")
+    if m is not None:
+        layout["max_obstacles"] = m
+    clip = check.number(obs, "clip", p)
+    check.equal(p + "clip", clip, CLIP, "the clip of sim.observation")
+    check.string(obs, "frame", p)
+    return layout
+
+
 def metadata_problems(meta: object) -> list[Problem]:
     """Everything wrong with a policy's metadata; empty when it is valid.
 
-    The schema (`POLICY_SCHEMA` 1; ranges as the simulator's config enforces them):
+    The schemas (`POLICY_SCHEMAS`: 1 and 2; ranges as the simulator's config enforces them):
 
-    - ``schema``: 1. ``scenario``: the scenario's name (1–255 characters, no path separator
-      or control character).
+    - ``schema``: 1 (an MLP over the version-1 observation: every zoo file) or 2 (adds
+      ``network`` and ``uavs``, and ``observation.version``). ``scenario``: the scenario's name
+      (1–255 characters, no path separator or control character).
     - ``scenario_config``: the `ScenarioConfig` as `dataclasses.asdict` writes it; it must build
-      one (every key known, typed and in range). ``scenario_hash``: `scenario_hash` of it.
-    - ``agents``: integer >= 1, = ``scenario_config.uav.count``. ``shared``: bool.
-      ``hidden``: integer >= 1 (units of every hidden layer).
-    - ``observation``: ``max_obstacles`` integer >= 1, ``range_m`` > 0, ``aperture_rad`` in
-      (0, 2π], ``speed_m_s`` > 0 (all equal to the scenario's), ``rows`` = 2 + max_obstacles,
-      ``columns`` = `COLUMNS`, ``size`` = rows·columns + max_obstacles, ``clip`` = `CLIP`,
-      ``frame`` a string.
+      one (every key known, typed and in range). ``scenario_hash``: `scenario_hash` of it. For a
+      generalist, the scenario it was trained or exported with (its ``sensing`` describes the
+      version-2 observation); it flies others (`uavs`).
+    - ``agents``: integer >= 1, = ``scenario_config.uav.count``. ``shared``: bool (true for a set
+      network). ``hidden``: integer >= 1 (units of every hidden layer).
+    - ``network`` (schema 2 only; schema 1 implies "mlp"): "mlp" (tensors `expected_shapes`'s
+      per-agent MLP, observation version 1) or "set" (`sim.setnet`, observation version 2).
+    - ``uavs`` (schema 2 only; schema 1 implies [agents, agents]): [fewest, most], integers
+      with 1 <= fewest <= most: the numbers of UAVs the policy flies; [agents, agents] for an
+      MLP, a range holding ``agents`` for a set network.
+    - ``observation``, version 1: ``max_obstacles`` integer >= 1, ``range_m`` > 0,
+      ``aperture_rad`` in (0, 2π], ``speed_m_s`` > 0 (all equal to the scenario's),
+      ``rows`` = 2 + max_obstacles, ``columns`` = `COLUMNS`, ``size`` = rows·columns +
+      max_obstacles, ``clip`` = `CLIP`, ``frame`` a string; in schema 2 also ``version`` = 1.
+    - ``observation``, version 2 (schema 2): ``version`` = 2, ``max_obstacles`` (m) integer >= 1,
+      ``max_neighbours`` (k) integer >= 0, ``range_m``, ``aperture_rad``, ``speed_m_s`` (all
+      equal to the scenario's), ``size`` = `SELF_SIZE` + 9k + 6m (`ObservationLayout.size`),
+      ``self_size`` = `SELF_SIZE`, ``neighbour_size`` = `NEIGHBOUR_COLUMNS`, ``intruder_size`` =
+      `INTRUDER_COLUMNS` (entries of the self block and per neighbour and intruder row),
+      ``clip`` = `CLIP`, ``frame`` a string. ``version`` equals the scenario's
+      ``sensing.observation`` (1 in schema 1), ``max_neighbours`` its ``sensing.max_neighbours``.
     - ``action``: ``normalised_bound`` 1.0, ``max_turn_rad`` in (0, π/2] (= the scenario's).
     - ``dt_s``, ``speed_m_s``, ``d_col_m``: finite > 0, equal to the scenario's.
     - ``reward``: a string. ``training``: ``commit`` string, ``steps`` integer >= 0, ``seed``
@@ -315,16 +528,10 @@ def metadata_problems(meta: object) -> list[Problem]:
         return [Problem(METADATA_KEY, f"must be a JSON object, got {type(meta).__name__}")]
     if not _walk(meta, check):
         return check.problems
-    if "schema" not in meta:
-        check.add("schema", f"required key is missing (expected {POLICY_SCHEMA})")
-    elif meta["schema"] != POLICY_SCHEMA or isinstance(meta["schema"], bool):
-        check.add(
-            "schema",
-            f"this remarl-fc reads policy schema {POLICY_SCHEMA}, the file has "
-            f"{show(meta['schema'])} (use the remarl-fc that wrote it)",
-        )
+    schema = _schema(meta, check)
+    if schema is None:
         return check.problems
-    check.known(meta, (*REQUIRED_KEYS, CHECKSUM_KEY))
+    check.known(meta, (*REQUIRED_KEYS, *(SCHEMA_2_KEYS if schema >= 2 else ()), CHECKSUM_KEY))
     name = check.string(meta, "scenario")
     if name is not None and not _SCENARIO_NAME.fullmatch(name):
         check.add("scenario", f"must be a scenario name (no '/'), got {show(name)}")
@@ -339,28 +546,34 @@ def metadata_problems(meta: object) -> list[Problem]:
         if digest != scenario_hash(recorded):
             check.add("scenario_hash", "does not match scenario_config (SHA-256 of its JSON)")
     agents = check.integer(meta, "agents")
-    check.boolean(meta, "shared")
+    shared = check.boolean(meta, "shared")
     check.integer(meta, "hidden")
     dt_s, speed, d_col = (check.number(meta, k) for k in ("dt_s", "speed_m_s", "d_col_m"))
     check.string(meta, "reward")
     obs = check.obj(meta, "observation")
-    layout: dict[str, Any] = {}
-    if obs is not None:
-        p = "observation."
-        check.known(obs, OBSERVATION_KEYS, p)
-        m = check.integer(obs, "max_obstacles", p)
-        layout["range_m"] = check.number(obs, "range_m", p)
-        layout["aperture_rad"] = check.number(obs, "aperture_rad", p, high=2 * math.pi)
-        layout["speed_m_s"] = check.number(obs, "speed_m_s", p)
-        rows, columns, size = (check.integer(obs, k, p) for k in ("rows", "columns", "size"))
-        check.equal(p + "columns", columns, COLUMNS, "the observation's columns")
-        if m is not None:
-            layout["max_obstacles"] = m
-            check.equal(p + "rows", rows, ROW_OBSTACLES + m, "2 + max_obstacles")
-            check.equal(p + "size", size, (ROW_OBSTACLES + m) * COLUMNS + m, "rows·4 + m")
-        clip = check.number(obs, "clip", p)
-        check.equal(p + "clip", clip, CLIP, "the clip of sim.observation")
-        check.string(obs, "frame", p)
+    layout = _observation(obs, schema, check) if obs is not None else {}
+    if schema >= 2:
+        network = check.choice(meta, "network", NETWORKS)
+        uavs = _uavs(meta, check)
+        version = layout.get("version")
+        if (
+            network is not None
+            and version is not None
+            and version != (2 if network == "set" else 1)
+        ):
+            check.add(
+                "network",
+                f"a {network} network reads observation version {2 if network == 'set' else 1}, "
+                f"the observation is version {version} (the scenario's [sensing] observation)",
+            )
+        if network == "set" and shared is False:
+            check.add("shared", "must be true for a set network (one network for every UAV)")
+        if network is not None and uavs is not None and agents is not None:
+            low, high = uavs
+            if network == "mlp" and uavs != (agents, agents):
+                check.add("uavs", f"must be [agents, agents] for an mlp, got {show(list(uavs))}")
+            elif not low <= agents <= high:
+                check.add("uavs", f"must hold agents ({agents}), got {show(list(uavs))}")
     act = check.obj(meta, "action")
     turn = None
     if act is not None:
@@ -384,22 +597,48 @@ def metadata_problems(meta: object) -> list[Problem]:
         ):
             check.add(CHECKSUM_KEY, f"must be 'sha256:' + 64 hex digits, got {show(value)}")
     if isinstance(cfg, ScenarioConfig):
-        of = "scenario_config"
-        check.equal("scenario", name, cfg.name, f"{of}.name")
-        check.equal("agents", agents, cfg.uav.count, f"{of}.uav.count")
-        check.equal("dt_s", dt_s, cfg.dt_s, f"{of}.dt_s")
-        check.equal("speed_m_s", speed, cfg.uav.speed_m_s, f"{of}.uav.speed_m_s")
-        check.equal("d_col_m", d_col, cfg.d_col_m, f"{of}.d_col_m")
-        check.equal("action.max_turn_rad", turn, cfg.uav.max_turn_rad, f"{of}.uav.max_turn_rad")
-        s = cfg.sensing
-        for key, want, what in (
-            ("max_obstacles", s.max_obstacles, "sensing.max_obstacles"),
-            ("range_m", s.range_m, "sensing.range_m"),
-            ("aperture_rad", s.aperture_rad, "sensing.aperture_rad"),
-            ("speed_m_s", cfg.uav.speed_m_s, "uav.speed_m_s"),
-        ):
-            check.equal(f"observation.{key}", layout.get(key), want, f"{of}.{what}")
+        _agrees_with_scenario(check, cfg, schema, layout, name, agents, dt_s, speed, d_col, turn)
     return check.problems
+
+
+def _agrees_with_scenario(
+    check: Checker,
+    cfg: ScenarioConfig,
+    schema: int,
+    layout: Mapping[str, Any],
+    name: str | None,
+    agents: int | None,
+    dt_s: float | None,
+    speed: float | None,
+    d_col: float | None,
+    turn: float | None,
+) -> None:
+    """Note every metadata value that differs from the scenario's (``scenario_config``)."""
+    of = "scenario_config"
+    check.equal("scenario", name, cfg.name, f"{of}.name")
+    check.equal("agents", agents, cfg.uav.count, f"{of}.uav.count")
+    check.equal("dt_s", dt_s, cfg.dt_s, f"{of}.dt_s")
+    check.equal("speed_m_s", speed, cfg.uav.speed_m_s, f"{of}.uav.speed_m_s")
+    check.equal("d_col_m", d_col, cfg.d_col_m, f"{of}.d_col_m")
+    check.equal("action.max_turn_rad", turn, cfg.uav.max_turn_rad, f"{of}.uav.max_turn_rad")
+    s = cfg.sensing
+    if schema == 1:
+        check.equal(
+            f"{of}.sensing.observation",
+            s.observation,
+            1,
+            "1 (schema 1 is the version-1 observation)",
+        )
+    for key, want, what in (
+        ("version", s.observation, "sensing.observation"),
+        ("max_obstacles", s.max_obstacles, "sensing.max_obstacles"),
+        ("max_neighbours", s.max_neighbours, "sensing.max_neighbours"),
+        ("range_m", s.range_m, "sensing.range_m"),
+        ("aperture_rad", s.aperture_rad, "sensing.aperture_rad"),
+        ("speed_m_s", cfg.uav.speed_m_s, "uav.speed_m_s"),
+    ):
+        if schema >= 2 or key != "version":
+            check.equal(f"observation.{key}", layout.get(key), want, f"{of}.{what}")
 
 
 def check_metadata(meta: object) -> dict[str, Any]:

@@ -163,6 +163,20 @@ class Checker:
             return None
         return value
 
+    def choice(
+        self, d: Mapping[str, Any], key: str, choices: Iterable[str], prefix: str = ""
+    ) -> str | None:
+        """``d[key]`` if it is one of the strings ``choices``, else None (noted)."""
+        allowed = tuple(choices)
+        expected = f"one of {', '.join(allowed)}"
+        value = self.get(d, key, prefix, expected)
+        if key not in d:
+            return None
+        if not isinstance(value, str) or value not in allowed:
+            self.add(prefix + key, f"must be {expected}, got {show(value)}")
+            return None
+        return value
+
     def known(self, d: Mapping[str, Any], keys: Iterable[str], prefix: str = "") -> None:
         """Note every key of ``d`` not in ``keys``."""
         allowed = set(keys)

@@ -36,7 +36,8 @@ SET_LAYERS = ("self", "nb1", "nb2", "in1", "in2", "l1", "l2", "out")
 POOLED = 5
 """Blocks of h entries the head reads: self, neighbours' max and mean, intruders' max and mean."""
 
-Layer = tuple[NDArray[np.float32], NDArray[np.float32]]
+Layer = tuple[NDArray[np.floating[Any]], NDArray[np.floating[Any]]]
+"""(weight (1, in, out), bias (1, 1, out)): float32 as stored, or float64 converted once."""
 
 
 def set_shapes(hidden: int, critic: bool) -> dict[str, tuple[int, int]]:
@@ -56,7 +57,7 @@ def set_shapes(hidden: int, critic: bool) -> dict[str, tuple[int, int]]:
 
 def _dense(x: NDArray[np.float64], layer: Layer, relu: bool = True) -> NDArray[np.float64]:
     w, b = layer
-    y: NDArray[np.float64] = np.matmul(x, w[0].astype(np.float64))
+    y: NDArray[np.float64] = np.matmul(x, np.asarray(w[0], dtype=np.float64))
     y += b[0, 0]
     if relu:
         np.maximum(y, 0.0, out=y)

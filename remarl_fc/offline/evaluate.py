@@ -2,7 +2,8 @@
 
 Inference is numpy (`remarl_fc.policy_io`); metrics are `sim.evaluation`'s, the same for every
 method. Reaction time is the wall time of one decision for the whole swarm (all N UAVs),
-measured on observations from the evaluation itself.
+measured on observations from the evaluation itself. A generalist observes with its own layout
+(`remarl_fc.policy_io.Policy.layout`, version 2), built from the simulator's state.
 """
 
 from __future__ import annotations
@@ -16,10 +17,12 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from remarl_fc.offline.rollout import PolicyFileAct, observe_for
 from remarl_fc.policy_io import Policy, load_policy
 from sim.config import DynamicsRandomisation, ScenarioConfig
 from sim.evaluation import run_episodes, summarize
 from sim.scenarios import load_scenario
+from sim.state import SwarmState
 from sim.swarm import SwarmSim
 
 REACTION_SAMPLES = 2000
@@ -44,6 +47,34 @@ def timed_decisions(decide: Callable[[int], object], samples: int) -> dict[str, 
         "reaction_time_median_ms": float(np.median(times) * 1e3),
         "reaction_time_p99_ms": float(np.percentile(times, 99) * 1e3),
     }
+
+
+class RecordingAct:
+    """`evaluate_policy`'s act function for `sim.evaluation.run_episodes`.
+
+    The policy's actions, the first `RECORDED` swarm observations kept (for the reaction time).
+    A generalist reads its own observation layout, not the scenario's: it takes the state
+    (``uses_state``) and observes it with `remarl_fc.offline.rollout.observe_for`.
+    """
+
+    RECORDED = 64
+
+    def __init__(self, policy: Policy, cfg: ScenarioConfig) -> None:
+        self.act = PolicyFileAct(policy)
+        self.cfg = cfg
+        self.uses_state = self.act.layout is not None
+        self.sim = SwarmSim(cfg, scored=False) if self.uses_state else None
+        self.seen: list[NDArray[np.float32]] = []
+
+    def __call__(
+        self, obs: NDArray[np.float32], state: SwarmState | None = None
+    ) -> NDArray[np.float32]:
+        """Actions (B, N) for the observations (B, N, D) (a generalist: of the state)."""
+        if self.sim is not None and state is not None:
+            obs = observe_for(self.sim, state, self.act)
+        if len(self.seen) < self.RECORDED:
+            self.seen.append(obs[0].copy())
+        return self.act.policy.act(obs)
 
 
 def world_overrides(
@@ -94,20 +125,14 @@ def evaluate_policy(
     """
     policy = load_policy(policy_name)
     cfg = evaluation_scenario(policy, scenario, overrides)
-    seen: list[NDArray[np.float32]] = []
-
-    def act(obs: NDArray[np.float32]) -> NDArray[np.float32]:
-        if len(seen) < 64:
-            seen.append(obs[0].copy())
-        return policy.act(obs)
-
+    act = RecordingAct(policy, cfg)
     rows = run_episodes(act, cfg, episodes, seed)
     result: dict[str, Any] = {
         "policy": policy.source,
         "scenario": cfg.name,
         "seed": seed,
         **summarize(rows),
-        **reaction_time_ms(policy, np.asarray(seen)),
+        **reaction_time_ms(policy, np.asarray(act.seen)),
         "uavs": cfg.uav.count,
         "dynamics": cfg.dynamics,
         "dynamics_randomised": cfg.dynamics_randomisation.randomised,
@@ -134,11 +159,12 @@ def plot_episode(
 
     cfg = evaluation_scenario(policy, scenario, overrides)
     sim = SwarmSim(cfg)
+    act = PolicyFileAct(policy)
     rng = np.random.default_rng(seed)
     state = sim.initial_state(rng, 1)
     trail, q_rows = [state.pos_m[0].copy()], []
     for _ in range(cfg.max_steps):
-        obs = sim.observe(state).flat()
+        obs = observe_for(sim, state, act)
         actions = policy.act(obs)
         q = policy.q_values(obs, actions)[0] if policy.critic else np.full(cfg.uav.count, np.nan)
         q_rows.append(np.where(state.active[0], q, np.nan))

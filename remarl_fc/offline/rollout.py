@@ -2,6 +2,10 @@
 
 A PNG shows the last frame (field contours, UAVs, obstacles, targets and the whole trails); a
 GIF animates every step. Files are written atomically (a partial file never appears).
+
+Also the act functions of the offline evaluation: `policy_by_name` (hand-written),
+`PolicyFileAct` (a loaded policy file), and `observe_for`, the observations an act function
+reads (a generalist's own layout, else the scenario's).
 """
 
 from __future__ import annotations
@@ -13,10 +17,12 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from remarl_fc.policy_io import Policy as LoadedPolicy
 from sim.config import ScenarioConfig
 from sim.env import episode_metrics
 from sim.errors import ConfigError
 from sim.heuristics import potential_field_actions, straight_actions
+from sim.observation import ObservationLayout
 from sim.orca import orca_actions
 from sim.scenarios import load_scenario
 from sim.state import SwarmState
@@ -47,6 +53,34 @@ def policy_by_name(name: str) -> Policy:
     raise ConfigError(f"unknown policy {name!r}; choose one of: {', '.join(POLICIES)}")
 
 
+class PolicyFileAct:
+    """A loaded policy file as an act function: (obs, state, cfg) → its actions (B, N).
+
+    Attributes:
+        policy: the policy. layout: the observation it reads where that is not the scenario's
+            (a generalist's version 2), None otherwise: the caller observes with `observe_for`.
+    """
+
+    def __init__(self, policy: LoadedPolicy) -> None:
+        self.policy = policy
+        self.layout: ObservationLayout | None = policy.layout if policy.generalist else None
+
+    def __call__(
+        self, obs: NDArray[np.float32], state: SwarmState, cfg: ScenarioConfig
+    ) -> NDArray[np.float32]:
+        """The policy's actions (B, N) for the observations (B, N, D) of its layout."""
+        return self.policy.act(obs)
+
+
+def observe_for(sim: SwarmSim, state: SwarmState, act: object) -> NDArray[np.float32]:
+    """(B, N, D) the flat observations ``act`` reads.
+
+    With ``act.layout`` where it has one (a `PolicyFileAct` of a generalist), else the
+    scenario's layout.
+    """
+    return sim.observe(state, layout=getattr(act, "layout", None)).flat()
+
+
 def rollout(scenario: str, policy: str, out: Path, seed: int = 0) -> dict[str, Any]:
     """Fly one episode of ``scenario`` with ``policy`` and draw it to ``out`` (.png or .gif).
 
@@ -67,7 +101,7 @@ def rollout(scenario: str, policy: str, out: Path, seed: int = 0) -> dict[str, A
     frames = [render_frame(cfg, state, 0, np.asarray(trail))] if suffix == ".gif" else []
     episode: dict[str, Any] = {}
     for _ in range(cfg.max_steps):
-        state, result = sim.step(state, act(sim.observe(state).flat(), state, cfg), rng)
+        state, result = sim.step(state, act(observe_for(sim, state, act), state, cfg), rng)
         trail.append(state.pos_m[0].copy())
         if suffix == ".gif":
             frames.append(render_frame(cfg, state, 0, np.asarray(trail)))

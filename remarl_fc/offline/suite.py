@@ -4,7 +4,8 @@ A *method* is a hand-written controller (`HAND_WRITTEN`: "straight", "potential-
 "orca"), "zoo" (per family, the zoo policy trained for that number of UAVs, where one exists),
 or a policy file (zoo name or path). A policy runs only where it fits the family (its number of
 UAVs, speed, turn limit and observation layout); elsewhere the family is "n/a" for it, with the
-reason.
+reason. A generalist fits every family whose number of UAVs is in its range, and observes with
+its own layout (`remarl_fc.offline.rollout.observe_for`).
 
 Each family runs as one batch of all its episodes in the unscored simulator (the flight and
 every metric are those of training; only the reward is not computed), from the episodes
@@ -27,7 +28,7 @@ from numpy.typing import NDArray
 
 from remarl_fc.errors import PolicyError
 from remarl_fc.offline.evaluate import timed_decisions
-from remarl_fc.offline.rollout import policy_by_name
+from remarl_fc.offline.rollout import PolicyFileAct, observe_for, policy_by_name
 from remarl_fc.policy_io import load_policy, zoo_names
 from sim.arrays import FloatArray
 from sim.config import ScenarioConfig
@@ -93,7 +94,7 @@ def resolve_method(spec: MethodSpec, family: Family, cfg: ScenarioConfig) -> tup
         policy.check_scenario(cfg)
     except PolicyError as exc:
         return None, str(exc)
-    return (lambda obs, state, c: policy.act(obs)), name
+    return PolicyFileAct(policy), name
 
 
 def run_family(
@@ -160,7 +161,7 @@ def fly_episodes(
     rows: list[dict[str, Any] | None] = [None] * batch.num_envs
     positions = [state.pos_m.copy()]
     for _ in range(cfg.max_steps):
-        state, result = sim.step(state, act(sim.observe(state).flat(), state, cfg), rng)
+        state, result = sim.step(state, act(observe_for(sim, state, act), state, cfg), rng)
         if trail:
             positions.append(state.pos_m.copy())
         done = result.terminated | result.truncated
@@ -179,7 +180,7 @@ def reaction_time(cfg: ScenarioConfig, one: EpisodeStart, act: Act) -> dict[str,
     """Median and p99 wall time (ms) of one decision for one swarm, at an episode's start."""
     sim = SwarmSim(cfg, scored=False)
     state = sim.start(one, np.random.default_rng(0))
-    obs = sim.observe(state).flat()
+    obs = observe_for(sim, state, act)
     return timed_decisions(lambda _: act(obs, state, cfg), REACTION_SAMPLES)
 
 

@@ -1,5 +1,5 @@
 """The exporter signs what it writes, never writes a file the loader would refuse, and rehashes
-files written before checksums (tensors bit for bit, metadata unchanged)."""
+files written before checksums (tensors bit for bit, metadata unchanged); generalists too."""
 
 from __future__ import annotations
 
@@ -15,7 +15,13 @@ import numpy as np
 import pytest
 from safetensors import safe_open
 from safetensors.numpy import load_file, save_file
-from tiny_policy import tiny_meta, tiny_tensors
+from tiny_policy import (
+    generalist_scenario,
+    tiny_generalist_meta,
+    tiny_generalist_tensors,
+    tiny_meta,
+    tiny_tensors,
+)
 
 from policies.export import Rehash, rehash_policy, write_policy
 from remarl_fc.policy_io import PolicyChecksumFailed, load_policy
@@ -31,6 +37,7 @@ from sim.policy_file import (
     policy_checksum,
 )
 from sim.scenarios import load_scenario
+from sim.setnet import SET_LAYERS, set_actor
 
 
 def write_old(path: Path, tensors: dict[str, np.ndarray], meta: dict[str, Any], **header: str):
@@ -261,3 +268,81 @@ def test_export_refuses_a_diverged_run(tmp_path):
         export_policy(run, out)
     assert info.value.key.startswith("critic.")
     assert not out.exists() and not out.with_name(out.name + ".part").exists()
+
+
+# ------------------------------------------------------------------------------ generalists
+
+
+def generalist_states(hidden: int = 8, seed: int = 0) -> tuple[dict[str, Any], dict[str, Any]]:
+    """An actor's and a critic's state dicts (``<layer>.weight`` / ``.bias``), in numpy."""
+    tensors = tiny_generalist_tensors(tiny_generalist_meta(hidden=hidden), seed)
+    split = {
+        net: {k.split(".", 1)[1]: v for k, v in tensors.items() if k.startswith(net + ".")}
+        for net in ("actor", "critic")
+    }
+    return split["actor"], split["critic"]
+
+
+def export_tiny_generalist(out: Path, actor, critic, **changes: Any) -> dict[str, Any]:
+    from policies.export import export_generalist
+
+    args: dict[str, Any] = {
+        "base_cfg": generalist_scenario(),
+        "hidden": 8,
+        "uav_range": (1, 50),
+        "reward": "remarl",
+        "training": {"steps": 12, "seed": 4},
+        "metrics": {"success_rate": 0.75, "min_d_u2o_m": math.nan},
+        **changes,
+    }
+    return export_generalist(out, actor, critic, **args)
+
+
+def test_export_generalist_writes_a_signed_file_that_acts_like_its_weights(tmp_path):
+    actor, critic = generalist_states()
+    out = tmp_path / "sub" / "g.safetensors"
+    meta = export_tiny_generalist(out, actor, critic)
+    assert meta["schema"] == 2 and meta["network"] == "set" and meta["uavs"] == [1, 50]
+    assert meta["metrics"] == {"success_rate": 0.75, "min_d_u2o_m": None}
+    assert meta["training"]["steps"] == 12 and meta["training"]["commit"]
+    policy = load_policy(out)
+    assert policy.meta == meta and policy.generalist and policy.uav_range == (1, 50)
+    assert [p.name for p in out.parent.iterdir()] == ["g.safetensors"]
+    obs = np.random.default_rng(0).normal(size=(4, 9, policy.layout.size)).astype(np.float32)
+    params = {n: (actor[f"{n}.weight"], actor[f"{n}.bias"]) for n in SET_LAYERS}
+    np.testing.assert_array_equal(policy.act(obs), set_actor(params, obs, policy.layout))
+    assert policy.q_values(obs, policy.act(obs)).shape == (4, 9)
+
+
+def test_export_generalist_takes_torch_tensors_and_no_critic(tmp_path):
+    torch = pytest.importorskip("torch", reason="needs the train extra")
+    actor, _ = generalist_states()
+    from_numpy = export_tiny_generalist(tmp_path / "n.safetensors", actor, None)
+    from_torch = export_tiny_generalist(
+        tmp_path / "t.safetensors",
+        {k: torch.from_numpy(v.copy()).requires_grad_() for k, v in actor.items()},
+        None,
+    )
+    assert from_torch[CHECKSUM_KEY] == from_numpy[CHECKSUM_KEY]
+    assert load_policy(tmp_path / "t.safetensors").critic == {}
+
+
+@pytest.mark.parametrize(
+    ("changes", "error", "key"),
+    [
+        ({"base_cfg": "v1"}, PolicySchemaError, "network"),
+        ({"uav_range": (4, 50)}, PolicySchemaError, "uavs"),
+        ({"hidden": 16}, PolicyTensorError, "actor.self.weight"),
+    ],
+)
+def test_export_generalist_never_writes_what_the_loader_refuses(tmp_path, changes, error, key):
+    if changes.get("base_cfg") == "v1":
+        changes = {"base_cfg": load_scenario("3u2o")}  # observation version 1
+    actor, critic = generalist_states()
+    out = tmp_path / "g.safetensors"
+    out.write_bytes(b"previous")
+    with pytest.raises(error) as info:
+        export_tiny_generalist(out, actor, critic, **changes)
+    assert info.value.key == key
+    assert out.read_bytes() == b"previous"
+    assert [p.name for p in tmp_path.iterdir()] == ["g.safetensors"]

@@ -1,16 +1,18 @@
 """Policy files are verified before they fly: format, schema, checksum, finite in-range weights.
 
 Every bad file is a `PolicyError` with a one-line message that says what to do, never another
-exception. Synthetic policies are built in numpy (no torch): the 2u1o scenario, 4 hidden units.
+exception. Synthetic policies are built in numpy (no torch): the 2u1o scenario, 4 hidden units;
+generalists (a set network for 1 to 50 UAVs, k = 6, m = 8) on the 3u2o scenario. Zoo files
+(schema 1) load and act as before.
 """
 
 from __future__ import annotations
 
 import contextlib
-import copy
 import hashlib
 import json
 import math
+import re
 import struct
 from pathlib import Path
 from typing import Any
@@ -20,9 +22,18 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from safetensors.numpy import load_file, save_file
-from tiny_policy import tiny_meta, tiny_tensors
+from tiny_policy import (
+    DELETE,
+    changed_tensors,
+    mutate,
+    tiny_generalist_meta,
+    tiny_generalist_tensors,
+    tiny_meta,
+    tiny_tensors,
+    write_tiny_generalist,
+)
 
-from remarl_fc.errors import PolicyError
+from remarl_fc.errors import PolicyError, PolicySpecMismatch, PolicyUavRangeMismatch
 from remarl_fc.policy_io import (
     PolicyChecksumFailed,
     PolicyFileInvalid,
@@ -30,6 +41,7 @@ from remarl_fc.policy_io import (
     zoo_dir,
     zoo_names,
 )
+from sim.observation import build_observations
 from sim.policy_file import (
     CHECKSUM_KEY,
     METADATA_KEY,
@@ -39,6 +51,9 @@ from sim.policy_file import (
     policy_checksum,
     verify_policy,
 )
+from sim.scenarios import load_scenario, scenario_names
+from sim.setnet import set_actor, set_critic
+from sim.swarm import SwarmSim
 
 # ------------------------------------------------------------------------------------ helpers
 
@@ -59,6 +74,15 @@ def good(tmp_path):
     meta = tiny_meta()
     tensors = tiny_tensors(meta)
     return write(tmp_path / "good.safetensors", tensors, meta), tensors, meta
+
+
+GOOD_META = tiny_meta()
+GOOD_TENSORS = tiny_tensors(GOOD_META)
+GENERALIST_META = tiny_generalist_meta(hidden=4)
+GOOD_FILES = {  # kind → (metadata, tensors): a zoo-like MLP, a generalist
+    "mlp": (GOOD_META, GOOD_TENSORS),
+    "generalist": (GENERALIST_META, tiny_generalist_tensors(GENERALIST_META)),
+}
 
 
 def one_line(exc: BaseException) -> str:
@@ -305,30 +329,28 @@ def test_weights_at_the_bound_load(tmp_path, good):
 
 
 @pytest.mark.parametrize(
-    ("change", "key", "match"),
+    ("kind", "change", "key", "match"),
     [
-        ("drop actor.out.bias", "actor.out.bias", "missing tensor"),
-        ("drop critic.l2.weight", "critic.l2.weight", "missing tensor"),
-        ("add actor.l3.weight", "actor.l3.weight", "unexpected tensor"),
-        ("float64 actor.l1.weight", "actor.l1.weight", "must be float32"),
-        ("reshape actor.l1.weight", "actor.l1.weight", "metadata says"),
-        ("reshape critic.act_l.bias", "critic.act_l.bias", "metadata says"),
+        ("mlp", "drop actor.out.bias", "actor.out.bias", "missing tensor"),
+        ("mlp", "drop critic.l2.weight", "critic.l2.weight", "missing tensor"),
+        ("mlp", "add actor.l3.weight", "actor.l3.weight", "unexpected tensor"),
+        ("mlp", "float64 actor.l1.weight", "actor.l1.weight", "must be float32"),
+        ("mlp", "reshape actor.l1.weight", "actor.l1.weight", "metadata says"),
+        ("mlp", "reshape critic.act_l.bias", "critic.act_l.bias", "metadata says"),
+        ("generalist", "drop actor.nb1.weight", "actor.nb1.weight", "missing tensor"),
+        ("generalist", "drop critic.in2.bias", "critic.in2.bias", "missing tensor"),
+        ("generalist", "add actor.obs_l.weight", "actor.obs_l.weight", "(a set policy holds"),
+        ("generalist", "float64 actor.self.weight", "actor.self.weight", "must be float32"),
+        ("generalist", "reshape actor.l1.weight", "actor.l1.weight", "says (1, 20, 4)"),
+        ("generalist", "reshape critic.l1.weight", "critic.l1.weight", "says (1, 21, 4)"),
+        ("generalist", "members actor.out.bias", "actor.out.bias", "says (1, 1, 1)"),
     ],
 )
-def test_tensors_must_fit_the_metadata(tmp_path, good, change, key, match):
-    _, tensors, meta = good
-    tensors = dict(tensors)
-    verb, name = change.split()
-    if verb == "drop":
-        del tensors[name]
-    elif verb == "add":
-        tensors[name] = np.zeros((2, 4, 4), np.float32)
-    elif verb == "float64":
-        tensors[name] = tensors[name].astype(np.float64)
-    else:
-        tensors[name] = np.zeros((*tensors[name].shape[:-1], 3), np.float32)
+def test_tensors_must_fit_the_metadata(tmp_path, kind, change, key, match):
+    meta, tensors = GOOD_FILES[kind]
+    tensors = changed_tensors(tensors, change)
     path = write(tmp_path / "t.safetensors", tensors, meta)
-    with pytest.raises(PolicyFileInvalid, match=match) as info:
+    with pytest.raises(PolicyFileInvalid, match=re.escape(match)) as info:
         load_policy(path)
     assert info.value.kind == "tensors" and info.value.key == key
     assert one_line(info.value).endswith("re-export it with remarl-fc export")
@@ -336,22 +358,6 @@ def test_tensors_must_fit_the_metadata(tmp_path, good, change, key, match):
 
 # --------------------------------------------------------------------------------- metadata
 
-
-def mutate(meta: dict[str, Any], path: str, value: Any) -> dict[str, Any]:
-    """A deep copy with ``path`` (dotted) set to ``value``, or deleted for `DELETE`."""
-    out = copy.deepcopy(meta)
-    *parents, last = path.split(".")
-    node = out
-    for p in parents:
-        node = node[p]
-    if value is DELETE:
-        del node[last]
-    else:
-        node[last] = value
-    return out
-
-
-DELETE = object()
 
 ISSUE_MUTATIONS = [
     ("agents", "three", "agents"),
@@ -366,7 +372,8 @@ MORE_MUTATIONS = [
     ("hidden", -4, "hidden"),
     ("hidden", [4], "hidden"),
     ("shared", "no", "shared"),
-    ("schema", 2, "schema"),
+    ("schema", 3, "schema"),
+    ("schema", 1.0, "schema"),
     ("schema", "1", "schema"),
     ("schema", DELETE, "schema"),
     ("scenario", "../../etc/passwd", "scenario"),
@@ -454,19 +461,16 @@ JSON_VALUES = st.recursive(
     lambda inner: st.lists(inner, max_size=3) | st.dictionaries(st.text(max_size=4), inner),
     max_leaves=6,
 )
-GOOD_META = tiny_meta()
-GOOD_TENSORS = tiny_tensors(GOOD_META)
 
 
+@pytest.mark.parametrize("kind", ["mlp", "generalist"])
 @settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(
-    path=st.sampled_from(meta_paths(GOOD_META)),
-    value=st.just(DELETE) | JSON_VALUES,
-    sign=st.booleans(),
-)
-def test_random_metadata_mutations_are_policy_errors(tmp_path_factory, path, value, sign):
-    bad = mutate(GOOD_META, path, value)
-    file = write(tmp_path_factory.mktemp("m") / "m.safetensors", GOOD_TENSORS, bad, sign=sign)
+@given(data=st.data(), value=st.just(DELETE) | JSON_VALUES, sign=st.booleans())
+def test_random_metadata_mutations_are_policy_errors(tmp_path_factory, kind, data, value, sign):
+    meta, tensors = GOOD_FILES[kind]
+    path = data.draw(st.sampled_from(meta_paths(meta)), label="path")
+    bad = mutate(meta, path, value)
+    file = write(tmp_path_factory.mktemp("m") / "m.safetensors", tensors, bad, sign=sign)
     error: PolicyFileInvalid | None = None
     try:
         policy = load_policy(file)
@@ -478,4 +482,197 @@ def test_random_metadata_mutations_are_policy_errors(tmp_path_factory, path, val
             assert error.problems and all(f"{k}: " in str(error) for k, _ in error.problems[:4])
         return
     assert metadata_problems(policy.meta) == []  # a harmless change, validly signed
-    assert policy.act(np.zeros((policy.agents, policy.layout.size))).shape == (policy.agents,)
+    for n in set(policy.uav_range):  # the zoo's: exactly its agents
+        assert policy.act(np.zeros((n, policy.layout.size))).shape == (n,)
+
+
+# ------------------------------------------------------------------------------ generalists
+
+
+@pytest.fixture(scope="module")
+def generalist(tmp_path_factory):
+    path = write_tiny_generalist(tmp_path_factory.mktemp("g") / "g.safetensors", seed=3)
+    return load_policy(path), load_file(str(path))
+
+
+def params(tensors: dict[str, np.ndarray], net: str) -> dict[str, Any]:
+    names = {k.split(".")[1] for k in tensors if k.startswith(net + ".")}
+    return {n: (tensors[f"{net}.{n}.weight"], tensors[f"{net}.{n}.bias"]) for n in names}
+
+
+def v2_observations(policy, n: int, intruders: int, seed: int = 0, envs: int = 2) -> np.ndarray:
+    """(envs, n, D) observations of a random swarm of n UAVs among ``intruders`` intruders,
+    every vehicle within 150 m (some in range, some not)."""
+    rng = np.random.default_rng(seed)
+    pos = rng.uniform(-150, 150, (envs, n, 2))
+    return build_observations(
+        policy.layout,
+        pos,
+        rng.uniform(-np.pi, np.pi, (envs, n)),
+        rng.normal(0, 10, (envs, n, 2)),
+        pos + rng.uniform(-500, 500, (envs, n, 2)),
+        pos.mean(axis=1),
+        rng.uniform(-150, 150, (envs, intruders, 2)),
+        rng.normal(0, 5, (envs, intruders, 2)),
+    ).flat()
+
+
+def test_a_generalist_round_trips(generalist):
+    policy, tensors = generalist
+    assert policy.generalist and policy.uav_range == (1, 50) and policy.agents == 50
+    assert policy.layout.version == 2 and policy.layout.max_neighbours == 6
+    assert policy.layout.max_obstacles == 8 and policy.layout.size == 110
+    assert set(policy.actor) == set(policy.critic) == set(params(tensors, "actor"))
+    obs = v2_observations(policy, 7, 5)
+    actions = policy.act(obs)
+    assert actions.dtype == np.float32 and actions.shape == (2, 7)
+    np.testing.assert_array_equal(actions, set_actor(params(tensors, "actor"), obs, policy.layout))
+    q = policy.q_values(obs, actions)
+    assert q.shape == (2, 7)
+    np.testing.assert_array_equal(
+        q, set_critic(params(tensors, "critic"), obs, actions, policy.layout)
+    )
+
+
+def test_a_generalist_ignores_the_order_of_neighbours_and_intruders(generalist):
+    policy, _ = generalist
+    blocks = policy.layout.blocks()
+    k, m = policy.layout.max_neighbours, policy.layout.max_obstacles
+    rng = np.random.default_rng(1)
+    obs = v2_observations(policy, 30, 8, seed=2, envs=3).reshape(-1, policy.layout.size)
+    assert obs[:, blocks["neighbour_mask"]].sum() > 0 and obs[:, blocks["intruder_mask"]].sum() > 0
+    assert (obs[:, blocks["intruder_mask"]] == 0).any()  # masked rows among them
+    before = policy.act(obs[:, None])
+    shuffled = obs.copy()
+    for row in shuffled:
+        for rows, mask, width, count in (
+            ("neighbours", "neighbour_mask", 8, k),
+            ("intruders", "intruder_mask", 5, m),
+        ):
+            order = rng.permutation(count)
+            row[blocks[rows]] = row[blocks[rows]].reshape(count, width)[order].reshape(-1)
+            row[blocks[mask]] = row[blocks[mask]][order]
+    assert not np.array_equal(shuffled, obs)
+    np.testing.assert_allclose(policy.act(shuffled[:, None]), before, atol=1e-6, rtol=0)
+
+
+def test_a_generalist_flies_1_to_50_uavs_among_0_to_8_intruders(generalist):
+    policy, _ = generalist
+    for n in range(1, 51):
+        for intruders in range(9):
+            actions = policy.act(v2_observations(policy, n, intruders, seed=n * 9 + intruders))
+            assert actions.shape == (2, n) and np.isfinite(actions).all()
+            assert np.abs(actions).max() <= 1.0
+
+
+def test_a_generalist_flies_the_simulators_observations_of_its_layout(generalist):
+    policy, _ = generalist
+    cfg = load_scenario("50u8o")  # observation version 1, m = 4: the policy brings its own
+    policy.check_scenario(cfg)
+    sim = SwarmSim(cfg, scored=False)
+    state = sim.initial_state(np.random.default_rng(0), 2)
+    obs = sim.observe(state, layout=policy.layout).flat()
+    assert obs.shape == (2, 50, 110) and policy.act(obs).shape == (2, 50)
+    with pytest.raises(PolicySpecMismatch, match="observation size is 28 here"):
+        policy.act(sim.observe(state).flat())
+
+
+@pytest.mark.parametrize("n", [51, 80])
+def test_a_generalist_refuses_more_uavs_than_it_flies(generalist, n):
+    policy, _ = generalist
+    with pytest.raises(PolicyUavRangeMismatch) as info:
+        policy.act(np.zeros((n, policy.layout.size), np.float32))
+    assert isinstance(info.value, PolicySpecMismatch)
+    assert info.value.field == "number of UAVs"
+    assert (info.value.expected, info.value.actual) == ((1, 50), n)
+    assert f"{n} UAVs here but the policy flies 1 to 50; fly it with 1 to 50 UAVs" in one_line(
+        info.value
+    )
+
+
+def test_a_generalist_checks_the_scenarios_size_dynamics_and_not_its_sensing(tmp_path):
+    path = write_tiny_generalist(tmp_path / "g.safetensors", uavs=(2, 5), critic=False)
+    policy = load_policy(path)
+    assert policy.critic == {} and policy.uav_range == (2, 5) and policy.agents == 5
+    for name in ("2u1o", "3u2o", "5u2o"):  # v1 sensing, other m: fine
+        policy.check_scenario(load_scenario(name))
+    for name, n in (("7u1o", 7), ("10u1o", 10)):
+        with pytest.raises(PolicyUavRangeMismatch, match=f"{n} UAVs here but the policy flies 2"):
+            policy.check_scenario(load_scenario(name))
+    with pytest.raises(PolicyUavRangeMismatch):
+        policy.act(np.zeros((1, policy.layout.size)))
+    for override, field in (
+        ({"dt_s": 0.5}, "decision step dt_s"),
+        ({"uav": {"speed_m_s": 12.0}}, "UAV speed speed_m_s"),
+    ):
+        with pytest.raises(PolicySpecMismatch) as info:
+            policy.check_scenario(load_scenario("3u2o", **override))
+        assert info.value.field == field
+    with pytest.raises(PolicyError, match="no critic"):
+        policy.q_values(np.zeros((3, policy.layout.size)), np.zeros(3))
+
+
+@pytest.mark.parametrize(
+    ("change", "kind", "key"),
+    [
+        ("nan critic.l2.weight", "weights", "critic.l2.weight"),
+        ("meta uavs", "schema", "uavs"),
+        ("meta observation.max_neighbours", "schema", "observation.max_neighbours"),
+        ("meta network", "schema", "network"),
+    ],
+)
+def test_a_bad_generalist_file_names_what_is_wrong(tmp_path, change, kind, key):
+    meta = tiny_generalist_meta()
+    tensors = tiny_generalist_tensors(meta)
+    verb, name = change.split()
+    if verb == "meta":
+        meta = mutate(meta, name, {"uavs": [50, 1], "network": "rnn"}.get(name, -2))
+    else:
+        tensors = changed_tensors(tensors, change)
+    with pytest.raises(PolicyFileInvalid) as info:
+        load_policy(write(tmp_path / "bad.safetensors", tensors, meta))
+    assert info.value.kind == kind and info.value.key == key, info.value.problems
+    one_line(info.value)
+
+
+def test_a_corrupt_generalist_is_a_checksum_error(tmp_path):
+    path = write_tiny_generalist(tmp_path / "g.safetensors")
+    raw = bytearray(path.read_bytes())
+    raw[-5] ^= 1 << 6
+    path.write_bytes(bytes(raw))
+    with pytest.raises(PolicyChecksumFailed, match="checksum mismatch"):
+        load_policy(path)
+
+
+# ------------------------------------------------------------------------ the zoo, unchanged
+
+
+def mlp_forward(tensors: dict[str, np.ndarray], obs: np.ndarray) -> np.ndarray:
+    """The zoo's actor, written out: per agent, tanh(relu(x W1 + b1) W2 + b2)."""
+    w1, b1 = tensors["actor.l1.weight"], tensors["actor.l1.bias"]
+    w2, b2 = tensors["actor.out.weight"], tensors["actor.out.bias"]
+    n = obs.shape[-2]
+    out = np.empty(obs.shape[:-1], np.float32)
+    for i in range(n):
+        a = 0 if w1.shape[0] == 1 else i
+        h = np.maximum(obs[..., i, :] @ w1[a] + b1[a, 0], 0.0)
+        out[..., i] = np.tanh(h @ w2[a] + b2[a, 0])[..., 0]
+    return out
+
+
+@pytest.mark.parametrize("name", [n for n in zoo_names() if n in scenario_names()])
+def test_zoo_policies_are_mlps_that_act_as_before(name):
+    policy = load_policy(name)
+    assert not policy.generalist and policy.meta["schema"] == 1
+    assert policy.uav_range == (policy.agents, policy.agents)
+    assert policy.layout.version == 1 and policy.layout.max_neighbours == 0
+    cfg = load_scenario(name)
+    policy.check_scenario(cfg)
+    sim = SwarmSim(cfg, scored=False)
+    state = sim.initial_state(np.random.default_rng(0), 3)
+    obs = sim.observe(state).flat()
+    tensors = load_file(str(zoo_dir() / f"{name}.safetensors"))
+    np.testing.assert_allclose(policy.act(obs), mlp_forward(tensors, obs), atol=1e-6)
+    with pytest.raises(PolicySpecMismatch, match="number of UAVs") as info:
+        policy.act(np.zeros((policy.agents + 1, policy.layout.size), np.float32))
+    assert not isinstance(info.value, PolicyUavRangeMismatch)

@@ -3,6 +3,7 @@
 import json
 
 import pytest
+from tiny_policy import write_tiny_generalist
 
 from remarl_fc.cli import main
 
@@ -185,3 +186,19 @@ def test_the_whole_smoke_suite_for_one_method(capsys):
     assert all(r["success_rate"] == 1.0 for r in paper)  # ORCA's 100 % on the paper's scenarios
     overtaken = next(r for r in out["results"] if r["family"] == "overtaken-3u")
     assert overtaken["collision_rate_u2o"] == 1.0  # hit from behind, outside its aperture
+
+
+def test_a_generalist_runs_on_every_family_its_range_holds(capsys, tmp_path):
+    """Its own version-2 layout on the families' version-1 scenarios; N outside: n/a."""
+    path = write_tiny_generalist(tmp_path / "g.safetensors", uavs=(1, 5))
+    argv = ["eval", "--suite", "smoke", "--policy", str(path)]
+    out = run_json(capsys, [*argv, "--families", "head-on-1u,paper-3u2o,paper-7u1o"])
+    cells = {r["family"]: r for r in out["results"]}
+    for family, uavs in (("head-on-1u", 1), ("paper-3u2o", 3)):
+        cell = cells[family]
+        assert cell["applicable"] and cell["uavs"] == uavs and cell["episodes"] == 3
+        assert cell["method"] == f"policy:{path}" and cell["policy"] == str(path)
+        assert 0.0 <= cell["success_rate"] <= 1.0 and cell["reaction_time_median_ms"] > 0
+    refused = cells["paper-7u1o"]
+    assert not refused["applicable"]
+    assert "7 UAVs here but the policy flies 1 to 5" in refused["reason"]

@@ -1,0 +1,158 @@
+"""One decision of a generalist, timed: observation building and the set network, numpy only.
+
+The swarm is the 50u8o scenario's (50 UAVs, 8 intruders; `tools/bench_decide.py` takes others),
+flown straight (zero actions) until its first collision, and each of those states again with the
+intruders moved in among the UAVs (`crowded`), so every UAV sees up to all 8: decisions cycle
+over both. The policy is a generalist of the
+shipped size (hidden 64, k = 6 neighbour and m = 8 intruder rows) with random weights: the
+timings depend on the network's size, not its weights. A decision is what the offline
+evaluation and the flight runtime do for one swarm at one step: every UAV's version-2
+observation (`sim.swarm.SwarmSim.observe` with the policy's layout) and the actor
+(`remarl_fc.policy_io.Policy.act`, i.e. `sim.setnet.set_actor`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from remarl_fc.policy_io import Policy
+from sim.config import ScenarioConfig
+from sim.policy_file import build_metadata, expected_shapes, network_layers
+from sim.scenarios import load_scenario
+from sim.state import SwarmState
+from sim.swarm import SwarmSim
+
+SHIPPED_HIDDEN = 64
+"""Hidden units of the shipped generalist."""
+
+SHIPPED_NEIGHBOURS = 6
+"""k, neighbour rows of the shipped generalist."""
+
+SHIPPED_INTRUDERS = 8
+"""m, intruder rows of the shipped generalist."""
+
+SHIPPED_UAVS = (1, 50)
+"""Swarm sizes the shipped generalist flies."""
+
+
+def random_generalist(
+    cfg: ScenarioConfig,
+    *,
+    hidden: int = SHIPPED_HIDDEN,
+    neighbours: int = SHIPPED_NEIGHBOURS,
+    intruders: int = SHIPPED_INTRUDERS,
+    seed: int = 0,
+) -> Policy:
+    """A generalist (actor only, weights N(0, 0.1²)) of this size for ``cfg``'s UAVs."""
+    sensing = dataclasses.replace(
+        cfg.sensing, observation=2, max_neighbours=neighbours, max_obstacles=intruders
+    )
+    base = dataclasses.replace(cfg, sensing=sensing)
+    uavs = (min(SHIPPED_UAVS[0], cfg.uav.count), max(SHIPPED_UAVS[1], cfg.uav.count))
+    meta = build_metadata(
+        base,
+        shared=True,
+        hidden=hidden,
+        reward="none",
+        training={"commit": "bench", "steps": 0, "seed": seed},
+        metrics={},
+        network="set",
+        uavs=uavs,
+    )
+    rng = np.random.default_rng(seed)
+    shapes = expected_shapes(meta)
+
+    def draw(name: str) -> NDArray[np.float32]:
+        return rng.normal(0.0, 0.1, shapes[name]).astype(np.float32)
+
+    actor_layers, _ = network_layers(meta)
+    actor = {n: (draw(f"actor.{n}.weight"), draw(f"actor.{n}.bias")) for n in actor_layers}
+    return Policy(source="random generalist", meta=meta, actor=actor, critic={})
+
+
+def episode_states(cfg: ScenarioConfig, seed: int = 0) -> tuple[SwarmSim, list[SwarmState]]:
+    """The states of one episode of ``cfg`` flown straight (zero actions), one per step."""
+    sim = SwarmSim(cfg, scored=False)
+    rng = np.random.default_rng(seed)
+    state = sim.initial_state(rng, 1)
+    states = [state]
+    for _ in range(cfg.max_steps):
+        state, result = sim.step(state, np.zeros((1, cfg.uav.count)), rng)
+        if result.terminated[0] or result.truncated[0]:
+            break
+        states.append(state)
+    return sim, states
+
+
+def crowded(state: SwarmState, rng: np.random.Generator) -> SwarmState:
+    """``state`` with each intruder moved 20–60 m from a random UAV (in everyone's midst)."""
+    b, n, _ = state.pos_m.shape
+    m = state.obstacle_pos_m.shape[1]
+    near = state.pos_m[:, rng.integers(0, n, m)]  # (B, M, 2)
+    angle = rng.uniform(0.0, 2 * np.pi, (b, m))
+    radius = rng.uniform(20.0, 60.0, (b, m))[..., None]
+    offset = radius * np.stack([np.cos(angle), np.sin(angle)], axis=-1)
+    return dataclasses.replace(state, obstacle_pos_m=near + offset)
+
+
+def _percentiles(times: NDArray[np.float64], prefix: str) -> dict[str, float]:
+    return {
+        f"{prefix}_median_ms": float(np.median(times) * 1e3),
+        f"{prefix}_p99_ms": float(np.percentile(times, 99) * 1e3),
+    }
+
+
+def bench_decide(
+    scenario: str = "50u8o",
+    *,
+    samples: int = 2000,
+    hidden: int = SHIPPED_HIDDEN,
+    neighbours: int = SHIPPED_NEIGHBOURS,
+    intruders: int = SHIPPED_INTRUDERS,
+    seed: int = 0,
+) -> dict[str, Any]:
+    """Median and p99 (ms) of one decision (observations + actor) for one swarm.
+
+    Also each part alone: ``observe_*`` (the version-2 observations of every UAV) and ``act_*``
+    (the actor on them). Decisions cycle over the states of one straight episode.
+    """
+    cfg = load_scenario(scenario)
+    policy = random_generalist(
+        cfg, hidden=hidden, neighbours=neighbours, intruders=intruders, seed=seed
+    )
+    layout = policy.layout
+    sim, flown = episode_states(cfg, seed)
+    rng = np.random.default_rng(seed)
+    states = flown + [crowded(s, rng) for s in flown]
+    decide, observe, act = np.empty(samples), np.empty(samples), np.empty(samples)
+    sensed = 0
+    for k in range(samples):
+        state = states[k % len(states)]
+        t0 = time.perf_counter()
+        obs = sim.observe(state, layout=layout).flat_shared()
+        t1 = time.perf_counter()
+        policy.act(obs)
+        t2 = time.perf_counter()
+        observe[k], act[k], decide[k] = t1 - t0, t2 - t1, t2 - t0
+        if k < len(states):
+            sensed = max(sensed, int(obs[..., layout.blocks()["intruder_mask"]].sum(-1).max()))
+    return {
+        "scenario": cfg.name,
+        "uavs": cfg.uav.count,
+        "intruders": cfg.obstacles.count,
+        "hidden": hidden,
+        "max_neighbours": neighbours,
+        "max_obstacles": intruders,
+        "observation_size": layout.size,
+        "states": len(states),
+        "most_intruders_in_one_observation": sensed,
+        "samples": samples,
+        **_percentiles(decide, "decision"),
+        **_percentiles(observe, "observe"),
+        **_percentiles(act, "act"),
+    }

@@ -1,0 +1,61 @@
+"""Time one decision of a generalist for a whole swarm: observations and actor, numpy only.
+
+50 UAVs and 8 intruders (the 50u8o scenario) against a generalist of the shipped size (hidden
+64, k = 6 neighbour rows, m = 8 intruder rows); see `remarl_fc.bench.decide`. Prints the median
+and p99 of a decision and of each part, in milliseconds.
+
+    OMP_NUM_THREADS=1 python tools/bench_decide.py [--scenario 50u8o] [--samples 2000] [--json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+from remarl_fc.bench.decide import (
+    SHIPPED_HIDDEN,
+    SHIPPED_INTRUDERS,
+    SHIPPED_NEIGHBOURS,
+    bench_decide,
+)
+
+
+def main() -> None:
+    """Run the benchmark and print its figures."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--scenario", default="50u8o", help="the swarm and its intruders")
+    parser.add_argument("--samples", type=int, default=2000, help="timed decisions")
+    parser.add_argument("--hidden", type=int, default=SHIPPED_HIDDEN)
+    parser.add_argument("--neighbours", type=int, default=SHIPPED_NEIGHBOURS, help="k")
+    parser.add_argument("--intruders", type=int, default=SHIPPED_INTRUDERS, help="m")
+    parser.add_argument("--json", action="store_true", help="print the result as JSON")
+    args = parser.parse_args()
+    result = bench_decide(
+        args.scenario,
+        samples=args.samples,
+        hidden=args.hidden,
+        neighbours=args.neighbours,
+        intruders=args.intruders,
+    )
+    if args.json:
+        print(json.dumps(result, indent=2))
+        return
+    print(
+        f"{result['scenario']}: {result['uavs']} UAVs, {result['intruders']} intruders; "
+        f"generalist hidden {result['hidden']}, k = {result['max_neighbours']}, "
+        f"m = {result['max_obstacles']} (observation {result['observation_size']} entries); "
+        f"{result['samples']} decisions over {result['states']} states"
+    )
+    for part, label in (
+        ("decision", "decision (observe + act)"),
+        ("observe", "  observations"),
+        ("act", "  actor"),
+    ):
+        print(
+            f"{label:<26} median {result[f'{part}_median_ms']:7.3f} ms   "
+            f"p99 {result[f'{part}_p99_ms']:7.3f} ms"
+        )
+
+
+if __name__ == "__main__":
+    main()
