@@ -59,6 +59,10 @@ class VehicleProfile:
     max_yaw_rate_rad_s: float = math.radians(60.0)
     """Cap on the yaw rate, rad/s (file key max_yaw_rate_deg_s)."""
 
+    can_hover: bool = True
+    """The vehicle can slow down and stop in the air (a multirotor); the paper's ideal UAV flies
+    at its constant speed (the safety shield only turns it)."""
+
     fit_rms_m_s: float = 0.0
     """RMS horizontal velocity error of the fit on its traces, m/s (a record, not a setting)."""
 

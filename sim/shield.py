@@ -1,0 +1,471 @@
+"""The runtime assurance shield: the policy proposes, a simple checked rule keeps separation.
+
+A Simplex-style monitor around any controller (a learned policy, the potential field, ORCA):
+for every UAV at every decision it predicts, over a look-ahead ``horizon_s``,
+
+* its own motion under each candidate decision — a heading change over the coming step flown
+  as the simulator flies it (the constant-turn-rate arc, then straight on its final heading:
+  `sim.prediction`), at full speed and, where the vehicle can slow down (a multirotor), at
+  lower speeds down to a hover for the coming step, on at the cruise speed after it;
+* every intruder it knows of, straight at constant velocity from its track, with a position
+  uncertainty that grows with the age of the report and the time predicted ahead
+  (``track_growth_m_s``);
+* every neighbouring UAV of the swarm on its committed arc: the decision the swarm's controller
+  proposes for it this step (the swarm shares its decisions), at its commanded speed (0 while
+  it hovers where it arrived);
+
+and computes, in closed form per piecewise-linear segment, each candidate's closest approach to
+each of them (the "bands" of detect-and-avoid systems such as NASA's DAIDALUS, over the
+candidates a turn-limited UAV can fly). The policy's action passes when its closest approach
+stays ≥ d_col + ``margin_m`` (plus the intruder's uncertainty) over the horizon; otherwise the
+shield flies the passing heading change nearest to the proposed one at full speed, then (where
+the vehicle can slow down) the fastest slower speed with a passing heading, nearest first; when
+nothing passes, the candidate with the largest clearance (closest approach minus what is
+required). Segments after a UAV reaches its target (at its distance over the cruise speed) are
+not checked: it leaves, or hovers where nothing of the swarm is headed.
+
+Modes: "off" (the proposal is flown, nothing computed), "monitor" (computed and recorded, never
+changes the proposal), "on". Everything is batched over (B environments, N UAVs, K candidates,
+J threats, P time points) in numpy, with no Python loop over UAVs, candidates or threats.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from sim.arrays import BoolArray, FloatArray
+from sim.config import ScenarioConfig
+from sim.prediction import displacements, segment_closest_sq, time_points
+from sim.sensors import picture
+from sim.state import SwarmState
+from sim.vehicle import load_profile
+
+ShieldMode = Literal["off", "monitor", "on"]
+SHIELD_MODES: tuple[ShieldMode, ...] = ("off", "monitor", "on")
+
+
+@dataclass(frozen=True)
+class ShieldConfig:
+    """Settings of the shield (`remarl-fc eval/fly --shield`, ``--shield-horizon``, ...)."""
+
+    mode: ShieldMode = "off"
+    """"off", "monitor" (record what the shield would do, never change the action) or "on"."""
+
+    horizon_s: float = 10.0
+    """Look-ahead of every check, seconds (5 decision steps at the paper's 2 s: an intruder at
+    15 m/s closing head-on with a UAV at 5 m/s covers the 100 m sensing range in 5 s)."""
+
+    margin_m: float = 2.5
+    """Required clearance beyond d_col, metres: covers the chord error of the predicted arcs
+    and a vehicle's lag behind its commanded arc; well below the 1.5·d_col spacing formations
+    keep, so a swarm flying its formation never trips the shield on itself."""
+
+    headings: int = 21
+    """Candidate heading changes, evenly spaced over [−a_max, a_max] (odd: 0 included), besides
+    the proposed one."""
+
+    slow_fractions: tuple[float, ...] = (0.5, 0.0)
+    """Speeds tried after every full-speed candidate failed, as fractions of the cruise speed,
+    fastest first (0: hover); only where the vehicle can slow down."""
+
+    track_growth_m_s: float = 0.5
+    """Growth of an intruder's position uncertainty per second of report age and of prediction,
+    m/s: added to the required clearance."""
+
+    neighbours: int = 8
+    """Nearest other UAVs each UAV checks its candidates against."""
+
+    def __post_init__(self) -> None:
+        if self.mode not in SHIELD_MODES:
+            raise ValueError(f"shield mode must be one of {', '.join(SHIELD_MODES)}")
+        for name in ("horizon_s", "track_growth_m_s", "margin_m"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise ValueError(f"shield {name} must be a finite number >= 0, got {value!r}")
+        if self.horizon_s <= 0:
+            raise ValueError("shield horizon_s must be > 0")
+        if self.headings < 3 or self.headings % 2 == 0:
+            raise ValueError(f"shield headings must be odd and >= 3, got {self.headings}")
+        if any(not 0.0 <= f < 1.0 for f in self.slow_fractions):
+            raise ValueError("shield slow_fractions must be in [0, 1)")
+        if self.neighbours < 0:
+            raise ValueError("shield neighbours must be >= 0")
+
+
+@dataclass(frozen=True)
+class ShieldDecision:
+    """What the shield decided for every UAV, (B, N) each.
+
+    Attributes:
+        action: the normalised heading change to fly (the proposal where the shield let it
+            pass, or in monitor mode).
+        speed_m_s: the speed to fly it at (the cruise speed unless the shield slowed down).
+        intervened: the proposal did not pass (in monitor mode: the shield would have changed
+            it) — deciding UAVs only.
+        safe_exists: some candidate passes.
+        proposed_cpa_m: predicted closest approach of the proposal to any threat (+inf: none).
+        flown_cpa_m: the same for the decision flown (what the shield would fly, in monitor
+            mode).
+        shield_action, shield_speed_m_s: what the shield would fly (= action and speed_m_s when
+            on).
+    """
+
+    action: NDArray[np.float32]
+    speed_m_s: FloatArray
+    intervened: BoolArray
+    safe_exists: BoolArray
+    proposed_cpa_m: FloatArray
+    flown_cpa_m: FloatArray
+    shield_action: NDArray[np.float32]
+    shield_speed_m_s: FloatArray
+
+
+@dataclass(frozen=True)
+class Threats:
+    """What one decision knows of the other vehicles.
+
+    Attributes:
+        intruder_pos_m, intruder_vel_m_s: (B, M, 2) intruders at the decision time.
+        intruder_known: (B, M) the intruders known at all (a track, or sensed).
+        intruder_age_s: (B, M) age of each intruder's report, seconds (0 for exact sensing).
+    """
+
+    intruder_pos_m: FloatArray
+    intruder_vel_m_s: FloatArray
+    intruder_known: BoolArray
+    intruder_age_s: FloatArray
+
+
+@dataclass(frozen=True)
+class Swarm:
+    """The swarm at one decision, (B, N) per UAV.
+
+    Attributes:
+        pos_m: (B, N, 2) positions. heading_rad: commanded headings. target_m: (B, N, 2).
+        deciding: the UAVs this decision is for (flying). present: the UAVs the others must
+        keep clear of (flying, or hovering where they arrived). speed_m_s: each UAV's speed
+        along its committed arc (0 while hovering).
+    """
+
+    pos_m: FloatArray
+    heading_rad: FloatArray
+    target_m: FloatArray
+    deciding: BoolArray
+    present: BoolArray
+    speed_m_s: FloatArray
+
+
+@dataclass(frozen=True)
+class Vehicle:
+    """The constants of the swarm's vehicles.
+
+    Attributes:
+        d_col_m: collision distance. dt_s: decision step. max_turn_rad: heading change of a
+        full action. cruise_m_s: full speed. can_slow: the vehicle may fly slower, down to a
+        hover (a multirotor).
+    """
+
+    d_col_m: float
+    dt_s: float
+    max_turn_rad: float
+    cruise_m_s: float
+    can_slow: bool = True
+
+
+def shield(
+    cfg: ShieldConfig,
+    vehicle: Vehicle,
+    swarm: Swarm,
+    threats: Threats,
+    proposed: NDArray[np.floating],
+) -> ShieldDecision:
+    """Check the proposed actions (B, N) and decide what to fly (the module docstring)."""
+    prop = np.clip(np.asarray(proposed, dtype=np.float64), -1.0, 1.0)
+    b, n = prop.shape
+    cruise = vehicle.cruise_m_s
+    full = np.full((b, n), cruise)
+    if cfg.mode == "off":
+        inf = np.full((b, n), np.inf)
+        no = np.zeros((b, n), dtype=bool)
+        act = prop.astype(np.float32)
+        return ShieldDecision(act, full, no, ~no, inf, inf, act, full)
+
+    dt, horizon = vehicle.dt_s, max(cfg.horizon_s, vehicle.dt_s)
+    times = time_points(dt, horizon)  # (P,)
+    a_max = vehicle.max_turn_rad
+    deciding = swarm.deciding
+    paths = _threat_paths(cfg, vehicle, swarm, threats, prop, times, required_m(cfg, vehicle))
+
+    # 1. The proposal of every UAV at full speed: most pass, and their decision is made.
+    unit_x, unit_y = displacements(swarm.heading_rad, prop[..., None] * a_max, 1.0, dt, horizon)
+    clear, cpa = _clearance(unit_x, unit_y, cruise, swarm, paths, dt, cruise)
+    proposed_cpa = cpa[..., 0]
+    fails = deciding & (clear[..., 0] < 0.0)
+    turn, speed, flown_cpa = prop.copy(), full.copy(), proposed_cpa.copy()
+    found = ~fails
+    if fails.any():
+        # 2. The failing UAVs' bands: every heading change at full speed, then slower ones.
+        grid = np.broadcast_to(np.linspace(-1.0, 1.0, cfg.headings), (b, n, cfg.headings))
+        unit_x, unit_y = displacements(swarm.heading_rad, grid * a_max, 1.0, dt, horizon)
+        theirs = paths.of(fails)
+        best = clear[..., 0].copy()  # the largest clearance so far (the fallback's)
+        fallback = (prop.copy(), full.copy(), proposed_cpa.copy())
+        speeds = [cruise]
+        if vehicle.can_slow:
+            speeds += [f * cruise for f in cfg.slow_fractions]
+        for v in speeds:  # fastest first, each batched over every UAV, heading and threat
+            todo = fails & ~found
+            if not todo.any():
+                break
+            c, d = _clearance(unit_x, unit_y, v, swarm, theirs.of(todo), dt, cruise)
+            ok = (c >= 0.0) & todo[..., None]
+            pick = np.where(ok, np.abs(grid - prop[..., None]), np.inf).argmin(axis=-1)
+            now = ok.any(axis=-1)
+            turn = np.where(now, _at(grid, pick), turn)
+            flown_cpa = np.where(now, _at(d, pick), flown_cpa)
+            speed = np.where(now, v, speed)
+            found = found | now
+            top = c.argmax(axis=-1)
+            better = todo & ~now & (_at(c, top) > best)
+            best = np.where(better, _at(c, top), best)
+            fallback = (
+                np.where(better, _at(grid, top), fallback[0]),
+                np.where(better, v, fallback[1]),
+                np.where(better, _at(d, top), fallback[2]),
+            )
+        # 3. Nothing passes: the largest clearance.
+        turn = np.where(found, turn, fallback[0])
+        speed = np.where(found, speed, fallback[1])
+        flown_cpa = np.where(found, flown_cpa, fallback[2])
+
+    shield_action = turn.astype(np.float32)
+    if cfg.mode == "monitor":
+        act, flown_speed = prop.astype(np.float32), full
+    else:
+        act, flown_speed = shield_action, speed
+    return ShieldDecision(
+        action=act,
+        speed_m_s=flown_speed,
+        intervened=fails,
+        safe_exists=found,
+        proposed_cpa_m=np.where(deciding, proposed_cpa, np.inf),
+        flown_cpa_m=np.where(deciding, flown_cpa, np.inf),
+        shield_action=shield_action,
+        shield_speed_m_s=speed,
+    )
+
+
+def required_m(cfg: ShieldConfig, vehicle: Vehicle) -> float:
+    """The separation every check requires before uncertainty: d_col + margin, metres."""
+    return vehicle.d_col_m + cfg.margin_m
+
+
+def _at(values: FloatArray, index: NDArray[np.intp]) -> FloatArray:
+    """values[..., index] for (B, N, K) values and (B, N) indices."""
+    out: FloatArray = np.take_along_axis(values, index[..., None], -1)[..., 0]
+    return out
+
+
+def _clearance(
+    unit_x: FloatArray,
+    unit_y: FloatArray,
+    speed_m_s: float,
+    swarm: Swarm,
+    paths: ThreatPaths,
+    dt_s: float,
+    cruise_m_s: float,
+) -> tuple[FloatArray, FloatArray]:
+    """(clearance, closest approach), each (B, N, K), of the candidates flown at one speed.
+
+    ``unit_x``, ``unit_y`` (B, N, K, P): each candidate's displacement at 1 m/s (a
+    displacement scales with the speed). Clearance: the smallest (distance − required) over
+    every threat and segment; +inf with no threat (and the closest approach +inf too).
+    """
+    b, n, k, _ = unit_x.shape
+    times = paths.times
+    clearance = np.full((b, n, k), np.inf)
+    cpa_sq = np.full((b, n, k), np.inf)
+    owner = paths.owner
+    if not len(owner):
+        return clearance, np.sqrt(cpa_sq)
+    env, uav = np.divmod(owner, n)
+    # Time first from here on: every segment operation runs over contiguous blocks.
+    rx = _flown(np.moveaxis(unit_x[env, uav], -1, 0), speed_m_s, cruise_m_s)  # (P, S, K)
+    rx += (swarm.pos_m[env, uav, 0] - paths.x)[..., None]
+    ry = _flown(np.moveaxis(unit_y[env, uav], -1, 0), speed_m_s, cruise_m_s)
+    ry += (swarm.pos_m[env, uav, 1] - paths.y)[..., None]
+    seg = segment_closest_sq(rx, ry)  # (P − 1, S, K)
+    # Segments after the UAV reaches its target are not checked.
+    gap = swarm.target_m[env, uav] - swarm.pos_m[env, uav]
+    to_go = np.hypot(gap[:, 0], gap[:, 1]) / cruise_m_s
+    skipped = times[:-1, None] >= np.maximum(to_go, dt_s)  # (P − 1, S)
+    seg[skipped] = np.inf
+    pair_cpa = seg.min(axis=0)  # (S, K)
+    np.sqrt(seg, out=seg)
+    seg -= paths.need[..., None]
+    pair_clear = seg.min(axis=0)
+    # Per UAV: the worst pair (the pairs come grouped by owner, in order).
+    starts = np.flatnonzero(np.r_[True, owner[1:] != owner[:-1]])
+    owners = owner[starts]
+    clearance.reshape(b * n, k)[owners] = np.minimum.reduceat(pair_clear, starts, axis=0)
+    cpa_sq.reshape(b * n, k)[owners] = np.minimum.reduceat(pair_cpa, starts, axis=0)
+    return clearance, np.sqrt(cpa_sq)
+
+
+def _flown(unit: FloatArray, speed_m_s: float, cruise_m_s: float) -> FloatArray:
+    """Displacements (P, ...) of a candidate flown at ``speed_m_s`` from its 1 m/s ones.
+
+    The arc at that speed over the coming step, then on at the cruise speed: slowing down (or
+    stopping) holds for one step and the next decision goes on, so a stop never hides a
+    conflict beyond the horizon by standing in an intruder's way.
+    """
+    out: FloatArray = unit * speed_m_s
+    if speed_m_s != cruise_m_s and len(unit) > 1:
+        out[-1] = out[-2] + (unit[-1] - unit[-2]) * cruise_m_s
+    return out
+
+
+@dataclass(frozen=True)
+class ThreatPaths:
+    """Every (UAV, threat) pair to check and the threat's predicted path.
+
+    Attributes:
+        times: (P,) the time points. owner: (S,) b·N + i of each pair's UAV, non-decreasing.
+        x, y: (P, S) the threat's position at each time point. need: (P − 1, S) the distance
+        each segment requires.
+    """
+
+    times: FloatArray
+    owner: NDArray[np.intp]
+    x: FloatArray
+    y: FloatArray
+    need: FloatArray
+
+    def of(self, uavs: BoolArray) -> ThreatPaths:
+        """The pairs of the UAVs selected by ``uavs`` (B, N) alone."""
+        keep = uavs.reshape(-1)[self.owner]
+        return ThreatPaths(
+            self.times, self.owner[keep], self.x[:, keep], self.y[:, keep], self.need[:, keep]
+        )
+
+
+def _threat_paths(
+    cfg: ShieldConfig,
+    vehicle: Vehicle,
+    swarm: Swarm,
+    threats: Threats,
+    proposed: FloatArray,
+    times: FloatArray,
+    required: float,
+) -> ThreatPaths:
+    """The (UAV, threat) pairs that can come within the required distance, and their paths.
+
+    Sorted by UAV. Most of the N·M and N·N pairs are far apart: gathered away, they cost
+    nothing.
+    """
+    n = swarm.heading_rad.shape[1]
+    horizon = float(times[-1])
+    deciding = swarm.deciding
+    parts: list[tuple[NDArray[np.intp], FloatArray, FloatArray, FloatArray]] = []
+    m = threats.intruder_pos_m.shape[1]
+    if m:  # intruders: straight at constant velocity; the requirement grows with uncertainty
+        q, w = threats.intruder_pos_m, threats.intruder_vel_m_s
+        rel = swarm.pos_m[:, :, None] - q[:, None]  # (B, N, M, 2)
+        dist = np.hypot(rel[..., 0], rel[..., 1])
+        speed = np.hypot(w[..., 0], w[..., 1])  # (B, M)
+        grow = cfg.track_growth_m_s * (threats.intruder_age_s + horizon)
+        reach = (vehicle.cruise_m_s + speed + cfg.track_growth_m_s) * horizon + required + grow
+        near = deciding[..., None] & threats.intruder_known[:, None] & (dist <= reach[:, None])
+        env, uav, obs = np.nonzero(near)
+        t = times[:, None]
+        tx = q[env, obs, 0] + w[env, obs, 0] * t  # (P, S)
+        ty = q[env, obs, 1] + w[env, obs, 1] * t
+        need = required + cfg.track_growth_m_s * (
+            threats.intruder_age_s[env, obs] + times[1:, None]
+        )
+        parts.append((env * n + uav, tx, ty, need))
+    others = min(cfg.neighbours, n - 1)
+    if others > 0:  # the nearest present UAVs within reach, on their committed arcs
+        rel = swarm.pos_m[:, :, None] - swarm.pos_m[:, None]  # (B, N, N, 2)
+        dist = np.hypot(rel[..., 0], rel[..., 1])
+        dist[:, np.arange(n), np.arange(n)] = np.inf
+        dist = np.where(swarm.present[:, None, :] & deciding[..., None], dist, np.inf)
+        both = 2.0 * vehicle.cruise_m_s * horizon + required  # two UAVs closing head-on
+        idx = np.argpartition(dist, others - 1, axis=-1)[..., :others]  # (B, N, J)
+        near = np.take_along_axis(dist, idx, -1) <= both
+        env, uav, slot = np.nonzero(near)
+        nb = idx[env, uav, slot]
+        nx, ny = displacements(
+            swarm.heading_rad[env, nb],
+            (proposed[env, nb] * vehicle.max_turn_rad)[:, None],
+            swarm.speed_m_s[env, nb][:, None],
+            vehicle.dt_s,
+            horizon,
+        )  # (S, 1, P)
+        tx = swarm.pos_m[env, nb, 0] + nx[:, 0].T
+        ty = swarm.pos_m[env, nb, 1] + ny[:, 0].T
+        need = np.full((len(times) - 1, len(env)), required)
+        parts.append((env * n + uav, tx, ty, need))
+    if not parts:
+        empty = np.zeros((len(times), 0))
+        return ThreatPaths(times, np.zeros(0, dtype=np.intp), empty, empty, empty[1:])
+    owner = np.concatenate([p[0] for p in parts])
+    order = np.argsort(owner, kind="stable")
+    return ThreatPaths(
+        times,
+        owner[order],
+        np.concatenate([p[1] for p in parts], axis=1)[:, order],
+        np.concatenate([p[2] for p in parts], axis=1)[:, order],
+        np.concatenate([p[3] for p in parts], axis=1)[:, order],
+    )
+
+
+def vehicle_of(cfg: ScenarioConfig) -> Vehicle:
+    """The shield's view of a scenario's vehicles (slowing down where every profile hovers)."""
+    names = cfg.dynamics_randomisation.profiles or (cfg.dynamics,)
+    return Vehicle(
+        d_col_m=cfg.d_col_m,
+        dt_s=cfg.dt_s,
+        max_turn_rad=cfg.uav.max_turn_rad,
+        cruise_m_s=cfg.uav.speed_m_s,
+        can_slow=all(load_profile(name).can_hover for name in names),
+    )
+
+
+def shield_state(
+    shield_cfg: ShieldConfig,
+    cfg: ScenarioConfig,
+    state: SwarmState,
+    proposed: NDArray[np.floating],
+    vehicle: Vehicle | None = None,
+) -> ShieldDecision:
+    """`shield` on a simulator state: what each UAV knows (exact or ADS-B) and the swarm's plan.
+
+    Intruders are what the UAVs know of them: the exact obstacles that are visible, or the
+    ADS-B tracks' picture (`sim.sensors.picture`, its reports' age); neighbours are the other
+    UAVs still present (hovering ones at speed 0), on their proposed arcs.
+    """
+    now = (state.steps * cfg.dt_s).astype(np.float64)[:, None]
+    if state.tracks is None:
+        pos, vel, known = state.obstacle_pos_m, state.obstacle_vel_m_s, state.obstacle_visible
+        age = np.zeros(known.shape)
+    else:
+        pos, vel, known = picture(state.tracks, now)
+        age = np.where(known, now - state.tracks.t_valid_s, 0.0)
+        pos, vel = np.where(known[..., None], pos, 0.0), np.where(known[..., None], vel, 0.0)
+    hovering = state.hovering(cfg.arrival)
+    swarm = Swarm(
+        pos_m=state.pos_m + state.gps_error_m,
+        heading_rad=state.heading_rad,
+        target_m=state.target_m,
+        deciding=state.active,
+        present=state.active | hovering,
+        speed_m_s=np.where(hovering, 0.0, state.speed_m_s),
+    )
+    threats = Threats(pos, vel, known, age)
+    return shield(shield_cfg, vehicle or vehicle_of(cfg), swarm, threats, proposed)

@@ -1,0 +1,236 @@
+"""The safety shield: it never changes what passes, it finds what passes, monitor mode only
+watches. Checked against an independent dense simulation of the predicted motion."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from sim.scenarios import load_scenario
+from sim.shield import ShieldConfig, Swarm, Threats, Vehicle, shield, shield_state
+from sim.swarm import SwarmSim
+
+VEHICLE = Vehicle(d_col_m=20.0, dt_s=2.0, max_turn_rad=math.pi / 4, cruise_m_s=5.0)
+DENSE = 2000
+"""Instants of the dense check over the horizon."""
+
+
+def dense_path(pos, heading, action, speed, horizon_s, vehicle=VEHICLE):
+    """(..., T, 2) positions of the arc-then-straight motion at `DENSE` instants (midpoint rule
+    on a fine grid: an independent integration of the same motion). ``speed`` holds over the
+    arc; the UAV goes on at the cruise speed after it (a slowed step is one step)."""
+    t = np.linspace(0.0, horizon_s, DENSE + 1)
+    mid = 0.5 * (t[1:] + t[:-1])
+    step = np.diff(t)
+    turn = np.asarray(action)[..., None] * vehicle.max_turn_rad
+    frac = np.clip(mid / vehicle.dt_s, 0.0, 1.0)
+    h = np.asarray(heading)[..., None] + turn * frac
+    v = np.where(mid < vehicle.dt_s, np.asarray(speed)[..., None], vehicle.cruise_m_s)
+    dx = np.cumsum(v * step * np.cos(h), axis=-1)
+    dy = np.cumsum(v * step * np.sin(h), axis=-1)
+    start = np.asarray(pos)
+    x = np.concatenate([start[..., 0, None], start[..., 0, None] + dx], axis=-1)
+    y = np.concatenate([start[..., 1, None], start[..., 1, None] + dy], axis=-1)
+    return np.stack([x, y], axis=-1), t
+
+
+def dense_clearance(cfg, swarm, threats, own, uav, action, speed, proposed):
+    """Smallest (distance − required) of UAV ``uav`` of environment ``own`` flying (action,
+    speed), against the intruders and the other UAVs on their proposed arcs."""
+    horizon = cfg.horizon_s
+    me, t = dense_path(swarm.pos_m[own, uav], swarm.heading_rad[own, uav], action, speed, horizon)
+    worst = np.inf
+    required = VEHICLE.d_col_m + cfg.margin_m
+    for m in np.flatnonzero(threats.intruder_known[own]):
+        path = threats.intruder_pos_m[own, m] + threats.intruder_vel_m_s[own, m] * t[:, None]
+        d = np.hypot(*(me - path).T)
+        need = required + cfg.track_growth_m_s * (threats.intruder_age_s[own, m] + t)
+        worst = min(worst, float((d - need).min()))
+    for j in range(swarm.pos_m.shape[1]):
+        if j == uav or not swarm.present[own, j]:
+            continue
+        other, _ = dense_path(
+            swarm.pos_m[own, j],
+            swarm.heading_rad[own, j],
+            proposed[own, j],
+            swarm.speed_m_s[own, j],
+            horizon,
+        )
+        worst = min(worst, float((np.hypot(*(me - other).T) - required).min()))
+    return worst
+
+
+def random_world(rng, b, n, m):
+    pos = rng.uniform(-60, 60, (b, n, 2))
+    heading = rng.uniform(-np.pi, np.pi, (b, n))
+    swarm = Swarm(
+        pos_m=pos,
+        heading_rad=heading,
+        target_m=pos + 1e4 * np.stack([np.cos(heading), np.sin(heading)], -1),
+        deciding=np.ones((b, n), bool),
+        present=np.ones((b, n), bool),
+        speed_m_s=np.full((b, n), VEHICLE.cruise_m_s),
+    )
+    angle = rng.uniform(-np.pi, np.pi, (b, m))
+    dist = rng.uniform(40, 160, (b, m))
+    ipos = np.stack([dist * np.cos(angle), dist * np.sin(angle)], -1)
+    ispeed = rng.uniform(0, 15, (b, m))
+    course = rng.uniform(-np.pi, np.pi, (b, m))
+    ivel = np.stack([ispeed * np.cos(course), ispeed * np.sin(course)], -1)
+    # keep intruders off the UAVs at the start
+    gap = np.hypot(*(pos[:, :, None] - ipos[:, None]).transpose(3, 0, 1, 2)).min(axis=1)
+    known = gap > 30.0
+    threats = Threats(ipos, ivel, known, np.zeros((b, m)))
+    return swarm, threats
+
+
+def test_off_flies_the_proposal_and_computes_nothing():
+    rng = np.random.default_rng(0)
+    swarm, threats = random_world(rng, 4, 3, 2)
+    prop = rng.uniform(-1, 1, (4, 3))
+    d = shield(ShieldConfig(mode="off"), VEHICLE, swarm, threats, prop)
+    np.testing.assert_array_equal(d.action, prop.astype(np.float32))
+    assert not d.intervened.any() and (d.speed_m_s == VEHICLE.cruise_m_s).all()
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 4), m=st.integers(0, 4))
+def test_monitor_never_changes_the_action_and_reports_what_on_would_do(seed, n, m):
+    rng = np.random.default_rng(seed)
+    swarm, threats = random_world(rng, 8, n, m)
+    prop = rng.uniform(-1, 1, (8, n))
+    watch = shield(ShieldConfig(mode="monitor"), VEHICLE, swarm, threats, prop)
+    act = shield(ShieldConfig(mode="on"), VEHICLE, swarm, threats, prop)
+    np.testing.assert_array_equal(watch.action, prop.astype(np.float32))
+    assert (watch.speed_m_s == VEHICLE.cruise_m_s).all()
+    np.testing.assert_array_equal(watch.intervened, act.intervened)
+    np.testing.assert_array_equal(watch.shield_action, act.action)
+    np.testing.assert_array_equal(watch.shield_speed_m_s, act.speed_m_s)
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1))
+def test_where_some_admissible_action_keeps_separation_the_shielded_one_does(seed):
+    """About two thousand random decisions (60 examples × 16 environments × 1–3 UAVs), each
+    UAV's decision checked by the dense simulation, and every admissible candidate too where
+    the shield intervened."""
+    rng = np.random.default_rng(seed)
+    cfg = ShieldConfig(mode="on", track_growth_m_s=0.0, headings=11)
+    b, n, m = 16, int(rng.integers(1, 4)), int(rng.integers(1, 4))
+    swarm, threats = random_world(rng, b, n, m)
+    prop = rng.uniform(-1, 1, (b, n))
+    d = shield(cfg, VEHICLE, swarm, threats, prop)
+    speeds = [VEHICLE.cruise_m_s] + [f * VEHICLE.cruise_m_s for f in cfg.slow_fractions]
+    headings = np.linspace(-1, 1, cfg.headings)
+    for e in range(b):
+        for i in range(n):
+            flown = dense_clearance(
+                cfg, swarm, threats, e, i, d.action[e, i], d.speed_m_s[e, i], prop
+            )
+            if not d.intervened[e, i]:
+                assert flown >= -0.5  # the proposal passed: it keeps separation
+                continue
+            best = max(
+                dense_clearance(cfg, swarm, threats, e, i, a, v, prop)
+                for v in speeds
+                for a in headings
+            )
+            if best >= 1.0:  # some admissible action keeps separation, with room
+                assert flown >= -0.5, (e, i, flown, best)
+
+
+def test_a_head_on_intruder_is_avoided_by_the_nearest_turn():
+    swarm = Swarm(
+        pos_m=np.zeros((1, 1, 2)),
+        heading_rad=np.zeros((1, 1)),
+        target_m=np.array([[[1e4, 0.0]]]),
+        deciding=np.ones((1, 1), bool),
+        present=np.ones((1, 1), bool),
+        speed_m_s=np.full((1, 1), 5.0),
+    )
+    threats = Threats(
+        np.array([[[100.0, 0.0]]]),
+        np.array([[[-5.0, 0.0]]]),
+        np.ones((1, 1), bool),
+        np.zeros((1, 1)),
+    )
+    straight = shield(ShieldConfig(mode="on"), VEHICLE, swarm, threats, np.zeros((1, 1)))
+    assert straight.intervened[0, 0] and straight.proposed_cpa_m[0, 0] < 1.0
+    assert abs(straight.action[0, 0]) > 0.1
+    assert straight.flown_cpa_m[0, 0] >= VEHICLE.d_col_m + 2.5 + 0.5 * 10.0 - 1e-6
+    # a hard turn away that already passes is flown as proposed
+    away = shield(ShieldConfig(mode="on"), VEHICLE, swarm, threats, np.ones((1, 1)))
+    assert not away.intervened[0, 0] and away.action[0, 0] == 1.0
+
+
+def test_boxed_in_multirotor_slows_down_and_a_fixed_speed_uav_takes_the_best_clearance():
+    # Intruders converging from ahead and both sides: no heading at full speed passes.
+    swarm = Swarm(
+        pos_m=np.zeros((1, 1, 2)),
+        heading_rad=np.zeros((1, 1)),
+        target_m=np.array([[[1e4, 0.0]]]),
+        deciding=np.ones((1, 1), bool),
+        present=np.ones((1, 1), bool),
+        speed_m_s=np.full((1, 1), 5.0),
+    )
+    pos = np.array([[[70.0, 0.0], [45.0, 45.0], [45.0, -45.0], [0.0, 70.0], [0.0, -70.0]]])
+    vel = -0.06 * pos  # all closing on the UAV
+    threats = Threats(pos, vel, np.ones((1, 5), bool), np.zeros((1, 5)))
+    cfg = ShieldConfig(mode="on", horizon_s=20.0)
+    hover = shield(cfg, VEHICLE, swarm, threats, np.zeros((1, 1)))
+    fixed = shield(
+        cfg,
+        Vehicle(20.0, 2.0, math.pi / 4, 5.0, can_slow=False),
+        swarm,
+        threats,
+        np.zeros((1, 1)),
+    )
+    assert hover.intervened[0, 0] and fixed.intervened[0, 0]
+    assert hover.speed_m_s[0, 0] <= fixed.speed_m_s[0, 0]
+    assert fixed.speed_m_s[0, 0] == 5.0
+
+
+def test_uncertainty_of_old_reports_widens_what_is_required():
+    swarm = Swarm(
+        pos_m=np.zeros((1, 1, 2)),
+        heading_rad=np.zeros((1, 1)),
+        target_m=np.array([[[1e4, 0.0]]]),
+        deciding=np.ones((1, 1), bool),
+        present=np.ones((1, 1), bool),
+        speed_m_s=np.full((1, 1), 5.0),
+    )
+    # An intruder passing 26 m abeam: clear with a fresh report, not with a 10 s old one.
+    pos, vel = np.array([[[60.0, 26.0]]]), np.array([[[-5.0, 0.0]]])
+    fresh = Threats(pos, vel, np.ones((1, 1), bool), np.zeros((1, 1)))
+    stale = Threats(pos, vel, np.ones((1, 1), bool), np.full((1, 1), 20.0))
+    cfg = ShieldConfig(mode="on", track_growth_m_s=0.2)
+    assert not shield(cfg, VEHICLE, swarm, fresh, np.zeros((1, 1))).intervened[0, 0]
+    assert shield(cfg, VEHICLE, swarm, stale, np.zeros((1, 1))).intervened[0, 0]
+
+
+@pytest.mark.parametrize("scenario", ["3u2o", "50u8o"])
+def test_on_a_simulator_state_every_output_is_in_range(scenario):
+    cfg = load_scenario(scenario)
+    sim = SwarmSim(cfg, scored=False)
+    rng = np.random.default_rng(1)
+    state = sim.initial_state(rng, 3)
+    for _ in range(6):
+        prop = rng.uniform(-1, 1, state.heading_rad.shape)
+        d = shield_state(ShieldConfig(mode="on"), cfg, state, prop)
+        assert ((d.action >= -1) & (d.action <= 1)).all()
+        assert ((d.speed_m_s >= 0) & (d.speed_m_s <= cfg.uav.speed_m_s)).all()
+        assert not d.intervened[~state.active].any()
+        state, _ = sim.step(state, d.action, rng, speeds_m_s=d.speed_m_s)
+
+
+def test_bad_settings_are_refused():
+    with pytest.raises(ValueError, match="mode"):
+        ShieldConfig(mode="maybe")  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="headings"):
+        ShieldConfig(headings=4)
+    with pytest.raises(ValueError, match="horizon"):
+        ShieldConfig(horizon_s=0.0)
