@@ -5,6 +5,11 @@ one UDP port), opens the runtime on that port with the scenario's mission, takes
 the policy to the targets, holds, and returns both sides' accounts: the runtime's (what it
 decided and why) and the mock's ground truth (what really happened). Tests use it for the
 closed-loop flights; the demo prints it.
+
+With ``vehicles`` (``remarl-fc demo --vehicles N``) the geometry is drawn instead of read
+from a scenario: N vehicles and M intruders of an encounter (`drawn_encounter`, the
+benchmark's generator `sim.encounters`), the same for the same seed, flown by the zoo's
+generalist policy where it is shipped (`demo_policy`).
 """
 
 from __future__ import annotations
@@ -20,6 +25,7 @@ from typing import Any
 
 import numpy as np
 
+from remarl_fc.errors import ConfigError
 from remarl_fc.flight.config import FlyConfig
 from remarl_fc.flight.control import ControlSpec
 from remarl_fc.flight.mission import Geofence, Mission
@@ -31,7 +37,10 @@ from remarl_fc.sitl.attacker import Attacker
 from remarl_fc.sitl.config import ARDUPILOT_QUICK_START, DEFAULT_HOME, Flavour, SitlConfig
 from remarl_fc.sitl.faults import Faults
 from remarl_fc.sitl.fleet import SitlFleet
+from sim.config import ScenarioConfig
+from sim.encounters import DISTRIBUTIONS, Family, Formation, sample_family
 from sim.scenarios import load_scenario
+from sim.spawn import EpisodeStart
 
 CRUISE_ALT_M = 20.0
 """Take-off and cruise height of the demo, above the origin (the intruders fly at it too)."""
@@ -108,15 +117,72 @@ def free_udp_port(host: str = "127.0.0.1") -> int:
 ROBUST_ZOO = "robust"
 """The zoo folder of the policies trained on fitted vehicles and ADS-B (`policies/zoo/robust`)."""
 
+GENERALIST_ZOO = "generalist"
+"""The zoo name of the generalist policy (`policies/zoo/generalist.safetensors`): one network
+for any number of vehicles."""
 
-def demo_policy(scenario: str) -> str:
-    """The policy the demo flies on a scenario.
+DEMO_DISTRIBUTION = "crossing"
+"""The encounter distribution of ``demo --vehicles`` (`sim.encounters.DISTRIBUTIONS`): the
+swarm flies its routes in formation, each intruder crosses one vehicle's route at 30–150°."""
 
-    The zoo's robust one where there is one (the mock's vehicles answer like real autopilots),
-    else the zoo policy of the scenario.
+DEMO_FORMATION: Formation = "random"
+"""The swarm's formation in ``demo --vehicles``: scattered, no two closer than 1.5·d_col."""
+
+DEFAULT_INTRUDERS = 2
+"""Intruders of ``demo --vehicles`` when not given."""
+
+MAX_DEMO_VEHICLES = 20
+"""The most vehicles ``demo --vehicles`` flies (the mock runs every airframe in one process)."""
+
+MAX_DEMO_INTRUDERS = 8
+"""The most intruders ``demo --vehicles`` draws (a generalist's: 0 to 8)."""
+
+
+def demo_policy(scenario: str, vehicles: int | None = None) -> str:
+    """The policy the demo flies: on ``vehicles`` drawn vehicles, or else on a scenario.
+
+    With ``vehicles``: the zoo's generalist where it is shipped. Otherwise (and where it is
+    not), the zoo's robust policy of the scenario where there is one (the mock's vehicles
+    answer like real autopilots), else the zoo policy of the scenario.
     """
+    if vehicles is not None and (zoo_dir() / f"{GENERALIST_ZOO}.safetensors").is_file():
+        return GENERALIST_ZOO
     robust = f"{ROBUST_ZOO}/{scenario}"
     return robust if (zoo_dir() / f"{robust}.safetensors").is_file() else scenario
+
+
+def drawn_encounter(
+    vehicles: int, intruders: int, seed: int, spec: ControlSpec
+) -> tuple[ScenarioConfig, EpisodeStart]:
+    """N vehicles with targets and M intruders, drawn from ``seed``.
+
+    One episode of a `DEMO_DISTRIBUTION` family of the encounter generator (`sim.encounters`)
+    at the policy's speed, step and d_col (``spec``): the same seed, the same geometry.
+
+    Returns:
+        The family's scenario (N UAVs, M obstacles) and its episode (B = 1), which the mock
+        (`SitlFleet`'s ``episode``) and the mission (`Mission.from_scenario`) both fly.
+
+    Raises:
+        ConfigError: N outside 1..`MAX_DEMO_VEHICLES` or M outside 0..`MAX_DEMO_INTRUDERS`.
+    """
+    if not 1 <= vehicles <= MAX_DEMO_VEHICLES:
+        raise ConfigError(f"vehicles must be 1 to {MAX_DEMO_VEHICLES}, got {vehicles}")
+    if not 0 <= intruders <= MAX_DEMO_INTRUDERS:
+        raise ConfigError(f"intruders must be 0 to {MAX_DEMO_INTRUDERS}, got {intruders}")
+    family = Family(
+        f"random {vehicles}u{intruders}o",
+        DEMO_DISTRIBUTION,
+        uavs=vehicles,
+        formation=DEMO_FORMATION,
+        encounter=dataclasses.replace(DISTRIBUTIONS[DEMO_DISTRIBUTION], intruders=intruders),
+        overrides={
+            "uav": {"speed_m_s": spec.speed_m_s},
+            "dt_s": spec.dt_s,
+            "d_col_m": spec.arrival_m,
+        },
+    )
+    return sample_family(family, seed, [0])
 
 
 async def fly_on_mock(
@@ -132,15 +198,18 @@ async def fly_on_mock(
     during: Callable[[SitlFleet, SwarmRuntime], Coroutine[Any, Any, None]] | None = None,
     fly_options: dict[str, Any] | None = None,
     geofence: Geofence | None = None,
+    vehicles: int | None = None,
+    intruders: int = DEFAULT_INTRUDERS,
     link_per_vehicle: bool = False,
     tcp: bool = False,
     signing_key: bytes | None = None,
     sitl_options: dict[str, Any] | None = None,
     quick_start: bool = False,
 ) -> MockFlight:
-    """Fly ``policy`` (default: `demo_policy` of ``scenario``) on a mock of ``scenario``.
+    """Fly ``policy`` (default: `demo_policy`) on a mock of ``scenario``, or of a drawn encounter.
 
     Args:
+        seed: the mock's noise, and the drawn encounter's geometry.
         during: a coroutine run alongside the flight (tests inject faults with it); it is
             cancelled when the flight ends.
         fly_options: extra `FlyConfig` fields.
@@ -153,10 +222,26 @@ async def fly_on_mock(
         sitl_options: extra `SitlConfig` fields (e.g. ``px4=Px4Params(...)``).
         quick_start: skip ArduCopter's slow start (EKF ready after 5 s instead of 39 s, the
             climb at once after the take-off ACK): for tests that do not exercise the start.
+        vehicles: fly this many vehicles and ``intruders`` intruders drawn from ``seed``
+            (`drawn_encounter`) instead of ``scenario``, for at most the drawn family's step
+            limit under control (``max_flight_s`` = max_steps × dt, as the simulator's episodes
+            end; ``fly_options`` may say otherwise).
+
+    Raises:
+        PolicySpecMismatch: the policy cannot fly the scenario (or N vehicles: a
+            `remarl_fc.flight.mission.VehicleCountMismatch` says what to do).
     """
-    cfg = load_scenario(scenario)
-    pol = load_policy(policy or demo_policy(scenario))
-    pol.check_scenario(cfg)
+    pol = load_policy(policy or demo_policy(scenario, vehicles))
+    spec = ControlSpec.from_policy_meta(pol.meta)
+    episode: EpisodeStart | None = None
+    if vehicles is None:
+        cfg = load_scenario(scenario)
+        pol.check_scenario(cfg)
+    else:
+        cfg, episode = drawn_encounter(vehicles, intruders, seed, spec)
+        fly_options = {"max_flight_s": cfg.max_steps * cfg.dt_s, **(fly_options or {})}
+    mission = Mission.from_scenario(cfg, DEFAULT_HOME, CRUISE_ALT_M, episode=episode)
+    mission.check_policy(pol.uav_range, spec.speed_m_s, spec.dt_s, spec.arrival_m)
     port = free_udp_port()
     options: dict[str, Any] = {"ardupilot": ARDUPILOT_QUICK_START} if quick_start else {}
     options.update(sitl_options or {})
@@ -171,11 +256,9 @@ async def fly_on_mock(
         seed=seed,
         **options,
     )
-    mission = Mission.from_scenario(cfg, DEFAULT_HOME, CRUISE_ALT_M)
     if geofence is not None:
         mission = dataclasses.replace(mission, geofence=geofence)
-    spec = ControlSpec.from_policy_meta(pol.meta)
-    fleet = SitlFleet(sitl, scenario=cfg, faults=faults, signing_key=signing_key)
+    fleet = SitlFleet(sitl, scenario=cfg, faults=faults, signing_key=signing_key, episode=episode)
     signing = SigningConfig(signing_key) if signing_key is not None else None
     # the fleet outlives the runtime: the runtime's hold commands on exit must reach it
     async with fleet:

@@ -19,9 +19,23 @@ from remarl_fc.cli.common import (
     EXIT_NOT_ALL_REACHED,
     FLAVOURS,
     add_choice,
+    add_seed,
     emit,
     finish,
 )
+
+DEMO_SCENARIO = "3u2o"
+"""The scenario ``demo`` flies when given neither ``--scenario`` nor ``--vehicles``."""
+
+MAX_DEMO_VEHICLES = 20
+"""``demo --vehicles`` at most (`remarl_fc.demo.MAX_DEMO_VEHICLES`, not imported here: the
+parser stays light)."""
+
+MAX_DEMO_INTRUDERS = 8
+"""``demo --intruders`` at most (`remarl_fc.demo.MAX_DEMO_INTRUDERS`)."""
+
+DEFAULT_DEMO_INTRUDERS = 2
+"""``demo --intruders`` when not given (`remarl_fc.demo.DEFAULT_INTRUDERS`)."""
 
 FLY_FLAGS = {
     "dry_run": "dry_run",
@@ -71,7 +85,11 @@ def add_parsers(sub: Any) -> None:
         metavar="URL",
         help="udpin:HOST:PORT, udpout:HOST:PORT, tcp:HOST:PORT, serial:DEV[:BAUD] (repeatable)",
     )
-    p.add_argument("--policy", required=True, help="zoo name (e.g. 3u2o) or .safetensors file")
+    p.add_argument(
+        "--policy",
+        required=True,
+        help="zoo name (e.g. 3u2o, or generalist: any number of vehicles) or .safetensors file",
+    )
     p.add_argument("--mission", required=True, help="mission TOML (docs/examples/)")
     p.add_argument(
         "--takeoff",
@@ -146,13 +164,33 @@ def add_parsers(sub: Any) -> None:
         "demo",
         help="fly the shipped policy on the built-in mock fleet (no SITL, no training)",
     )
-    p.add_argument("--scenario", default="3u2o", help="scenario with a zoo policy (default 3u2o)")
+    p.add_argument(
+        "--scenario", default=None, help=f"scenario with a zoo policy (default {DEMO_SCENARIO})"
+    )
+    p.add_argument(
+        "--vehicles",
+        type=_int_in(1, MAX_DEMO_VEHICLES),
+        default=None,
+        metavar="N",
+        help=f"instead of a scenario: N vehicles (1..{MAX_DEMO_VEHICLES}) with targets and "
+        "random intruders, drawn from --seed",
+    )
+    p.add_argument(
+        "--intruders",
+        type=_int_in(0, MAX_DEMO_INTRUDERS),
+        default=None,
+        metavar="M",
+        help=f"with --vehicles: M ADS-B intruders (0..{MAX_DEMO_INTRUDERS}, default "
+        f"{DEFAULT_DEMO_INTRUDERS})",
+    )
+    add_seed(p, help="the mock's noise, and the geometry drawn for --vehicles (default 0)")
     p.add_argument(
         "--policy",
         default=None,
-        help="zoo name or .safetensors file (default: the zoo's robust policy of the scenario "
-        "where there is one, trained on fitted vehicles and ADS-B, e.g. robust/3u2o; else the "
-        "zoo policy of the scenario)",
+        help="zoo name or .safetensors file (default: with --vehicles, the zoo's generalist "
+        "where it is shipped; else the zoo's robust policy of the scenario where there is one, "
+        "trained on fitted vehicles and ADS-B, e.g. robust/3u2o; else the zoo policy of the "
+        "scenario)",
     )
     add_choice(p, "--flavour", FLAVOURS)
     p.add_argument("--speedup", type=float, default=2.0, help="simulated s per wall s")
@@ -179,6 +217,19 @@ def add_bench_parsers(bench: Any) -> None:
     b.add_argument("--seconds", type=float, default=5.0)
     b.add_argument("--bus", default=None, help="mqtt://HOST:PORT (default: start mosquitto)")
     finish(b, cmd_bench_bus)
+
+
+def _int_in(lo: int, hi: int) -> Any:
+    """An argparse type: an integer in [lo, hi]."""
+
+    def parse(text: str) -> int:
+        value = int(text)
+        if not lo <= value <= hi:
+            raise argparse.ArgumentTypeError(f"must be {lo} to {hi}, got {value}")
+        return value
+
+    parse.__name__ = "integer"  # argparse's "invalid integer value: 'x'"
+    return parse
 
 
 def _status_printer(enabled: bool) -> Any:
@@ -211,7 +262,7 @@ def cmd_fly(args: argparse.Namespace) -> int:
     policy = load_policy(args.policy)
     mission = load_mission(args.mission)
     spec = ControlSpec.from_policy_meta(policy.meta)
-    mission.check_policy(policy.agents, spec.speed_m_s, spec.dt_s, spec.arrival_m)
+    mission.check_policy(policy.uav_range, spec.speed_m_s, spec.dt_s, spec.arrival_m)
     signing = SigningConfig(load_signing_key(args.signing_key)) if args.signing_key else None
     by_mission = args.takeoff is not None and math.isnan(args.takeoff)
     try:
@@ -301,19 +352,29 @@ def _fly_text(summary: dict[str, Any]) -> str:
 def cmd_demo(args: argparse.Namespace) -> int:
     """Mock fleet + runtime in one process; plot and ground truth at the end."""
     from remarl_fc.demo import fly_on_mock
+    from remarl_fc.errors import ConfigError
     from remarl_fc.flight.flightlog import plot_flight
     from remarl_fc.sitl.groundtruth import write_json_atomic
 
+    if args.vehicles is not None and args.scenario is not None:
+        raise ConfigError("demo: give --scenario or --vehicles, not both")
+    if args.vehicles is None and args.intruders is not None:
+        raise ConfigError("demo: --intruders goes with --vehicles (a scenario has its own)")
+    scenario = args.scenario or DEMO_SCENARIO
+    intruders = DEFAULT_DEMO_INTRUDERS if args.intruders is None else args.intruders
     with tempfile.TemporaryDirectory(prefix="remarl-demo-") as tmp:
         log_dir = Path(args.log) if args.log else Path(tmp)
         flight = asyncio.run(
             fly_on_mock(
-                args.scenario,
+                scenario,
                 args.policy,
                 flavour=args.flavour,
                 speedup=args.speedup,
                 log_dir=log_dir,
                 on_status=_status_printer(not args.json),
+                seed=args.seed,
+                vehicles=args.vehicles,
+                intruders=intruders,
             )
         )
         figure = plot_flight(log_dir, args.out)
@@ -324,8 +385,11 @@ def cmd_demo(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps({"ground_truth": overall, "runtime": flight.runtime, "plot": figure}))
     else:
+        what = scenario
+        if args.vehicles is not None:
+            what = f"{args.vehicles} vehicles, {intruders} intruders, seed {args.seed}"
         print(
-            f"\nground truth ({args.flavour} mock, {args.scenario}): "
+            f"\nground truth ({args.flavour} mock, {what}): "
             f"{overall['reached_targets']}/{len(truth['vehicles'])} reached their targets, "
             f"collisions {overall['collisions_vehicle_intruder']} with intruders and "
             f"{overall['collisions_vehicle_vehicle']} between vehicles; closest approach "

@@ -7,6 +7,12 @@ vehicle on the arc the simulator would fly: heading h(t) = h₀ + a·(t − t₀
 speed. Between decisions `setpoint` samples that arc as a NED velocity and yaw (what
 SET_POSITION_TARGET_LOCAL_NED with type_mask 2503 carries).
 
+A version-2 policy (a generalist: any number of vehicles) also sees the swarm's own vehicles
+as neighbours (`SwarmPicture`, from `swarm_picture`): those under control or holding at their
+targets, where their telemetry places them; the controller knows the headings it commands
+and flies its vehicles at the arcs' velocities, as the simulator's UAVs fly theirs. A version-1
+policy sees only its own rows, as it was trained.
+
 The frames are the simulator's (x east, y north, heading counter-clockwise from east); the
 mission's north/east metres and NED yaw are converted in `remarl_fc.frames` only.
 """
@@ -22,7 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from remarl_fc.flight.config import Member
-from remarl_fc.flight.status import OBSTACLE, Status
+from remarl_fc.flight.status import NEIGHBOUR, OBSTACLE, Status
 from remarl_fc.flight.traffic import TrafficPicture
 from remarl_fc.frames import heading_to_yaw, ne_to_sim, sim_to_ne
 from sim.kinematics import heading_velocity
@@ -30,6 +36,7 @@ from sim.observation import ObservationLayout, build_observations
 from sim.spawn import virtual_centre_and_velocity
 
 FloatArray = NDArray[np.float64]
+BoolArray = NDArray[np.bool_]
 
 
 class PolicyLike(Protocol):
@@ -72,6 +79,33 @@ class ControlSpec:
             lead_m=float(meta["scenario_config"]["field"]["swarm_lead_m"]),
             arrival_m=float(meta["d_col_m"]),
         )
+
+
+@dataclass(frozen=True)
+class SwarmPicture:
+    """The swarm's own vehicles as a version-2 policy's neighbour rows show them (slot order).
+
+    Attributes:
+        present: (N,) neighbours to the others: position known, and under control or holding
+            at their targets (`remarl_fc.flight.status.NEIGHBOUR`). The others are not (a
+            lost, held or pilot-flown vehicle is an obstacle: `obstacle_picture`).
+        on_arc: (N,) flying this controller's arcs (its own vehicles under control): their
+            velocity is the arc's heading × the arc's speed.
+        heading_known: (N,) whose commanded heading the others know (this controller's own).
+        vel_ne_m_s: (N, 2) the velocity of those not on an arc: their telemetry's (a peer
+            process flies them), 0 for one holding at its target.
+    """
+
+    present: BoolArray
+    on_arc: BoolArray
+    heading_known: BoolArray
+    vel_ne_m_s: FloatArray
+
+    @classmethod
+    def everyone(cls, n: int) -> SwarmPicture:
+        """All N vehicles under this controller's control."""
+        yes = np.ones(n, dtype=bool)
+        return cls(yes, yes.copy(), yes.copy(), np.zeros((n, 2)))
 
 
 @dataclass(frozen=True)
@@ -149,6 +183,8 @@ class SwarmController:
         obstacles_ne_m: FloatArray,
         obstacle_vel_ne_m_s: FloatArray,
         speed_m_s: FloatArray | None = None,
+        *,
+        swarm: SwarmPicture | None = None,
     ) -> Decision:
         """Decide every vehicle's next arc.
 
@@ -159,14 +195,29 @@ class SwarmController:
                 (or no longer) members of the swarm, predicted to ``now``.
             speed_m_s: (N,) speeds to fly the coming arcs at, clipped to [0, the policy's
                 speed] (a multirotor can slow down and stop); None: the policy's speed.
+            swarm: version-2 policies: which vehicles are neighbours and how they move (see
+                `SwarmPicture`); None: every vehicle with a known position, all on their arcs.
+                Version 1 ignores it.
         """
         layout = self.policy.layout
         heading = self.heading_at(now)
-        pos = ne_to_sim(np.asarray(positions_ne_m, dtype=np.float64))
-        pos = np.where(np.isfinite(pos), pos, 0.0)
+        raw = ne_to_sim(np.asarray(positions_ne_m, dtype=np.float64))
+        known = np.isfinite(raw).all(axis=-1)
+        pos = np.where(np.isfinite(raw), raw, 0.0)
         vel = heading_velocity(heading, self.spec.speed_m_s)
         obs_xy = ne_to_sim(np.asarray(obstacles_ne_m, dtype=np.float64).reshape(-1, 2))
         obs_v = ne_to_sim(np.asarray(obstacle_vel_ne_m_s, dtype=np.float64).reshape(-1, 2))
+        neighbours: dict[str, Any] = {}
+        if layout.version == 2:
+            sw = SwarmPicture.everyone(self.n) if swarm is None else swarm
+            arc = heading_velocity(heading, self.speed_m_s[:, None])
+            told = ne_to_sim(np.nan_to_num(np.asarray(sw.vel_ne_m_s, dtype=np.float64)))
+            vel = np.where(np.asarray(sw.on_arc)[:, None], arc, told)
+            neighbours = {
+                "uav_valid": (np.asarray(sw.present, dtype=bool) & known)[None],
+                "commanded_heading_rad": heading[None],
+                "heading_known": np.asarray(sw.heading_known, dtype=bool)[None],
+            }
         built = build_observations(
             layout,
             pos[None],
@@ -176,6 +227,7 @@ class SwarmController:
             self.centre_at(now)[None],
             obs_xy[None],
             obs_v[None],
+            **neighbours,
         )
         flat = built.flat()
         action = np.clip(self.policy.act(flat)[0], -1.0, 1.0).astype(np.float32)
@@ -205,6 +257,29 @@ class SwarmController:
         """Within the arrival distance of its target (horizontal)."""
         xy = ne_to_sim(np.asarray(position_ne_m, dtype=np.float64))
         return bool(np.hypot(*(xy - self.targets_xy[slot])) < self.spec.arrival_m)
+
+
+def swarm_picture(rows: Sequence[tuple[Member, Status]]) -> SwarmPicture:
+    """The `SwarmPicture` of the mission's vehicles (``rows`` in slot order).
+
+    Neighbours: under control or holding at their targets, with a known position. This
+    process's own vehicles under control fly its arcs, and their headings are known; a peer
+    process's vehicles move as their telemetry says, their headings unknown; a vehicle holding
+    at its target is at rest.
+    """
+    present, on_arc, known, vel = [], [], [], []
+    for m, status in rows:
+        flying = status == Status.CONTROLLED
+        present.append(status in NEIGHBOUR and math.isfinite(m.track.t_position))
+        on_arc.append(m.local and flying)
+        known.append(m.local and status in NEIGHBOUR)
+        vel.append(m.track.vel_ned_m_s[:2] if flying else np.zeros(2))
+    return SwarmPicture(
+        np.array(present, dtype=bool),
+        np.array(on_arc, dtype=bool),
+        np.array(known, dtype=bool),
+        np.array(vel, dtype=np.float64).reshape(-1, 2),
+    )
 
 
 def obstacle_picture(

@@ -38,10 +38,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from remarl_fc.errors import ConfigError, PolicySpecMismatch
+from remarl_fc.errors import ConfigError, PolicyError, PolicySpecMismatch
 from remarl_fc.frames import GeoPoint, geodetic_to_ned, heading_to_yaw, sim_to_ne
 from sim.config import ScenarioConfig
-from sim.spawn import swarm_layout, target_spacing_problem
+from sim.spawn import EpisodeStart, swarm_layout, target_spacing_problem
 
 FloatArray = NDArray[np.float64]
 
@@ -66,6 +66,34 @@ class MissionError(ConfigError):
         where = f"{source}: {key}: " if key else f"{source}: "
         super().__init__(where + message)
         self.source, self.key = source, key
+
+
+class VehicleCountMismatch(PolicySpecMismatch):
+    """A mission with more or fewer vehicles than the policy flies; the message says what to do.
+
+    Attributes:
+        field: "number of vehicles". expected: the policy's N, or its (fewest, most) for a
+            generalist. actual: the mission's vehicles. uav_range: (fewest, most).
+    """
+
+    def __init__(self, source: str, uav_range: tuple[int, int], vehicles: int) -> None:
+        lo, hi = uav_range
+        if lo == hi:
+            flies = f"this policy flies {lo} vehicle{'s' * (lo != 1)}"
+            fix = f"use a generalist policy (--policy generalist) or a mission of {lo}"
+        else:
+            flies = f"this policy flies {lo} to {hi} vehicles"
+            fix = (
+                f"split it into missions of at most {hi}"
+                if vehicles > hi
+                else f"give it at least {lo}"
+            )
+        what = f"{flies}; the mission has {vehicles}: {fix}"
+        PolicyError.__init__(self, f"number of vehicles: {what}", source=source)
+        self.field = "number of vehicles"
+        self.expected = lo if lo == hi else uav_range
+        self.actual = vehicles
+        self.uav_range = uav_range
 
 
 @dataclass(frozen=True)
@@ -130,25 +158,36 @@ class Mission:
         """(N, 2) targets in slot order."""
         return np.array([v.target_ne_m for v in self.by_slot()], dtype=np.float64)
 
-    def check_policy(self, agents: int, speed_m_s: float, dt_s: float, d_col_m: float) -> None:
+    def check_policy(
+        self, uavs: int | tuple[int, int], speed_m_s: float, dt_s: float, d_col_m: float
+    ) -> None:
         """Refuse a mission that does not fit the policy; the error names the value.
 
-        Also refuses targets closer together than the policy's d_col plus a margin
-        (`sim.spawn.target_spacing_problem`): arrived vehicles hold at their targets.
+        Args:
+            uavs: the vehicles the policy flies: N, or (fewest, most) (`Policy.uav_range`:
+                (N, N) for a version-1 policy, (1, 50) for a generalist).
+
+        Raises:
+            VehicleCountMismatch: the mission's vehicle count is outside ``uavs`` (a
+                `PolicySpecMismatch`, as is a speed or dt that differs from the policy's).
+            MissionError: slots other than 0..N−1 one each; targets closer together than the
+                policy's d_col plus a margin (`sim.spawn.target_spacing_problem`): arrived
+                vehicles hold at their targets.
         """
-        checks = [
-            ("number of vehicles", agents, len(self.vehicles)),
-            ("speed_m_s", speed_m_s, self.speed_m_s),
-        ]
+        lo, hi = (uavs, uavs) if isinstance(uavs, int) else uavs
+        n = len(self.vehicles)
+        if not lo <= n <= hi:
+            raise VehicleCountMismatch(self.source, (lo, hi), n)
+        checks = [("speed_m_s", speed_m_s, self.speed_m_s)]
         if self.dt_s is not None:
             checks.append(("dt_s", dt_s, self.dt_s))
         for name, expected, actual in checks:
             if not math.isclose(float(expected), float(actual)):
                 raise PolicySpecMismatch(self.source, name, expected, actual)
         slots = sorted(v.slot for v in self.vehicles)
-        if slots != list(range(agents)):
+        if slots != list(range(n)):
             raise MissionError(
-                f"vehicle slots are {slots}; the policy has slots 0..{agents - 1}, one each",
+                f"vehicle slots are {slots}; {n} vehicles take slots 0..{n - 1}, one each",
                 source=self.source,
                 key="vehicle.slot",
             )
@@ -158,15 +197,22 @@ class Mission:
 
     @classmethod
     def from_scenario(
-        cls, cfg: ScenarioConfig, origin: GeoPoint, alt_m: float = DEFAULT_ALT_M
+        cls,
+        cfg: ScenarioConfig,
+        origin: GeoPoint,
+        alt_m: float = DEFAULT_ALT_M,
+        *,
+        episode: EpisodeStart | None = None,
     ) -> Mission:
         """The mission a scenario describes: its targets, from the arena origin, system ids 1..N.
 
         The mock (`remarl-fc sitl --scenario`) places vehicle i at the scenario's spawn i with
-        the same origin, so this mission flies the scenario on the mock.
+        the same origin, so this mission flies the scenario on the mock. ``episode``: the
+        targets of this episode (B = 1) instead of the scenario's layout (an encounter drawn
+        by `sim.encounters`, which the mock flies given the same episode).
         """
-        layout = swarm_layout(cfg)
-        targets = sim_to_ne(layout.targets_m)
+        targets_m = swarm_layout(cfg).targets_m if episode is None else episode.target_m[0]
+        targets = sim_to_ne(targets_m)
         plans = tuple(
             VehiclePlan(i + 1, i, (float(t[0]), float(t[1])), alt_m) for i, t in enumerate(targets)
         )

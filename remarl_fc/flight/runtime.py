@@ -37,6 +37,7 @@ from remarl_fc.flight.control import (
     PolicyLike,
     SwarmController,
     obstacle_picture,
+    swarm_picture,
 )
 from remarl_fc.flight.core import (
     Command,
@@ -277,15 +278,16 @@ class SwarmRuntime(StackOwner):
     def _decide(self, now: float) -> None:
         self._sync_peers(now)
         positions = np.array([m.track.predicted_ne_m(now) for m in self.members])
-        obstacles, obstacle_vel = obstacle_picture(
-            self.traffic, self._report_rows(), now, self.cfg.adsb_band_m
-        )
+        rows = self._report_rows()
+        obstacles, obstacle_vel = obstacle_picture(self.traffic, rows, now, self.cfg.adsb_band_m)
         t0 = time.perf_counter()
-        decision = self.controller.decide(now, positions, obstacles, obstacle_vel)
+        decision = self.controller.decide(
+            now, positions, obstacles, obstacle_vel, swarm=swarm_picture(rows)
+        )
         self.decide_s.append(time.perf_counter() - t0)
         self.decisions += 1
         if self._log is not None:
-            for row in decision_rows(self._report_rows(), self.controller, decision, self.decide_s):
+            for row in decision_rows(rows, self.controller, decision, self.decide_s):
                 self._log.write(row)
             self._log.flush()
         if self.on_status is not None:

@@ -53,6 +53,10 @@ BEFORE_CONTROL = frozenset({Status.WAITING, Status.TAKING_OFF, Status.READY})
 OBSTACLE = frozenset({Status.LOST, Status.PILOT, Status.HELD})
 """Vehicles in these statuses are no longer flown by the policy: obstacles for the others."""
 
+NEIGHBOUR = frozenset({Status.CONTROLLED, Status.REACHED})
+"""Vehicles in these statuses are the swarm's own to a version-2 policy (its neighbour rows):
+flown by it, or holding at their targets (the simulator's hover on arrival)."""
+
 
 class IllegalTransition(RuntimeError):
     """A status change that `TRANSITIONS` does not allow (a bug in the runtime, not bad input)."""

@@ -45,7 +45,7 @@ from remarl_fc.sitl.telemetry import TelemetryBuilder, heartbeat
 from remarl_fc.sitl.traffic import Traffic
 from remarl_fc.sitl.vehicle import Airframes, step
 from sim.config import ScenarioConfig
-from sim.spawn import SPAWN_SPACING_FACTOR, swarm_layout
+from sim.spawn import SPAWN_SPACING_FACTOR, EpisodeStart, spawn_episodes
 from sim.vehicle import DelayLine, load_profile
 
 FloatArray = NDArray[np.float64]
@@ -86,6 +86,9 @@ class SitlFleet(StackOwner):
         cfg: fleet settings. With a scenario, the vehicle count is the scenario's.
         scenario: place the vehicles at the scenario's spawn points, give them its targets,
             and fly its obstacles as ADS-B intruders. None: a grid at 1.5·d_col spacing.
+        episode: with a scenario, the episode to fly (B = 1: starts, targets, intruders; e.g.
+            an encounter drawn by `sim.encounters.sample_family`); None: one drawn from the
+            scenario (`sim.spawn.spawn_episodes`, from the fleet's seed).
         faults: faults to inject (may be changed while running).
         signing_key: 32-byte MAVLink 2 signing key, or None.
         traffic_start_s: start the intruders at this simulated time instead of with the swarm.
@@ -99,6 +102,7 @@ class SitlFleet(StackOwner):
         faults: Faults | None = None,
         signing_key: bytes | None = None,
         traffic_start_s: float | None = None,
+        episode: EpisodeStart | None = None,
     ) -> None:
         self.cfg = cfg
         self.scenario = scenario
@@ -106,13 +110,20 @@ class SitlFleet(StackOwner):
         n = scenario.uav.count if scenario is not None else cfg.vehicles
         self.n = n
         if scenario is not None:
-            layout = swarm_layout(scenario)
-            spawn_ne = sim_to_ne(layout.positions_m)
-            yaw = heading_to_yaw(layout.headings_rad)
-            targets: FloatArray | None = sim_to_ne(layout.targets_m)
+            if episode is None:
+                episode = spawn_episodes(scenario, self.rng, 1)
+            episode.check(scenario)
+            if episode.num_envs != 1:
+                raise ValueError(f"the mock flies one episode, got {episode.num_envs}")
+            spawn_ne = sim_to_ne(episode.start_m[0])
+            yaw = heading_to_yaw(episode.headings()[0])
+            targets: FloatArray | None = sim_to_ne(episode.target_m[0])
             d_col = scenario.d_col_m
             self.traffic: Traffic | None = Traffic(
-                scenario, self.rng, cfg.cruise_alt_m, traffic_start_s
+                episode.obstacle_pos_m[0],
+                episode.obstacle_vel_m_s[0],
+                cfg.cruise_alt_m,
+                traffic_start_s,
             )
         else:
             d_col = DEFAULT_D_COL_M

@@ -1,7 +1,8 @@
 """Intruders: a scenario's obstacles flying as ADS-B traffic.
 
-They spawn and move exactly as in the simulator — `sim.spawn.spawn_obstacles` places them and
-gives their velocities, `sim.kinematics.straight_points` moves them — mapped from the
+They spawn and move exactly as in the simulator — an episode's start (`sim.spawn.EpisodeStart`:
+a scenario's from `sim.spawn.spawn_episodes`, or an encounter drawn by `sim.encounters`) places
+them and gives their velocities, `sim.kinematics.straight_points` moves them — mapped from the
 simulator's frame (x east, y north) into the arena's NED frame at the cruise height. They wait
 at their spawn points until the swarm starts its mission (the first vehicle moving faster than
 `START_SPEED_M_S` horizontally, or an explicit start time), so that take-off time does not
@@ -22,9 +23,7 @@ from remarl_fc.mavlink.consts import (
     ADSB_EMITTER_TYPE_UAV,
     AdsbFlag,
 )
-from sim.config import ScenarioConfig
 from sim.kinematics import straight_points
-from sim.spawn import spawn_obstacles
 
 FloatArray = NDArray[np.float64]
 
@@ -47,25 +46,24 @@ ADSB_FLAGS = int(
 
 
 class Traffic:
-    """M intruders of a scenario.
+    """M intruders of an episode.
 
     Args:
-        scenario: where they spawn and how fast they fly.
-        rng: draws the spawn jitter and heading perturbation (as the simulator does).
+        pos_m, vel_m_s: (M, 2) where they spawn and their velocities, in the simulator's frame
+            (`sim.spawn.EpisodeStart.obstacle_pos_m` and ``obstacle_vel_m_s`` of one episode).
         cruise_alt_m: height above the origin they fly at.
         start_s: fixed start time, or None to start with the swarm.
     """
 
     def __init__(
         self,
-        scenario: ScenarioConfig,
-        rng: np.random.Generator,
+        pos_m: FloatArray,
+        vel_m_s: FloatArray,
         cruise_alt_m: float,
         start_s: float | None = None,
     ) -> None:
-        pos, vel = spawn_obstacles(scenario, rng, 1)  # (1, M, 2) in the simulator frame
-        self.spawn_ne_m = sim_to_ne(pos[0])  # (M, 2)
-        self.vel_ne_m_s = sim_to_ne(vel[0])
+        self.spawn_ne_m = sim_to_ne(np.asarray(pos_m).reshape(-1, 2))  # (M, 2)
+        self.vel_ne_m_s = sim_to_ne(np.asarray(vel_m_s).reshape(-1, 2))
         self.down_m = -cruise_alt_m
         self.start_s = start_s
         self.count = len(self.spawn_ne_m)

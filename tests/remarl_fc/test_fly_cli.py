@@ -57,7 +57,11 @@ def test_fly_the_example_mission_on_a_mock_in_another_process(tmp_path, capsys):
 @pytest.mark.parametrize(
     ("args", "message"),
     [
-        (["--policy", "5u2o", "--mission", str(MISSION)], "number of vehicles"),
+        (
+            ["--policy", "5u2o", "--mission", str(MISSION)],
+            "number of vehicles: this policy flies 5 vehicles; the mission has 3: use a "
+            "generalist policy (--policy generalist) or a mission of 5",
+        ),
         (["--policy", "3u2o", "--mission", "missing.toml"], "cannot read the file"),
         (["--policy", "nope", "--mission", str(MISSION)], "nope"),
         (["--policy", "3u2o", "--mission", str(MISSION), "--setpoint-hz", "2"], "10 Hz"),
@@ -66,6 +70,19 @@ def test_fly_the_example_mission_on_a_mock_in_another_process(tmp_path, capsys):
 def test_fly_refuses_what_cannot_be_flown(args, message, capsys):
     assert main(["fly", "--connection", "udpin:127.0.0.1:0", *args]) == 2
     assert message in capsys.readouterr().err
+
+
+def test_fly_takes_any_mission_size_in_a_generalists_range(tmp_path, capsys):
+    from tiny_policy import write_tiny_generalist
+
+    args = ["fly", "--connection", "bogus", "--mission", str(MISSION), "--policy"]
+    anyone = write_tiny_generalist(tmp_path / "g.safetensors")
+    assert main([*args, str(anyone)]) == 2
+    assert "udpin:HOST:PORT" in capsys.readouterr().err  # refused later: the mission fits
+    four = write_tiny_generalist(tmp_path / "g4.safetensors", scenario="5u2o", uavs=(4, 50))
+    assert main([*args, str(four)]) == 2
+    err = capsys.readouterr().err
+    assert "this policy flies 4 to 50 vehicles; the mission has 3: give it at least 4" in err
 
 
 def test_bad_connection_and_bad_log_folder(capsys, tmp_path):

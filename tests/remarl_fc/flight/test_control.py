@@ -8,10 +8,13 @@ import numpy as np
 import pytest
 from numpy.typing import NDArray
 
-from remarl_fc.flight.control import ControlSpec, SwarmController
-from remarl_fc.frames import heading_to_yaw, ne_to_sim, sim_to_ne
+from remarl_fc.flight.config import Member
+from remarl_fc.flight.control import ControlSpec, SwarmController, SwarmPicture, swarm_picture
+from remarl_fc.flight.status import Status
+from remarl_fc.flight.tracking import VehicleTrack
+from remarl_fc.frames import GeoPoint, heading_to_yaw, ne_to_sim, sim_to_ne
 from remarl_fc.policy_io import load_policy
-from sim.observation import ObservationLayout, build_observations
+from sim.observation import NEIGHBOUR_COLUMNS, ObservationLayout, build_observations
 from sim.scenarios import load_scenario
 from sim.spawn import virtual_centre_and_velocity
 from sim.swarm import SwarmSim
@@ -350,3 +353,151 @@ def test_closed_loop_decisions_equal_the_simulators():
         if result.terminated[0] or result.truncated[0]:
             break
     assert sensed_steps > 0, "the obstacles were never sensed: the comparison missed them"
+
+
+# -- version 2: the swarm's own vehicles as neighbours ---------------------------------------
+
+LAYOUT_V2 = ObservationLayout(
+    max_obstacles=3,
+    range_m=100.0,
+    aperture_rad=math.radians(270.0),
+    speed_m_s=10.0,
+    max_neighbours=4,
+    version=2,
+)
+
+
+def neighbour_rows(layout: ObservationLayout, obs: NDArray[np.float32]) -> NDArray[np.float32]:
+    """(N, k, 8) neighbour rows of flat observations (N, size)."""
+    cols = NEIGHBOUR_COLUMNS
+    return obs[:, layout.blocks()["neighbours"]].reshape(len(obs), layout.max_neighbours, cols)
+
+
+def neighbour_mask(layout: ObservationLayout, obs: NDArray[np.float32]) -> NDArray[np.float32]:
+    return obs[:, layout.blocks()["neighbour_mask"]]
+
+
+def v2_controller(targets_ne, action: float = 0.0) -> SwarmController:
+    policy = ConstantPolicy(action, LAYOUT_V2)
+    return SwarmController(policy, SPEC, np.asarray(targets_ne, dtype=np.float64))
+
+
+def test_two_vehicles_20_m_apart_see_each_other():
+    # vehicle 0 flies east; vehicle 1, 20 m away 60° to its left, flies north-west
+    apart = 20.0 * np.array([math.sin(math.radians(60.0)), math.cos(math.radians(60.0))])
+    start = np.array([[0.0, 0.0], apart])
+    north_west = np.array([1.0, -1.0]) / math.sqrt(2.0)
+    targets = np.array([[0.0, 300.0], apart + 300.0 * north_west])
+    c = v2_controller(targets)
+    c.start(start, 0.0)
+    d = c.decide(0.0, start, NO_OBSTACLES, NO_OBSTACLES)
+    assert d.obs.shape == (2, LAYOUT_V2.size) and d.action.shape == (2,)
+    rows, mask = neighbour_rows(LAYOUT_V2, d.obs), neighbour_mask(LAYOUT_V2, d.obs)
+    np.testing.assert_array_equal(mask, [[1, 0, 0, 0], [1, 0, 0, 0]])
+    assert not rows[:, 1:].any()  # the empty rows are zero
+    r, v, h = LAYOUT_V2.range_m, LAYOUT_V2.speed_m_s, math.radians(135.0)
+    # vehicle 0 (heading east): 10 m ahead, 17.3 m to its left, heading 135° more, known
+    np.testing.assert_allclose(rows[0, 0, [0, 1, 4]], [10.0 / r, apart[0] / r, 0.2], atol=1e-6)
+    np.testing.assert_allclose(rows[0, 0, 5:], [math.cos(h), math.sin(h), 1.0], atol=1e-6)
+    rel_v = v * np.array([math.cos(h) - 1.0, math.sin(h)])  # its velocity minus ours
+    np.testing.assert_allclose(rows[0, 0, 2:4], rel_v / v, atol=1e-6)
+    # vehicle 1 (heading 135°): the same pair seen from the other side, in its own frame
+    rel_xy = -np.array([10.0, apart[0]])  # simulator frame: x east, y north
+    ahead = np.array([[math.cos(h), math.sin(h)], [-math.sin(h), math.cos(h)]]) @ rel_xy
+    assert ahead[1] > 0.0  # vehicle 0 is to its left
+    np.testing.assert_allclose(rows[1, 0, :2], ahead / r, atol=1e-6)
+    np.testing.assert_allclose(rows[1, 0, 4], 0.2, atol=1e-6)
+    np.testing.assert_allclose(rows[1, 0, 5:], [math.cos(-h), math.sin(-h), 1.0], atol=1e-6)
+
+
+def test_a_vehicle_not_flown_or_not_located_is_no_neighbour():
+    start = np.array([[0.0, 0.0], [20.0, 0.0], [-20.0, 0.0], [-40.0, 0.0]])
+    targets = start + np.array([0.0, 300.0])
+    c = v2_controller(targets)
+    c.start(start, 0.0)
+    positions = start.copy()
+    positions[3] = np.nan  # never located
+    swarm = SwarmPicture(
+        present=np.array([True, True, False, True]),  # vehicle 2: lost, held or the pilot's
+        on_arc=np.array([True, True, False, True]),
+        heading_known=np.array([True, True, False, True]),
+        vel_ne_m_s=np.zeros((4, 2)),
+    )
+    d = c.decide(0.0, positions, NO_OBSTACLES, NO_OBSTACLES, swarm=swarm)
+    mask = neighbour_mask(LAYOUT_V2, d.obs)
+    # vehicles 0 and 1 see only each other; vehicles 2 and 3 (not neighbours) still see them
+    np.testing.assert_array_equal(mask.sum(axis=1), [1, 1, 2, 2])
+    rows = neighbour_rows(LAYOUT_V2, d.obs)
+    np.testing.assert_allclose(rows[0, 0, 1], 20.0 / LAYOUT_V2.range_m, atol=1e-6)
+
+
+def test_a_peer_processes_vehicle_moves_as_its_telemetry_says_heading_unknown():
+    start = np.array([[0.0, 0.0], [20.0, 0.0]])
+    c = v2_controller(start + np.array([0.0, 300.0]))
+    c.start(start, 0.0)
+    swarm = SwarmPicture(
+        present=np.array([True, True]),
+        on_arc=np.array([True, False]),  # vehicle 1 flown by another process
+        heading_known=np.array([True, False]),
+        vel_ne_m_s=np.array([[0.0, 0.0], [-5.0, 0.0]]),  # flying south at 5 m/s
+    )
+    d = c.decide(0.0, start, NO_OBSTACLES, NO_OBSTACLES, swarm=swarm)
+    row = neighbour_rows(LAYOUT_V2, d.obs)[0, 0]
+    # vehicle 0 flies east at 10 m/s: the other's velocity relative to it, in its frame
+    np.testing.assert_allclose(row[2:4], [-1.0, -0.5], atol=1e-6)
+    np.testing.assert_array_equal(row[5:], [0.0, 0.0, 0.0])  # heading unknown
+    assert neighbour_rows(LAYOUT_V2, d.obs)[1, 0, 7] == 1.0  # vehicle 0's is known
+
+
+def test_swarm_picture_of_the_runtimes_rows():
+    def member(slot: int, *, local: bool = True, located: bool = True) -> Member:
+        m = Member(slot, slot + 1, VehicleTrack(slot + 1, GeoPoint(47.0, 8.0, 400.0)), local=local)
+        m.track.vel_ned_m_s = np.array([1.0, 2.0, 0.0])
+        m.track.t_position = 0.0 if located else math.nan
+        return m
+
+    rows = [
+        (member(0), Status.CONTROLLED),
+        (member(1), Status.REACHED),
+        (member(2), Status.LOST),
+        (member(3, local=False), Status.CONTROLLED),
+        (member(4, located=False), Status.CONTROLLED),
+        (member(5), Status.PILOT),
+    ]
+    sw = swarm_picture(rows)
+    np.testing.assert_array_equal(sw.present, [True, True, False, True, False, False])
+    np.testing.assert_array_equal(sw.on_arc, [True, False, False, False, True, False])
+    np.testing.assert_array_equal(sw.heading_known, [True, True, False, False, True, False])
+    np.testing.assert_array_equal(sw.vel_ne_m_s[1], [0.0, 0.0])  # holding at its target
+    np.testing.assert_array_equal(sw.vel_ne_m_s[3], [1.0, 2.0])  # a peer's: its telemetry
+
+
+def test_version_2_first_decision_equals_the_simulators():
+    """A generalist's first observation in flight is the simulator's (`SwarmSim.observe`)."""
+    cfg = load_scenario("5u2o")
+    sim = SwarmSim(cfg)
+    state = sim.initial_state(np.random.default_rng(2), 1)
+    expected = sim.observe(state, layout=LAYOUT_V2).flat()
+    assert expected[0, :, LAYOUT_V2.blocks()["neighbour_mask"]].any()
+    c = v2_controller(sim_to_ne(state.target_m[0]))
+    spawn = sim_to_ne(state.pos_m[0])
+    c.start(spawn, 0.0)
+    d = c.decide(
+        0.0, spawn, sim_to_ne(state.obstacle_pos_m[0]), sim_to_ne(state.obstacle_vel_m_s[0])
+    )
+    np.testing.assert_allclose(d.obs, expected[0], atol=1e-6)
+
+
+def test_version_1_ignores_the_swarm_picture():
+    start = np.array([[0.0, 0.0], [20.0, 0.0]])
+    targets = start + np.array([0.0, 300.0])
+    plain, given = controller(targets, 0.3), controller(targets, 0.3)
+    for c in (plain, given):
+        c.start(start, 0.0)
+    nobody = SwarmPicture(
+        np.zeros(2, dtype=bool), np.zeros(2, dtype=bool), np.zeros(2, dtype=bool), np.ones((2, 2))
+    )
+    a = plain.decide(0.5, start, NO_OBSTACLES, NO_OBSTACLES)
+    b = given.decide(0.5, start, NO_OBSTACLES, NO_OBSTACLES, swarm=nobody)
+    np.testing.assert_array_equal(a.obs, b.obs)
+    assert a.obs.shape == (2, LAYOUT.size)

@@ -16,12 +16,14 @@ from remarl_fc.flight.mission import (
     Geofence,
     Mission,
     MissionError,
+    VehicleCountMismatch,
     VehiclePlan,
     initial_yaw_rad,
     load_mission,
 )
 from remarl_fc.frames import GeoPoint, ned_to_geodetic, sim_to_ne
 from remarl_fc.sitl.config import DEFAULT_HOME
+from sim.encounters import Family, sample_family
 from sim.scenarios import load_scenario
 from sim.spawn import swarm_layout
 
@@ -359,6 +361,40 @@ def test_check_policy_without_dt_does_not_check_dt(tmp_path):
     m.check_policy(2, 10.0, 0.5, 20.0)
 
 
+def test_a_policy_for_another_number_of_vehicles_says_what_to_do(tmp_path):
+    m = load_mission(write(tmp_path, VALID))
+    with pytest.raises(VehicleCountMismatch) as info:
+        m.check_policy((3, 3), 10.0, 2.0, 20.0)
+    err = info.value
+    assert isinstance(err, PolicySpecMismatch)
+    assert (err.field, err.expected, err.actual) == ("number of vehicles", 3, 2)
+    assert "this policy flies 3 vehicles; the mission has 2" in str(err)
+    assert "use a generalist policy (--policy generalist) or a mission of 3" in str(err)
+
+
+@pytest.mark.parametrize("uavs", [(1, 50), (2, 2), (2, 8)])
+def test_check_policy_takes_any_count_inside_the_policys_range(tmp_path, uavs):
+    load_mission(write(tmp_path, VALID)).check_policy(uavs, 10.0, 2.0, 20.0)
+
+
+@pytest.mark.parametrize(
+    ("uavs", "fix"), [((3, 50), "give it at least 3"), ((1, 1), "a mission of 1")]
+)
+def test_check_policy_refuses_a_count_outside_the_range(tmp_path, uavs, fix):
+    with pytest.raises(VehicleCountMismatch) as info:
+        load_mission(write(tmp_path, VALID)).check_policy(uavs, 10.0, 2.0, 20.0)
+    assert fix in str(info.value) and info.value.uav_range == uavs
+
+
+def test_too_many_vehicles_for_a_generalist(tmp_path):
+    err = VehicleCountMismatch("m.toml", (1, 50), 60)
+    assert str(err) == (
+        "m.toml: number of vehicles: this policy flies 1 to 50 vehicles; the mission has 60: "
+        "split it into missions of at most 50"
+    )
+    assert err.expected == (1, 50) and err.actual == 60
+
+
 @pytest.mark.parametrize(("first", "second"), [(0, 0), (1, 2), (1, 1)])
 def test_check_policy_refuses_bad_slots(tmp_path, first, second):
     text = replace("system_id = 7\nslot = 1", f"system_id = 7\nslot = {first}")
@@ -391,6 +427,15 @@ def test_from_scenario_3u2o():
     np.testing.assert_array_equal(m.targets_ne_m(), sim_to_ne(layout.targets_m))
     assert np.all(m.targets_ne_m()[:, 1] == cfg.uav.target_x_m)  # every target 270 m east
     m.check_policy(cfg.uav.count, cfg.uav.speed_m_s, cfg.dt_s, cfg.d_col_m)
+
+
+def test_from_scenario_with_a_drawn_episode_flies_its_targets():
+    family = Family("drawn", "crossing", uavs=6, formation="random")
+    cfg, episode = sample_family(family, 3, [0])
+    m = Mission.from_scenario(cfg, ORIGIN, episode=episode)
+    assert [v.slot for v in m.by_slot()] == list(range(6))
+    np.testing.assert_array_equal(m.targets_ne_m(), sim_to_ne(episode.target_m[0]))
+    m.check_policy((1, 50), cfg.uav.speed_m_s, cfg.dt_s, cfg.d_col_m)
 
 
 def test_from_scenario_alt_and_initial_yaw():
