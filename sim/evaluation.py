@@ -21,7 +21,9 @@ from numpy.typing import NDArray
 from sim.config import ScenarioConfig
 from sim.env import make_vector_env
 
-ActFn = Callable[[NDArray[np.float32]], NDArray[np.float32]]
+ActFn = Callable[..., Any]
+"""obs (B, N, D) → actions (B, N); with ``uses_state`` set on it, (obs, state) → actions; either
+may return (actions, speeds (B, N) m/s) where it also chooses speeds."""
 
 EvaluationSuite = Literal["run", "training", "zoo", "ablation", "encounters"]
 
@@ -86,8 +88,9 @@ def run_episodes(
     rows: list[dict[str, Any]] = []
     uses_state = bool(getattr(act, "uses_state", False))
     while len(rows) < episodes:
-        actions = act(obs, env.state) if uses_state else act(obs)  # type: ignore[call-arg]
-        obs, _, _, _, info = env.step(actions)
+        decided = act(obs, env.state) if uses_state else act(obs)
+        actions, speeds = decided if isinstance(decided, tuple) else (decided, None)
+        obs, _, _, _, info = env.step(actions, speeds)
         if "episode" not in info:
             continue
         ep = info["episode"]

@@ -153,7 +153,7 @@ class SwarmVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float32], NDArray
         return obs, {"active": self._state.active.copy()}
 
     def step(  # type: ignore[override]
-        self, actions: NDArray[np.float32]
+        self, actions: NDArray[np.float32], speeds_m_s: NDArray[np.floating[Any]] | None = None
     ) -> tuple[
         NDArray[np.float32],
         NDArray[np.float32],
@@ -161,8 +161,13 @@ class SwarmVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float32], NDArray
         NDArray[np.bool_],
         dict[str, Any],
     ]:
-        """Step every environment (see the class docstring for the autoreset and ``infos``)."""
-        state, result = self.sim.step(self.state, np.asarray(actions), self._rng)
+        """Step every environment (see the class docstring for the autoreset and ``infos``).
+
+        ``speeds_m_s`` (B, N): commanded speeds (`sim.swarm.SwarmSim.step`); None: full speed.
+        """
+        state, result = self.sim.step(
+            self.state, np.asarray(actions), self._rng, speeds_m_s=speeds_m_s
+        )
         rewards = self.rewards_of(result)
         done = result.terminated | result.truncated
         obs = result.obs.flat_shared()  # the step's own observations: no copy needed

@@ -18,12 +18,17 @@ import numpy as np
 from numpy.typing import NDArray
 
 from remarl_fc.offline.rollout import PolicyFileAct, observe_for
+from remarl_fc.offline.shielding import Shielded
 from remarl_fc.policy_io import Policy, load_policy
 from sim.config import DynamicsRandomisation, ScenarioConfig
 from sim.evaluation import run_episodes, summarize
 from sim.scenarios import load_scenario
+from sim.shield import ShieldConfig
 from sim.state import SwarmState
 from sim.swarm import SwarmSim
+
+UNSHIELDED_KEYS = ("success_rate", "collision_rate_u2o", "collision_rate_u2u", "energy_rad")
+"""The figures of a shielded evaluation repeated without the shield."""
 
 REACTION_SAMPLES = 2000
 """Timed single-swarm decisions behind the reaction-time figures."""
@@ -59,21 +64,30 @@ class RecordingAct:
 
     RECORDED = 64
 
-    def __init__(self, policy: Policy, cfg: ScenarioConfig) -> None:
+    def __init__(
+        self, policy: Policy, cfg: ScenarioConfig, shield: ShieldConfig | None = None
+    ) -> None:
         self.act = PolicyFileAct(policy)
         self.cfg = cfg
-        self.uses_state = self.act.layout is not None
-        self.sim = SwarmSim(cfg, scored=False) if self.uses_state else None
+        on = shield is not None and shield.mode != "off"
+        self.shielded = Shielded(self.act, shield) if on and shield is not None else None
+        self.uses_state = self.act.layout is not None or self.shielded is not None
+        self.sim = SwarmSim(cfg, scored=False) if self.act.layout is not None else None
         self.seen: list[NDArray[np.float32]] = []
 
     def __call__(
         self, obs: NDArray[np.float32], state: SwarmState | None = None
-    ) -> NDArray[np.float32]:
-        """Actions (B, N) for the observations (B, N, D) (a generalist: of the state)."""
+    ) -> NDArray[np.float32] | tuple[NDArray[np.float32], NDArray[np.float64]]:
+        """Actions (B, N) for the observations (B, N, D) (a generalist: of the state).
+
+        Behind the shield: (actions, speeds).
+        """
         if self.sim is not None and state is not None:
             obs = observe_for(self.sim, state, self.act)
         if len(self.seen) < self.RECORDED:
             self.seen.append(obs[0].copy())
+        if self.shielded is not None and state is not None:
+            return self.shielded(obs, state, self.cfg)
         return self.act.policy.act(obs)
 
 
@@ -117,21 +131,31 @@ def evaluate_policy(
     episodes: int,
     seed: int,
     overrides: dict[str, Any] | None = None,
+    shield: ShieldConfig | None = None,
 ) -> tuple[Policy, dict[str, Any]]:
     """Load, check against the scenario (default: the policy's own), run, summarise.
 
     ``overrides`` (`world_overrides`) change the scenario's world: vehicle response, sensing,
-    arrival; the result records the world flown.
+    arrival; the result records the world flown. ``shield``: behind the safety shield; with it
+    on, the same episodes are flown without it too (``*_unshielded``).
     """
     policy = load_policy(policy_name)
     cfg = evaluation_scenario(policy, scenario, overrides)
-    act = RecordingAct(policy, cfg)
+    shielded: dict[str, Any] = {"shield": "off"}
+    if shield is not None and shield.mode == "on":
+        plain = summarize(run_episodes(RecordingAct(policy, cfg), cfg, episodes, seed))
+        shielded |= {f"{k}_unshielded": plain[k] for k in UNSHIELDED_KEYS}
+    act = RecordingAct(policy, cfg, shield)
     rows = run_episodes(act, cfg, episodes, seed)
+    if act.shielded is not None:
+        shielded |= act.shielded.report()
+        shielded.pop("episodes_intervened")  # autoreset: environments are not episodes here
     result: dict[str, Any] = {
         "policy": policy.source,
         "scenario": cfg.name,
         "seed": seed,
         **summarize(rows),
+        **shielded,
         **reaction_time_ms(policy, np.asarray(act.seen)),
         "uavs": cfg.uav.count,
         "dynamics": cfg.dynamics,

@@ -16,6 +16,7 @@ reaction time of one decision for one swarm.
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
@@ -29,14 +30,16 @@ from numpy.typing import NDArray
 from remarl_fc.errors import PolicyError
 from remarl_fc.offline.evaluate import timed_decisions
 from remarl_fc.offline.rollout import PolicyFileAct, observe_for, policy_by_name
+from remarl_fc.offline.shielding import Shielded
 from remarl_fc.policy_io import load_policy, zoo_names
-from sim.arrays import FloatArray
+from sim.arrays import BoolArray, FloatArray
 from sim.config import ScenarioConfig
 from sim.encounters import Family, sample_family
 from sim.env import episode_metrics
 from sim.errors import ConfigError
 from sim.evaluation import summarize
 from sim.parallel import run_on_ray
+from sim.shield import ShieldConfig
 from sim.spawn import EpisodeStart
 from sim.state import SwarmState
 from sim.suite import Suite, family_labels
@@ -51,7 +54,12 @@ METHODS = (*HAND_WRITTEN, "zoo")
 REACTION_SAMPLES = 30
 """Timed single-swarm decisions per family behind the reaction-time figures."""
 
-Act = Callable[[NDArray[np.float32], SwarmState, ScenarioConfig], NDArray[np.float32]]
+Act = Callable[
+    [NDArray[np.float32], SwarmState, ScenarioConfig],
+    NDArray[np.float32] | tuple[NDArray[np.float32], FloatArray],
+]
+"""An act function: (observations, state, scenario) → actions (B, N), or (actions, speeds)
+where it also chooses speeds (`remarl_fc.offline.shielding.Shielded`)."""
 
 
 @dataclass(frozen=True)
@@ -98,9 +106,18 @@ def resolve_method(spec: MethodSpec, family: Family, cfg: ScenarioConfig) -> tup
 
 
 def run_family(
-    suite: Suite, family: Family, spec: MethodSpec, episodes: int | None = None
+    suite: Suite,
+    family: Family,
+    spec: MethodSpec,
+    episodes: int | None = None,
+    shield: ShieldConfig | None = None,
 ) -> dict[str, Any]:
     """Evaluate one method on one family: its metrics, JSON-ready.
+
+    With the shield on, the family is flown twice, with and without it: the metrics are the
+    shielded flights', and ``*_unshielded`` the same episodes without the shield. In monitor
+    mode the actions are the method's own; the interventions are those the shield would have
+    made.
 
     Raises:
         ConfigError: bad method. PolicyError: a policy file that cannot be loaded.
@@ -111,10 +128,18 @@ def run_family(
     head: dict[str, Any] = {"family": family.name, "method": spec.label, "uavs": cfg.uav.count}
     if act is None:
         return {**head, "applicable": False, "reason": note}
+    solvable = family_labels(suite, family, count)
+    shielded: dict[str, Any] = {"shield": "off"}
+    if shield is not None and shield.mode != "off":
+        if shield.mode == "on":
+            plain = _success(fly_episodes(cfg, batch, act).rows, solvable)
+            shielded |= {f"{k}_unshielded": v for k, v in plain.items()}
+        act = Shielded(act, shield)
     t0 = time.perf_counter()
     rows = fly_episodes(cfg, batch, act).rows
     elapsed = time.perf_counter() - t0
-    solvable = family_labels(suite, family, count)
+    if isinstance(act, Shielded):
+        shielded |= act.report()
     success = np.array([bool(r["success"]) for r in rows])
     closest = np.array([min(float(r["min_d_u2o_m"]), float(r["min_d_u2u_m"])) for r in rows])
     failed = np.flatnonzero(~success)
@@ -131,7 +156,20 @@ def run_family(
         ),
         "worst_episode": int(worst),
         "seconds": elapsed,
+        **shielded,
         **reaction_time(cfg, batch.take(slice(0, 1)), act),
+    }
+
+
+def _success(rows: list[dict[str, Any]], solvable: BoolArray) -> dict[str, float]:
+    """Success over all episodes and over the solvable ones, and the collision rates."""
+    success = np.array([bool(r["success"]) for r in rows])
+    summary = summarize(rows)
+    return {
+        "success_rate": float(success.mean()),
+        "success_rate_solvable": float(success[solvable].mean()) if solvable.any() else math.nan,
+        "collision_rate_u2o": summary["collision_rate_u2o"],
+        "collision_rate_u2u": summary["collision_rate_u2u"],
     }
 
 
@@ -161,7 +199,9 @@ def fly_episodes(
     rows: list[dict[str, Any] | None] = [None] * batch.num_envs
     positions = [state.pos_m.copy()]
     for _ in range(cfg.max_steps):
-        state, result = sim.step(state, act(observe_for(sim, state, act), state, cfg), rng)
+        decided = act(observe_for(sim, state, act), state, cfg)
+        actions, speeds = decided if isinstance(decided, tuple) else (decided, None)
+        state, result = sim.step(state, actions, rng, speeds_m_s=speeds)
         if trail:
             positions.append(state.pos_m.copy())
         done = result.terminated | result.truncated
@@ -184,7 +224,9 @@ def reaction_time(cfg: ScenarioConfig, one: EpisodeStart, act: Act) -> dict[str,
     return timed_decisions(lambda _: act(obs, state, cfg), REACTION_SAMPLES)
 
 
-def _job(job: tuple[Suite, Family, MethodSpec, int | None]) -> dict[str, Any]:
+def _job(
+    job: tuple[Suite, Family, MethodSpec, int | None, ShieldConfig | None],
+) -> dict[str, Any]:
     return run_family(*job)
 
 
@@ -196,8 +238,11 @@ def evaluate_suite(
     episodes: int | None = None,
     workers: int = 1,
     ray_address: str | None = None,
+    shield: ShieldConfig | None = None,
 ) -> list[dict[str, Any]]:
     """Every (method, family) cell; results in (method, family) order.
+
+    ``shield``: every method behind the safety shield (`run_family`); None or "off": as is.
 
     Families spread over ``workers`` processes, or over the Ray cluster at ``ray_address``.
     The oracle labels are computed first, once per family, where they are not cached.
@@ -206,7 +251,7 @@ def evaluate_suite(
     count = suite.episodes if episodes is None else min(episodes, suite.episodes)
     for family in chosen:  # labels once, before workers race to cache them
         family_labels(suite, family, count)
-    jobs = [(suite, f, spec, count) for spec in specs for f in chosen]
+    jobs = [(suite, f, spec, count, shield) for spec in specs for f in chosen]
     if ray_address is not None:
         return run_on_ray(_job, jobs, ray_address)
     if workers > 1:
