@@ -10,6 +10,8 @@ import json
 from collections.abc import Callable, Sequence
 from typing import Any
 
+from remarl_fc.errors import ConfigError
+
 EXIT_USAGE = 2
 """Exit status for bad input (also argparse's)."""
 
@@ -90,3 +92,44 @@ def progress_bar(*, enabled: bool) -> Any:
         disable=not enabled,
         transient=False,
     )
+
+
+def add_shield_flags(p: Any, default: str) -> None:
+    """Add ``--shield off|monitor|on`` (default ``default``), its horizon and its margin.
+
+    The defaults of the horizon and margin are `sim.shield.ShieldConfig`'s.
+    """
+    from sim.shield import SHIELD_MODES, ShieldConfig
+
+    base = ShieldConfig()
+    p.add_argument(
+        "--shield",
+        choices=list(SHIELD_MODES),
+        default=default,
+        help=f"the safety shield: off, monitor (record what it would change) or on (default "
+        f"{default})",
+    )
+    p.add_argument(
+        "--shield-horizon",
+        type=float,
+        default=base.horizon_s,
+        help=f"shield look-ahead, seconds (default {base.horizon_s:g})",
+    )
+    p.add_argument(
+        "--shield-margin",
+        type=float,
+        default=base.margin_m,
+        help=f"clearance the shield keeps beyond d_col, metres (default {base.margin_m:g})",
+    )
+
+
+def shield_from_args(args: argparse.Namespace) -> Any:
+    """The `sim.shield.ShieldConfig` of ``--shield*``; a bad value is a `ConfigError`."""
+    from sim.shield import ShieldConfig
+
+    try:
+        return ShieldConfig(
+            mode=args.shield, horizon_s=args.shield_horizon, margin_m=args.shield_margin
+        )
+    except ValueError as exc:
+        raise ConfigError(f"--shield: {exc}") from exc

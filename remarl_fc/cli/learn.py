@@ -18,10 +18,12 @@ from remarl_fc.cli.common import (
     SCENARIO_HELP,
     add_choice,
     add_seed,
+    add_shield_flags,
     emit,
     finish,
     positive_int,
     progress_bar,
+    shield_from_args,
 )
 from remarl_fc.cli.suite import add_eval_suite_flags, cmd_eval_suite
 from remarl_fc.errors import ConfigError
@@ -93,6 +95,7 @@ def add_eval(sub: Any) -> None:
         help="episodes (default 1000; with --suite, per family, default the suite's)",
     )
     add_seed(p, default=evaluation_seed(), help="first evaluation seed")
+    add_shield_flags(p, default="off")
     p.add_argument(
         "--dynamics",
         default=None,
@@ -258,7 +261,9 @@ def cmd_eval(args: argparse.Namespace) -> int:
 
     episodes = args.episodes or DEFAULT_EVAL_EPISODES
     world = world_overrides(args.dynamics, args.sensors, args.arrival)
-    policy, result = evaluate_policy(args.policy, args.scenario, episodes, args.seed, world)
+    policy, result = evaluate_policy(
+        args.policy, args.scenario, episodes, args.seed, world, shield_from_args(args)
+    )
     if args.plot:
         plot_episode(policy, args.scenario, args.seed, Path(args.plot), world)
         result["plot"] = args.plot

@@ -11,7 +11,7 @@ import math
 from pathlib import Path
 from typing import Any
 
-from remarl_fc.cli.common import emit, finish, positive_int
+from remarl_fc.cli.common import emit, finish, positive_int, shield_from_args
 from remarl_fc.errors import ConfigError
 
 SUITE_HELP = "a shipped suite (standard, smoke) or a suite .toml path"
@@ -161,6 +161,7 @@ def cmd_eval_suite(args: argparse.Namespace) -> int:
         episodes=args.episodes,
         workers=args.workers,
         ray_address=args.ray_address,
+        shield=shield_from_args(args),
     )
     payload: dict[str, Any] = {
         "suite": s.name,

@@ -170,6 +170,7 @@ def _success(rows: list[dict[str, Any]], solvable: BoolArray) -> dict[str, float
         "success_rate_solvable": float(success[solvable].mean()) if solvable.any() else math.nan,
         "collision_rate_u2o": summary["collision_rate_u2o"],
         "collision_rate_u2u": summary["collision_rate_u2u"],
+        "energy_rad": summary["energy_rad"],
     }
 
 

@@ -60,7 +60,8 @@ def dense_clearance(cfg, swarm, threats, own, uav, action, speed, proposed):
             swarm.speed_m_s[own, j],
             horizon,
         )
-        worst = min(worst, float((np.hypot(*(me - other).T) - required).min()))
+        ahead = t <= cfg.neighbour_horizon_s  # the swarm's own UAVs: a shorter look-ahead
+        worst = min(worst, float((np.hypot(*(me - other).T) - required)[ahead].min()))
     return worst
 
 
