@@ -58,6 +58,9 @@ from sim.swarm import SwarmSim
 CHECKPOINT_SCHEMA = 1
 """Version of the generalist checkpoint layout."""
 
+CHECKPOINT_MINUTES = 5.0
+"""Wall-clock minutes between checkpoints of ``last.safetensors`` (besides each validation)."""
+
 VALIDATION_SEED = evaluation_seed(suite="training", offset=7_777)
 """Seed of the validation episodes: neither the training stream nor a suite's."""
 
@@ -288,7 +291,7 @@ def train_generalist(
     )
     writer = summary_writer(out_dir)
     start = time.monotonic()
-    last_eval = start
+    last_eval = last_save = start
     warm = 0 if resume and iteration > 0 else cfg.warmup_transitions
     recent: list[dict[str, Any]] = []
     transitions_seen = 0
@@ -379,8 +382,12 @@ def train_generalist(
                 if progress is not None:
                     progress(scalars)
 
-            # ---- validate and checkpoint
+            # ---- checkpoint (a crash loses at most CHECKPOINT_MINUTES), validate
+            if time.monotonic() - last_save >= 60 * CHECKPOINT_MINUTES:
+                last_save = time.monotonic()
+                checkpoint(last_path)
             if time.monotonic() - last_eval >= 60 * cfg.eval_minutes:
+                checkpoint(last_path)
                 last_eval = time.monotonic()
                 result = validate(nets, worlds, layout, cfg.eval_episodes, device)
                 record = {"iteration": iteration, "elapsed_s": elapsed(), **result}
