@@ -162,7 +162,7 @@ def test_a_head_on_intruder_is_avoided_by_the_nearest_turn():
     straight = shield(ShieldConfig(mode="on"), VEHICLE, swarm, threats, np.zeros((1, 1)))
     assert straight.intervened[0, 0] and straight.proposed_cpa_m[0, 0] < 1.0
     assert abs(straight.action[0, 0]) > 0.1
-    assert straight.flown_cpa_m[0, 0] >= VEHICLE.d_col_m + 2.5 + 0.5 * 10.0 - 1e-6
+    assert straight.flown_cpa_m[0, 0] >= VEHICLE.d_col_m + ShieldConfig().margin_m - 1e-6
     # a hard turn away that already passes is flown as proposed
     away = shield(ShieldConfig(mode="on"), VEHICLE, swarm, threats, np.ones((1, 1)))
     assert not away.intervened[0, 0] and away.action[0, 0] == 1.0
