@@ -70,7 +70,7 @@ class ShieldConfig:
 
     margin_m: float = 1.0
     """Required clearance beyond d_col, metres: covers the chord error of the predicted arcs
-    (0.12 m, `sim.prediction.ARC_SEGMENTS`). Measured behind the zoo policies on the paper
+    (0.25 m, `CHORDS`). Measured behind the zoo policies on the paper
     scenarios (100 episodes each): 2.5 m cost 3u2o 2% of its success and 5u2o 1%, 1 m cost
     nothing (docs/MODEL.md). Raise it on real vehicles by their tracking error
     (``--shield-margin``)."""
@@ -277,13 +277,29 @@ def shield(
     )
 
 
+CHORDS = 2
+"""Chords of the predicted arc (every other point of `sim.prediction`'s): the chord of a 10 m
+arc turning by at most π/8 lies within L·a_max/(8·2²) = 0.25 m of it at the defaults, inside
+the margin; half the segments of ORCA's four."""
+
+_STRIDE = ARC_SEGMENTS // CHORDS
+
+
+def _arc_subset(values: FloatArray) -> FloatArray:
+    """Points (..., P) of `sim.prediction` with the arc thinned to `CHORDS` chords."""
+    keep = list(range(0, ARC_SEGMENTS + 1, _STRIDE)) + list(
+        range(ARC_SEGMENTS + 1, values.shape[-1])
+    )
+    return values[..., keep]
+
+
 def _times(dt_s: float, horizon_s: float, neighbour_s: float) -> tuple[FloatArray, float | None]:
     """The time points of every check, and where the neighbour horizon splits the straight part.
 
     The arc's chords, then the neighbour horizon where it lies inside the straight part, then
     the horizon; the split as a fraction of the straight part (None: not inside it).
     """
-    times = time_points(dt_s, horizon_s)
+    times = _arc_subset(time_points(dt_s, horizon_s))
     if not dt_s < neighbour_s < horizon_s:
         return times, None
     split = (neighbour_s - dt_s) / (horizon_s - dt_s)
@@ -293,10 +309,12 @@ def _times(dt_s: float, horizon_s: float, neighbour_s: float) -> tuple[FloatArra
 def _at_times(
     xy: tuple[FloatArray, FloatArray], split: float | None
 ) -> tuple[FloatArray, FloatArray]:
-    """`sim.prediction.displacements` (..., P) with the split point of `_times` inserted.
+    """`sim.prediction.displacements` (..., P) at the points of `_times`.
 
-    The straight part is linear in time, so the point is interpolated exactly.
+    The arc thinned to `CHORDS` chords, and the split point inserted: the straight part is
+    linear in time, so the point is interpolated exactly.
     """
+    xy = (_arc_subset(xy[0]), _arc_subset(xy[1]))
     if split is None:
         return xy
     out = []
@@ -372,7 +390,7 @@ def _flown(unit: FloatArray, speed_m_s: float, cruise_m_s: float) -> FloatArray:
     """
     out: FloatArray = unit * speed_m_s
     if speed_m_s != cruise_m_s:
-        end = ARC_SEGMENTS  # the arc's last point, at dt; the straight part's follow
+        end = CHORDS  # the arc's last point, at dt; the straight part's follow
         out[end + 1 :] = out[end] + (unit[end + 1 :] - unit[end]) * cruise_m_s
     return out
 

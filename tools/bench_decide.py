@@ -1,4 +1,4 @@
-"""Time one decision of a generalist for a whole swarm: observations and actor, numpy only.
+"""Time one decision of a generalist for a whole swarm: observations, actor, shield; numpy only.
 
 50 UAVs and 8 intruders (the 50u8o scenario) against a generalist of the shipped size (hidden
 64, k = 6 neighbour rows, m = 8 intruder rows); see `remarl_fc.bench.decide`. Prints the median
@@ -50,6 +50,8 @@ def main() -> None:
         ("decision", "decision (observe + act)"),
         ("observe", "  observations"),
         ("act", "  actor"),
+        ("shield", "shield (on)"),
+        ("shielded_decision", "decision + shield"),
     ):
         print(
             f"{label:<26} median {result[f'{part}_median_ms']:7.3f} ms   "

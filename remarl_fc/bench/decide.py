@@ -24,6 +24,7 @@ from remarl_fc.policy_io import Policy
 from sim.config import ScenarioConfig
 from sim.policy_file import build_metadata, expected_shapes, network_layers
 from sim.scenarios import load_scenario
+from sim.shield import ShieldConfig, shield_state, vehicle_of
 from sim.state import SwarmState
 from sim.swarm import SwarmSim
 
@@ -118,8 +119,10 @@ def bench_decide(
 ) -> dict[str, Any]:
     """Median and p99 (ms) of one decision (observations + actor) for one swarm.
 
-    Also each part alone: ``observe_*`` (the version-2 observations of every UAV) and ``act_*``
-    (the actor on them). Decisions cycle over the states of one straight episode.
+    Also each part alone: ``observe_*`` (the version-2 observations of every UAV), ``act_*``
+    (the actor on them), ``shield_*`` (the safety shield on the actor's proposals, mode on,
+    `sim.shield.shield_state`), and ``shielded_decision_*`` (all three). Decisions cycle over
+    the states of one straight episode and their crowded copies.
     """
     cfg = load_scenario(scenario)
     policy = random_generalist(
@@ -130,15 +133,21 @@ def bench_decide(
     rng = np.random.default_rng(seed)
     states = flown + [crowded(s, rng) for s in flown]
     decide, observe, act = np.empty(samples), np.empty(samples), np.empty(samples)
-    sensed = 0
+    guard = np.empty(samples)
+    shield_cfg = ShieldConfig(mode="on")
+    vehicle = vehicle_of(cfg)
+    sensed = interventions = 0
     for k in range(samples):
         state = states[k % len(states)]
         t0 = time.perf_counter()
         obs = sim.observe(state, layout=layout).flat_shared()
         t1 = time.perf_counter()
-        policy.act(obs)
+        actions = policy.act(obs)
         t2 = time.perf_counter()
-        observe[k], act[k], decide[k] = t1 - t0, t2 - t1, t2 - t0
+        shielded = shield_state(shield_cfg, cfg, state, actions, vehicle)
+        t3 = time.perf_counter()
+        observe[k], act[k], decide[k], guard[k] = t1 - t0, t2 - t1, t2 - t0, t3 - t2
+        interventions += int(shielded.intervened.sum())
         if k < len(states):
             sensed = max(sensed, int(obs[..., layout.blocks()["intruder_mask"]].sum(-1).max()))
     return {
@@ -155,4 +164,7 @@ def bench_decide(
         **_percentiles(decide, "decision"),
         **_percentiles(observe, "observe"),
         **_percentiles(act, "act"),
+        **_percentiles(guard, "shield"),
+        **_percentiles(decide + guard, "shielded_decision"),
+        "shield_intervention_rate": interventions / (samples * cfg.uav.count),
     }
