@@ -420,3 +420,38 @@ def train_generalist(
         }
     )
     return summary
+
+
+def export_generalist_run(
+    run_dir: Path, out: Path, *, checkpoint: str = "best", metrics: dict[str, Any] | None = None
+) -> dict[str, Any]:
+    """Write the policy file of a generalist run folder; returns the metadata written.
+
+    The actor and the first of the twin critics, the version-2 layout of the run, for 1 to
+    ``max_uavs`` UAVs; the base scenario is the first family's of the first suite (the
+    constants every family shares: speed, step, turn limit, d_col, sensing).
+    """
+    from policies.export import export_generalist
+
+    config = json.loads((run_dir / "config.json").read_text())
+    raw = dict(config["generalist"])
+    raw["suites"] = tuple(raw["suites"])
+    cfg = GeneralistConfig(**raw)
+    base = family_scenario(load_suite(cfg.suites[0]).families[0])
+    layout = generalist_layout(cfg, base)
+    nets = TD3Nets.create(layout, dataclasses.replace(cfg, device="cpu"), "cpu")
+    meta = load_checkpoint(run_dir / f"{checkpoint}.safetensors", nets)
+    return export_generalist(
+        out,
+        nets.actor.state_dict(),
+        nets.critics[0].state_dict(),
+        base_cfg=with_layout(base, layout),
+        hidden=cfg.hidden,
+        uav_range=(1, cfg.max_uavs),
+        reward="remarl-separation",
+        training={
+            "steps": int(meta["updates"]),
+            "seed": cfg.seed,
+        },
+        metrics=metrics,
+    )

@@ -299,6 +299,14 @@ def cmd_export(args: argparse.Namespace) -> int:
     if not (run / "config.json").is_file():
         raise ConfigError(f"{run}: not a training run folder (no config.json); pass --out of train")
     metrics = json.loads(Path(args.metrics).read_text()) if args.metrics else None
+    if "generalist" in json.loads((run / "config.json").read_text()):
+        from policies.generalist_train import export_generalist_run
+
+        meta = export_generalist_run(
+            run, Path(args.out), checkpoint=args.checkpoint, metrics=metrics
+        )
+        emit(args, {"out": args.out, **meta}, f"wrote {args.out} (generalist)")
+        return 0
     meta = export_policy(run, Path(args.out), checkpoint=args.checkpoint, metrics=metrics)
     emit(args, {"out": args.out, **meta}, f"wrote {args.out} ({meta['scenario']})")
     return 0

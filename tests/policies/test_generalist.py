@@ -216,3 +216,39 @@ def test_tiny_generalist_run_trains_checkpoints_and_resumes(tmp_path):
         GeneralistConfig(**{**cfg.__dict__, "total_iterations": 35}), out, resume=True
     )
     assert again["iterations"] == 35 and again["updates"] > summary["updates"]
+
+
+def test_a_generalist_run_exports_a_policy_fly_can_load_for_any_n(tmp_path):
+    from policies.generalist_train import export_generalist_run
+    from remarl_fc.policy_io import load_policy
+    from sim.scenarios import load_scenario
+    from sim.swarm import SwarmSim
+
+    suite = tmp_path / "tiny.toml"
+    suite.write_text(TINY_SUITE)
+    cfg = GeneralistConfig(
+        suites=(str(suite),),
+        agents_per_family=2,
+        hidden=8,
+        batch_size=16,
+        warmup_transitions=10,
+        updates_per_iteration=1,
+        minutes=0.0,
+        total_iterations=5,
+        eval_episodes=1,
+        device="cpu",
+    )
+    run = tmp_path / "run"
+    train_generalist(cfg, run)
+    out = tmp_path / "generalist.safetensors"
+    meta = export_generalist_run(run, out, checkpoint="last", metrics={"success_rate": 0.5})
+    assert meta["network"] == "set" and meta["uavs"] == [1, 50]
+    policy = load_policy(str(out))
+    assert policy.generalist and policy.uav_range == (1, 50)
+    for scenario in ("2u1o", "7u2o", "50u8o"):
+        scen = load_scenario(scenario)
+        policy.check_scenario(scen)
+        sim = SwarmSim(scen, scored=False)
+        state = sim.initial_state(np.random.default_rng(0), 2)
+        actions = policy.act(sim.observe(state, layout=policy.layout).flat())
+        assert actions.shape == (2, scen.uav.count) and np.isfinite(actions).all()
