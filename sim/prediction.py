@@ -66,11 +66,14 @@ def closest_approach(rx: FloatArray, ry: FloatArray) -> FloatArray:
     return closest
 
 
-def segment_closest_sq(rx: FloatArray, ry: FloatArray) -> FloatArray:
+def segment_closest_sq(
+    rx: FloatArray, ry: FloatArray, limit: FloatArray | None = None
+) -> FloatArray:
     """Squared closest distance to the origin on each segment of paths, time first.
 
     (P, ...) points → (P − 1, ...) segments (`closest_approach`'s closed form); with time the
-    leading axis every operation runs over contiguous blocks.
+    leading axis every operation runs over contiguous blocks. ``limit`` (broadcast to the
+    segments, in [0, 1]): only the first that fraction of each segment counts.
     """
     x0, y0 = rx[:-1], ry[:-1]
     ddx, ddy = rx[1:] - x0, ry[1:] - y0
@@ -80,6 +83,8 @@ def segment_closest_sq(rx: FloatArray, ry: FloatArray) -> FloatArray:
     u /= dd
     np.negative(u, out=u)
     np.clip(u, 0.0, 1.0, out=u)
+    if limit is not None:
+        np.minimum(u, limit, out=u)
     ddx *= u
     ddx += x0
     ddy *= u

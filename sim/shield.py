@@ -21,8 +21,9 @@ stays ≥ d_col + ``margin_m`` (plus the intruder's uncertainty) over the horizo
 shield flies the passing heading change nearest to the proposed one at full speed, then (where
 the vehicle can slow down) the fastest slower speed with a passing heading, nearest first; when
 nothing passes, the candidate with the largest clearance (closest approach minus what is
-required). Segments after a UAV reaches its target (at its distance over the cruise speed) are
-not checked: it leaves, or hovers where nothing of the swarm is headed.
+required). Nothing after a UAV reaches its target (its distance over the cruise speed, at least
+the coming step) is checked: it leaves, or hovers where nothing of the swarm is headed; a
+straight line past the target would see conflicts the UAV never flies into.
 
 Modes: "off" (the proposal is flown, nothing computed), "monitor" (computed and recorded, never
 changes the proposal), "on". Everything is batched over (B environments, N UAVs, K candidates,
@@ -363,12 +364,14 @@ def _clearance(
     rx += (swarm.pos_m[env, uav, 0] - paths.x)[..., None]
     ry = _flown(np.moveaxis(unit_y[env, uav], -1, 0), speed_m_s, cruise_m_s)
     ry += (swarm.pos_m[env, uav, 1] - paths.y)[..., None]
-    seg = segment_closest_sq(rx, ry)  # (P − 1, S, K)
-    # Segments after the UAV reaches its target are not checked.
+    # Nothing after the UAV reaches its target is checked: each segment ends there at the
+    # latest (the whole coming step is always checked: the UAV flies it).
     gap = swarm.target_m[env, uav] - swarm.pos_m[env, uav]
-    to_go = np.hypot(gap[:, 0], gap[:, 1]) / cruise_m_s
-    skipped = times[:-1, None] >= np.maximum(to_go, dt_s)  # (P − 1, S)
-    seg[skipped] = np.inf
+    to_go = np.maximum(np.hypot(gap[:, 0], gap[:, 1]) / cruise_m_s, dt_s)  # (S,)
+    start, end = times[:-1, None], times[1:, None]
+    reach = np.clip((to_go - start) / (end - start), 0.0, 1.0)  # (P − 1, S)
+    seg = segment_closest_sq(rx, ry, reach[..., None])  # (P − 1, S, K)
+    seg[start >= to_go] = np.inf  # segments that start after the arrival
     pair_cpa = seg.min(axis=0)  # (S, K)
     np.sqrt(seg, out=seg)
     seg -= paths.need[..., None]
