@@ -4,6 +4,8 @@
     python tools/suite_table.py --suite smoke          # a first look in seconds
     python tools/suite_table.py --plot docs/img/suite  # also the heatmap and worst episodes
     python tools/suite_table.py --json results.json    # keep the raw figures
+    python tools/suite_table.py --policy generalist    # a policy file beside the methods
+    python tools/suite_table.py --from results.json    # arrange a saved run
 
 The figures are those of ``remarl-fc eval --suite NAME --method zoo,orca,potential-field,
 straight``; this script only arranges them: one row per family, per method the success over all
@@ -72,6 +74,13 @@ def markdown(results: list[dict[str, Any]], suite: str, version: int) -> str:
         else:
             means.append("n/a")
     lines.append("| **mean over the families it runs** | | | | " + " | ".join(means) + " |")
+    u2u = []
+    for m in methods:
+        ran = [cell[(f, m)] for f in families if cell.get((f, m), {}).get("applicable")]
+        episodes = sum(r["episodes"] for r in ran)
+        hits = sum(r["collision_rate_u2u"] * r["episodes"] for r in ran)
+        u2u.append(f"{hits / episodes:.1%}" if episodes else "n/a")
+    lines.append("| UAV–UAV collisions (share of episodes) | | | | " + " | ".join(u2u) + " |")
     seconds = [
         sum(cell[(f, m)].get("seconds", 0.0) for f in families if (f, m) in cell) for m in methods
     ]
@@ -83,15 +92,22 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--suite", default="standard")
     parser.add_argument("--methods", default=",".join(METHODS))
+    parser.add_argument("--policy", default=None, help="also a policy file (zoo name or path)")
+    parser.add_argument("--from", dest="source", default=None, help="a saved --json to arrange")
     parser.add_argument("--workers", type=int, default=1)
     parser.add_argument("--plot", default=None, help="folder for the heatmap and worst episodes")
     parser.add_argument("--json", default=None, help="also write the raw results here")
     args = parser.parse_args()
     keep_freed_memory()  # the simulator's steps reuse their temporaries
     suite = load_suite(args.suite)
-    specs = [MethodSpec("method", m) for m in args.methods.split(",")]
+    specs = [MethodSpec("method", m) for m in args.methods.split(",") if m]
+    if args.policy:
+        specs.append(MethodSpec("policy", args.policy))
     t0 = time.perf_counter()
-    results = evaluate_suite(suite, specs, workers=args.workers)
+    if args.source:
+        results = json.loads(Path(args.source).read_text())
+    else:
+        results = evaluate_suite(suite, specs, workers=args.workers)
     print(markdown(results, suite.name, suite.version))
     print(f"\n{time.perf_counter() - t0:.0f} s in all")
     if args.json:
