@@ -187,6 +187,25 @@ class GeneralistConfig:
     """Where the separation term starts, in d_col (the PSO threshold d̄_U2U and the spacing
     targets keep)."""
 
+    teacher: str = "none"
+    """A teacher to start from: "none" (TD3 from scratch) or "orca-shield" (ORCA's actions
+    through the safety shield, heading changes only: the strongest hand-written method of the
+    suite, 87 % mean solvable success). With a teacher the run first collects
+    ``teacher_transitions`` of its flights, clones it (``bc_updates`` supervised steps, the
+    critics learning its values meanwhile), then fine-tunes with TD3 plus a behaviour-cloning
+    term on the teacher's transitions (TD3+BC), its weight falling from ``bc_weight`` to 0
+    over the first half of the run."""
+
+    teacher_transitions: int = 400_000
+    """UAV transitions flown by the teacher before learning (its replay share)."""
+
+    bc_updates: int = 4_000
+    """Supervised steps cloning the teacher (and critic steps on its transitions)."""
+
+    bc_weight: float = 2.5
+    """α of TD3+BC at the start of fine-tuning: the actor's loss is −Q/mean|Q| + α·(π − a_teacher)²
+    on the teacher's transitions (Fujimoto & Gu 2021's normalisation)."""
+
     real_share: float = 0.35
     """Share of families flown in the real world (fitted ArduCopter/PX4 responses randomised
     per UAV, ADS-B intruders, GPS noise) rather than the paper's ideal one."""
@@ -233,3 +252,6 @@ class GeneralistConfig:
         check_at_least(self, 0, "max_neighbours", "warmup_transitions")
         check(0 <= self.noise_end <= self.noise_start, "noise_end", "must be in [0, noise_start]")
         check(self.device in ("cpu", "cuda", "auto"), "device", 'must be "cpu", "cuda" or "auto"')
+        check(self.teacher in ("none", "orca-shield"), "teacher", 'must be "none" or "orca-shield"')
+        check(self.bc_weight >= 0, "bc_weight", "must be >= 0")
+        check_at_least(self, 0, "teacher_transitions", "bc_updates")

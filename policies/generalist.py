@@ -135,6 +135,7 @@ class AgentBatch:
     """Per-UAV transitions: obs, next_obs (B, D); action, reward, terminal_value (B,).
 
     ``terminal`` (B,) bool: the UAV's trajectory ended (bootstrap with ``terminal_value``).
+    ``teacher`` (B,): the teacher's action where a teacher flew the transition, NaN elsewhere.
     """
 
     obs: Tensor
@@ -143,6 +144,7 @@ class AgentBatch:
     next_obs: Tensor
     terminal: Tensor
     terminal_value: Tensor
+    teacher: Tensor
 
 
 class AgentReplay:
@@ -156,14 +158,16 @@ class AgentReplay:
         self.reward = np.zeros(capacity, np.float32)
         self.terminal = np.zeros(capacity, bool)
         self.terminal_value = np.zeros(capacity, np.float32)
+        self.teacher = np.full(capacity, np.nan, np.float32)
 
     def add(self, **columns: NDArray[Any]) -> None:
         """Store T transitions at once (the newest ``capacity`` if T exceeds it).
 
         Columns: ``obs``, ``next_obs`` (T, D); ``action``, ``reward``, ``terminal``,
-        ``terminal_value`` (T,).
+        ``terminal_value`` (T,); optionally ``teacher`` (T,) (absent: NaN, no teacher).
         """
         count = len(columns["obs"])
+        columns.setdefault("teacher", np.full(count, np.nan, np.float32))
         if count > self.capacity:
             columns = {k: v[-self.capacity :] for k, v in columns.items()}
             count = self.capacity
@@ -187,13 +191,34 @@ class AgentReplay:
             next_obs=tensor(self.next_obs),
             terminal=tensor(self.terminal),
             terminal_value=tensor(self.terminal_value),
+            teacher=tensor(self.teacher),
         )
 
 
+def clone_step(nets: TD3Nets, batch: AgentBatch) -> float:
+    """One supervised step of the actor toward the teacher's actions of the batch (MSE)."""
+    has = ~torch.isnan(batch.teacher)
+    if not bool(has.any()):
+        return 0.0
+    loss = ((nets.actor(batch.obs[has]) - batch.teacher[has]) ** 2).mean()
+    nets.actor_opt.zero_grad(set_to_none=True)
+    loss.backward()
+    nets.actor_opt.step()
+    return float(loss.detach())
+
+
 def td3_update(
-    nets: TD3Nets, batch: AgentBatch, cfg: GeneralistConfig, update_actor: bool
+    nets: TD3Nets,
+    batch: AgentBatch,
+    cfg: GeneralistConfig,
+    update_actor: bool,
+    bc_weight: float = 0.0,
 ) -> dict[str, float]:
-    """One critic step (and, with ``update_actor``, one actor step and the soft updates)."""
+    """One critic step (and, with ``update_actor``, one actor step and the soft updates).
+
+    ``bc_weight`` > 0: TD3+BC's actor loss, −Q/mean|Q| + α·(π − a_teacher)² over the batch's
+    transitions a teacher flew.
+    """
     with torch.no_grad():
         noise = (torch.randn_like(batch.action) * cfg.target_noise).clamp(
             -cfg.target_noise_clip, cfg.target_noise_clip
@@ -213,7 +238,13 @@ def td3_update(
     nets.critic_opt.step()
     out = {"losses/critic": float(critic_loss.detach())}
     if update_actor:
-        actor_loss = -nets.critics[0](batch.obs, nets.actor(batch.obs)).mean()
+        action = nets.actor(batch.obs)
+        q_pi = nets.critics[0](batch.obs, action)
+        actor_loss = -q_pi.mean()
+        has = ~torch.isnan(batch.teacher)
+        if bc_weight > 0 and bool(has.any()):
+            actor_loss = actor_loss / q_pi.abs().mean().detach().clamp_min(1e-6)
+            actor_loss = actor_loss + bc_weight * ((action[has] - batch.teacher[has]) ** 2).mean()
         nets.actor_opt.zero_grad(set_to_none=True)
         actor_loss.backward()
         nn.utils.clip_grad_norm_(nets.actor.parameters(), cfg.grad_clip)

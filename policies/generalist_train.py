@@ -41,7 +41,8 @@ import torch
 from numpy.typing import NDArray
 
 from policies.config import GeneralistConfig
-from policies.generalist import AgentReplay, TD3Nets, td3_update
+from policies.ddpg import soft_update
+from policies.generalist import AgentReplay, TD3Nets, clone_step, td3_update
 from policies.train import load_checkpoint, reward_upper_bound, save_checkpoint, summary_writer
 from sim.arrays import BoolArray, FloatArray
 from sim.config import ScenarioConfig
@@ -49,7 +50,9 @@ from sim.encounters import Family, draw_episodes, family_scenario
 from sim.env import episode_metrics
 from sim.evaluation import evaluation_seed
 from sim.observation import ObservationLayout
+from sim.orca import orca_actions
 from sim.scenarios import REAL_WORLD
+from sim.shield import ShieldConfig, shield_state, vehicle_of
 from sim.spawn import EpisodeStart, spawn_episodes
 from sim.state import SwarmState, merge_where
 from sim.suite import load_suite
@@ -156,10 +159,12 @@ def step_world(
     cfg: GeneralistConfig,
     goal_value: float,
     rng: np.random.Generator,
+    teacher: NDArray[np.float32] | None = None,
 ) -> tuple[dict[str, NDArray[Any]], list[dict[str, Any]]]:
     """Step one world; returns its UAV transitions and the metrics of the episodes that ended.
 
-    Finished environments restart at once with the family's next episodes.
+    Finished environments restart at once with the family's next episodes. ``teacher`` (B, N):
+    the teacher's actions at this step, stored with the transitions (for behaviour cloning).
     """
     sim, c = world.sim, world.cfg
     state, result = sim.step(world.state, actions, rng)
@@ -177,6 +182,8 @@ def step_world(
         "terminal": terminal[acted],
         "terminal_value": np.where(result.arrived, goal_value, 0.0)[acted].astype(np.float32),
     }
+    if teacher is not None:
+        transitions["teacher"] = teacher[acted].astype(np.float32)
     done = result.terminated | result.truncated
     ended: list[dict[str, Any]] = []
     if done.any():
@@ -189,6 +196,59 @@ def step_world(
         next_obs[done] = sim.observe(fresh).flat()
     world.state, world.obs = state, next_obs
     return transitions, ended
+
+
+TEACHER_NOISE = 0.1
+"""Std of the Gaussian noise on the teacher's normalised actions while it flies for cloning:
+states a little off its own path, so the clone learns to come back to it."""
+
+
+def teacher_actions(world: World) -> NDArray[np.float32]:
+    """The "orca-shield" teacher's actions (B, N) in a world: ORCA through the shield.
+
+    Heading changes only (the policy commands no speed), and ORCA reads the simulator's state,
+    the true positions even where the UAVs' sensors are ADS-B: a privileged teacher, which the
+    student, seeing only its observation, imitates as far as it can.
+    """
+    proposed = orca_actions(world.state, world.cfg)
+    vehicle = dataclasses.replace(vehicle_of(world.cfg), can_slow=False)
+    return shield_state(ShieldConfig(mode="on"), world.cfg, world.state, proposed, vehicle).action
+
+
+def learn_from_teacher(
+    nets: TD3Nets,
+    worlds: list[World],
+    buffer: AgentReplay,
+    cfg: GeneralistConfig,
+    goal_value: float,
+    rng: np.random.Generator,
+    device: str,
+) -> dict[str, float]:
+    """Fly the teacher until ``teacher_transitions``, then clone it.
+
+    The critics learn the teacher's values meanwhile. Returns the last losses and the
+    teacher's success while it flew (with its exploration noise).
+    """
+    collected, episodes = 0, []
+    while collected < cfg.teacher_transitions:
+        for world in worlds:
+            taught = teacher_actions(world)
+            flown = np.clip(taught + rng.normal(0.0, TEACHER_NOISE, taught.shape), -1.0, 1.0)
+            transitions, ended = step_world(
+                world, flown.astype(np.float32), cfg, goal_value, rng, teacher=taught
+            )
+            buffer.add(**transitions)
+            collected += len(transitions["obs"])
+            episodes += [float(r["success"]) for r in ended]
+    losses: dict[str, float] = {}
+    for _ in range(cfg.bc_updates):
+        batch = buffer.sample(cfg.batch_size, rng, device)
+        losses["losses/clone"] = clone_step(nets, batch)
+        losses |= td3_update(nets, batch, cfg, update_actor=False)
+        soft_update(nets.critic_targets, nets.critics, cfg.tau)
+        soft_update(nets.actor_target, nets.actor, cfg.tau)
+    nets.actor_target.load_state_dict(nets.actor.state_dict())
+    return {"teacher/success": float(np.mean(episodes)) if episodes else 0.0, **losses}
 
 
 def actor_actions(nets: TD3Nets, obs: NDArray[np.float32], device: str) -> NDArray[np.float32]:
@@ -317,6 +377,16 @@ def train_generalist(
         )
 
     summary: dict[str, Any] = {}
+    taught = cfg.teacher != "none" and not (resume and iteration > 0)
+    if taught:
+        scalars = learn_from_teacher(nets, worlds, buffer, cfg, goal_value, rng, device)
+        warm = 0  # the clone explores from here
+        if progress is not None:
+            progress({"iteration": 0.0, "perf/elapsed_min": elapsed() / 60, **scalars})
+        if writer is not None:
+            for key, value in scalars.items():
+                writer.add_scalar(key, value, 0)
+        last_eval = time.monotonic() - 60 * cfg.eval_minutes  # validate the clone at once
     try:
         while iteration < cfg.total_iterations:
             if cfg.minutes and elapsed() >= 60 * cfg.minutes:
@@ -353,10 +423,11 @@ def train_generalist(
             losses: dict[str, float] = {}
             if warm <= 0 and buffer.size >= cfg.batch_size:
                 t1 = time.perf_counter()
+                bc = cfg.bc_weight * max(0.0, 1.0 - 2.0 * frac) if cfg.teacher != "none" else 0.0
                 for _ in range(cfg.updates_per_iteration):
                     updates += 1
                     batch = buffer.sample(cfg.batch_size, rng, device)
-                    losses |= td3_update(nets, batch, cfg, updates % cfg.policy_delay == 0)
+                    losses |= td3_update(nets, batch, cfg, updates % cfg.policy_delay == 0, bc)
                 learn_s += time.perf_counter() - t1
 
             # ---- log

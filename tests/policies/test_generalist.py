@@ -252,3 +252,41 @@ def test_a_generalist_run_exports_a_policy_fly_can_load_for_any_n(tmp_path):
         state = sim.initial_state(np.random.default_rng(0), 2)
         actions = policy.act(sim.observe(state, layout=policy.layout).flat())
         assert actions.shape == (2, scen.uav.count) and np.isfinite(actions).all()
+
+
+def test_a_teacher_run_flies_the_teacher_clones_it_then_fine_tunes(tmp_path):
+    suite = tmp_path / "tiny.toml"
+    suite.write_text(TINY_SUITE)
+    cfg = GeneralistConfig(
+        suites=(str(suite),),
+        agents_per_family=4,
+        hidden=8,
+        batch_size=32,
+        teacher="orca-shield",
+        teacher_transitions=200,
+        bc_updates=20,
+        updates_per_iteration=1,
+        minutes=0.0,
+        total_iterations=4,
+        eval_episodes=2,
+        device="cpu",
+    )
+    seen: list[dict[str, float]] = []
+    summary = train_generalist(cfg, tmp_path / "run", progress=seen.append)
+    assert seen and "teacher/success" in seen[0] and seen[0]["losses/clone"] > 0
+    assert summary["iterations"] == 4
+    evals = (tmp_path / "run" / "evals.jsonl").read_text().splitlines()
+    assert json.loads(evals[0])["iteration"] == 1  # the clone is validated at once
+
+
+def test_the_teacher_is_orca_through_the_shield():
+    from policies.generalist_train import World, teacher_actions, with_layout
+    from sim.scenarios import load_scenario
+    from sim.swarm import SwarmSim
+
+    cfg = with_layout(load_scenario("3u2o"), LAYOUT)
+    sim = SwarmSim(cfg)
+    state = sim.initial_state(np.random.default_rng(0), 3)
+    world = World(None, cfg, False, sim, state, sim.observe(state).flat(), 3)  # type: ignore[arg-type]
+    actions = teacher_actions(world)
+    assert actions.shape == (3, 3) and (np.abs(actions) <= 1).all()
