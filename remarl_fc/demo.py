@@ -40,6 +40,7 @@ from remarl_fc.sitl.fleet import SitlFleet
 from sim.config import ScenarioConfig
 from sim.encounters import DISTRIBUTIONS, Family, Formation, sample_family
 from sim.scenarios import load_scenario
+from sim.shield import ShieldConfig
 from sim.spawn import EpisodeStart
 
 CRUISE_ALT_M = 20.0
@@ -205,6 +206,7 @@ async def fly_on_mock(
     signing_key: bytes | None = None,
     sitl_options: dict[str, Any] | None = None,
     quick_start: bool = False,
+    shield: ShieldConfig | None = None,
 ) -> MockFlight:
     """Fly ``policy`` (default: `demo_policy`) on a mock of ``scenario``, or of a drawn encounter.
 
@@ -222,6 +224,7 @@ async def fly_on_mock(
         sitl_options: extra `SitlConfig` fields (e.g. ``px4=Px4Params(...)``).
         quick_start: skip ArduCopter's slow start (EKF ready after 5 s instead of 39 s, the
             climb at once after the take-off ACK): for tests that do not exercise the start.
+        shield: the safety shield behind the policy; None: `FlyConfig`'s (on).
         vehicles: fly this many vehicles and ``intruders`` intruders drawn from ``seed``
             (`drawn_encounter`) instead of ``scenario``, for at most the drawn family's step
             limit under control (``max_flight_s`` = max_steps × dt, as the simulator's episodes
@@ -240,6 +243,8 @@ async def fly_on_mock(
     else:
         cfg, episode = drawn_encounter(vehicles, intruders, seed, spec)
         fly_options = {"max_flight_s": cfg.max_steps * cfg.dt_s, **(fly_options or {})}
+    if shield is not None:
+        fly_options = {"shield": shield, **(fly_options or {})}
     mission = Mission.from_scenario(cfg, DEFAULT_HOME, CRUISE_ALT_M, episode=episode)
     mission.check_policy(pol.uav_range, spec.speed_m_s, spec.dt_s, spec.arrival_m)
     port = free_udp_port()

@@ -20,8 +20,10 @@ from remarl_fc.cli.common import (
     FLAVOURS,
     add_choice,
     add_seed,
+    add_shield_flags,
     emit,
     finish,
+    shield_from_args,
 )
 
 DEMO_SCENARIO = "3u2o"
@@ -36,6 +38,10 @@ MAX_DEMO_INTRUDERS = 8
 
 DEFAULT_DEMO_INTRUDERS = 2
 """``demo --intruders`` when not given (`remarl_fc.demo.DEFAULT_INTRUDERS`)."""
+
+FLY_SHIELD_MODE = "on"
+"""``fly --shield`` and ``demo --shield`` when not given (the mode of
+`remarl_fc.flight.config.FLY_SHIELD`, not imported here: the parser stays light)."""
 
 FLY_FLAGS = {
     "dry_run": "dry_run",
@@ -133,6 +139,7 @@ def add_parsers(sub: Any) -> None:
     p.add_argument(
         "--speedup", type=float, default=1.0, help=argparse.SUPPRESS
     )  # only to fly a mock running faster than real time
+    add_shield_flags(p, default=FLY_SHIELD_MODE)
     bus = p.add_argument_group("swarm bus (one process per vehicle)")
     bus.add_argument(
         "--vehicle",
@@ -197,6 +204,7 @@ def add_parsers(sub: Any) -> None:
     p.add_argument("--out", default="flight.png", help="the flight plot (default flight.png)")
     p.add_argument("--log", default=None, metavar="DIR", help="keep the logs here")
     p.add_argument("--summary", default=None, help="write the ground truth here (JSON)")
+    add_shield_flags(p, default=FLY_SHIELD_MODE)
     finish(p, cmd_demo)
 
     p = sub.add_parser("plot-flight", help="draw a flight from its log folder")
@@ -265,6 +273,7 @@ def cmd_fly(args: argparse.Namespace) -> int:
     mission.check_policy(policy.uav_range, spec.speed_m_s, spec.dt_s, spec.arrival_m)
     signing = SigningConfig(load_signing_key(args.signing_key)) if args.signing_key else None
     by_mission = args.takeoff is not None and math.isnan(args.takeoff)
+    shield = shield_from_args(args)
     try:
         cfg = FlyConfig(
             connections=tuple(args.connection),
@@ -275,6 +284,7 @@ def cmd_fly(args: argparse.Namespace) -> int:
             log_dir=Path(args.log) if args.log else None,
             signing=signing,
             vehicles=frozenset(args.vehicle) if args.vehicle else None,
+            shield=shield,
             **{setting: getattr(args, flag) for setting, flag in FLY_FLAGS.items()},
         )
     except ValueError as exc:
@@ -335,7 +345,9 @@ def _make_bus(args: argparse.Namespace, cfg: Any) -> Any:
 
 
 def _fly_text(summary: dict[str, Any]) -> str:
-    lines = [f"{summary['decisions']} decisions"]
+    from remarl_fc.flight.shielding import summary_line
+
+    lines = [f"{summary['decisions']} decisions", summary_line(summary["shield"])]
     for v in summary["vehicles"]:
         last = v["events"][-1][1] if v["events"] else ""
         trust = "" if v["trusted"] else f", telemetry untrusted: {v['untrusted']}"
@@ -354,6 +366,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     from remarl_fc.demo import fly_on_mock
     from remarl_fc.errors import ConfigError
     from remarl_fc.flight.flightlog import plot_flight
+    from remarl_fc.flight.shielding import summary_line
     from remarl_fc.sitl.groundtruth import write_json_atomic
 
     if args.vehicles is not None and args.scenario is not None:
@@ -362,6 +375,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
         raise ConfigError("demo: --intruders goes with --vehicles (a scenario has its own)")
     scenario = args.scenario or DEMO_SCENARIO
     intruders = DEFAULT_DEMO_INTRUDERS if args.intruders is None else args.intruders
+    shield = shield_from_args(args)
     with tempfile.TemporaryDirectory(prefix="remarl-demo-") as tmp:
         log_dir = Path(args.log) if args.log else Path(tmp)
         flight = asyncio.run(
@@ -375,6 +389,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
                 seed=args.seed,
                 vehicles=args.vehicles,
                 intruders=intruders,
+                shield=shield,
             )
         )
         figure = plot_flight(log_dir, args.out)
@@ -395,6 +410,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
             f"{overall['collisions_vehicle_vehicle']} between vehicles; closest approach "
             f"{overall['min_vehicle_intruder_m']} m to an intruder, "
             f"{overall['min_vehicle_vehicle_m']} m between vehicles (d_col {overall['d_col_m']} m)"
+            f"\n{summary_line(flight.runtime['shield'])}"
             f"\nwrote {figure['out']}"
         )
     return demo_exit_status(truth)

@@ -24,8 +24,13 @@ from remarl_fc.flight.tracking import VehicleTrack
 from remarl_fc.mavlink.codec import SigningConfig
 from remarl_fc.mavlink.consts import MavComponent, MsgId
 from remarl_fc.mavlink.link import LinkAddress, MavlinkLink
+from sim.shield import ShieldConfig
 
 HoldMode = Literal["brake", "loiter"]
+
+FLY_SHIELD = ShieldConfig(mode="on")
+"""The safety shield a flight flies behind unless told otherwise (`FlyConfig.shield`): on, with
+`sim.shield.ShieldConfig`'s horizon, margin and candidates."""
 
 TELEMETRY: dict[int, float] = {
     MsgId.GLOBAL_POSITION_INT: 10.0,
@@ -120,6 +125,10 @@ class FlyConfig:
     check_params: bool = True
     """Read and judge every vehicle's failsafe parameters before arming
     (`remarl_fc.flight.paramcheck`); an error finding stops the flight."""
+    shield: ShieldConfig = FLY_SHIELD
+    """The safety shield behind the policy (`sim.shield`, docs/FLYING.md "The safety shield"):
+    "on" replaces a decision that would come within d_col + margin of an obstacle or of the
+    swarm; "monitor" only records it; "off" computes nothing."""
 
     def __post_init__(self) -> None:
         if not self.connections:

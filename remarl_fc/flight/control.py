@@ -13,6 +13,14 @@ targets, where their telemetry places them; the controller knows the headings it
 and flies its vehicles at the arcs' velocities, as the simulator's UAVs fly theirs. A version-1
 policy sees only its own rows, as it was trained.
 
+Behind the policy stands the safety shield (`sim.shield.shield`, the one implementation the
+simulator and the offline evaluation use too), when the controller is given one
+(``SwarmController(..., shield=ShieldConfig(mode="on"))``): every decision, the policy's
+heading changes are checked against the obstacles (ADS-B intruders, each with its report's
+age, and vehicles no longer flown) and the swarm's committed arcs, and the shield's heading
+change and speed replace a proposal that would come within d_col + margin ("on"; "monitor"
+only records what it would do).
+
 The frames are the simulator's (x east, y north, heading counter-clockwise from east); the
 mission's north/east metres and NED yaw are converted in `remarl_fc.frames` only.
 """
@@ -33,10 +41,26 @@ from remarl_fc.flight.traffic import TrafficPicture
 from remarl_fc.frames import heading_to_yaw, ne_to_sim, sim_to_ne
 from sim.kinematics import heading_velocity
 from sim.observation import ObservationLayout, build_observations
+from sim.shield import ShieldConfig, ShieldDecision, Threats, shield
+from sim.shield import Swarm as ShieldSwarm
+from sim.shield import Vehicle as ShieldVehicle
 from sim.spawn import virtual_centre_and_velocity
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
+
+MULTIROTOR_CAN_SLOW = True
+"""The vehicles `fly` flies can slow down and hover (ArduPilot and PX4 multirotors in
+GUIDED/OFFBOARD follow a zero velocity setpoint): the shield may slow them down."""
+
+MIN_REPORT_AGE_S = 1e-3
+"""The least age the shield is given for an obstacle, s. In flight every obstacle is a report
+(an ADS-B track, a vehicle's last telemetry), never the simulator's exact sensing, which the
+shield tells by an age of 0 and trusts without uncertainty."""
+
+MOVING_M_S = 0.1
+"""A vehicle not on this controller's arcs (a peer's) slower than this has no heading from its
+velocity: the shield keeps the controller's."""
 
 
 class PolicyLike(Protocol):
@@ -80,6 +104,20 @@ class ControlSpec:
             arrival_m=float(meta["d_col_m"]),
         )
 
+    def shield_vehicle(self) -> ShieldVehicle:
+        """The shield's view of the vehicles (`sim.shield.Vehicle`).
+
+        The policy's d_col, step, turn bound and speed; multirotors that can slow down
+        (`MULTIROTOR_CAN_SLOW`).
+        """
+        return ShieldVehicle(
+            d_col_m=self.arrival_m,
+            dt_s=self.dt_s,
+            max_turn_rad=self.max_turn_rad,
+            cruise_m_s=self.speed_m_s,
+            can_slow=MULTIROTOR_CAN_SLOW,
+        )
+
 
 @dataclass(frozen=True)
 class SwarmPicture:
@@ -113,10 +151,14 @@ class Decision:
     """One decision of the swarm (for the log).
 
     Attributes:
-        t: decision time. obs: (N, size) observations. action: (N,) in [−1, 1].
-        turn_rad: (N,) heading change over the coming step. heading_rad: (N,) at t.
-        positions_ne_m: (N, 2) as used. obstacles_ne_m: (M, 2) as used.
-        speed_m_s: (N,) the speed commanded along the coming arc.
+        t: decision time. obs: (N, size) observations. action: (N,) in [−1, 1], flown (the
+        shield's where it replaced the policy's). turn_rad: (N,) heading change over the
+        coming step. heading_rad: (N,) at t. positions_ne_m: (N, 2) as used.
+        obstacles_ne_m: (M, 2) as used. speed_m_s: (N,) the speed commanded along the coming
+        arc. proposed_action: (N,) the policy's. flown: (N,) the vehicles this decision flies
+        (on this controller's arcs, position known): the ones the shield checked.
+        shield: the shield's decision, (1, N) arrays (`sim.shield.ShieldDecision`); None when
+        the shield is off.
     """
 
     t: float
@@ -127,6 +169,9 @@ class Decision:
     positions_ne_m: FloatArray
     obstacles_ne_m: FloatArray
     speed_m_s: FloatArray
+    proposed_action: NDArray[np.float32]
+    flown: BoolArray
+    shield: ShieldDecision | None
 
 
 class SwarmController:
@@ -136,10 +181,20 @@ class SwarmController:
         policy: the policy (numpy inference).
         spec: speed, dt, turn bound, virtual-centre lead, arrival distance.
         targets_ne_m: (N, 2) targets, north/east metres in the mission frame.
+        shield: the safety shield behind the policy (default: `ShieldConfig`'s, off).
     """
 
-    def __init__(self, policy: PolicyLike, spec: ControlSpec, targets_ne_m: FloatArray) -> None:
+    def __init__(
+        self,
+        policy: PolicyLike,
+        spec: ControlSpec,
+        targets_ne_m: FloatArray,
+        *,
+        shield: ShieldConfig | None = None,
+    ) -> None:
         self.policy, self.spec = policy, spec
+        self.shield = shield if shield is not None else ShieldConfig()
+        self.shield_vehicle = spec.shield_vehicle()
         self.targets_xy = ne_to_sim(np.asarray(targets_ne_m, dtype=np.float64))
         n = len(self.targets_xy)
         self.n = n
@@ -185,8 +240,9 @@ class SwarmController:
         speed_m_s: FloatArray | None = None,
         *,
         swarm: SwarmPicture | None = None,
+        obstacle_age_s: FloatArray | None = None,
     ) -> Decision:
-        """Decide every vehicle's next arc.
+        """Decide every vehicle's next arc: the policy's, through the shield.
 
         Args:
             now: decision time (s, the controller's clock).
@@ -195,21 +251,29 @@ class SwarmController:
                 (or no longer) members of the swarm, predicted to ``now``.
             speed_m_s: (N,) speeds to fly the coming arcs at, clipped to [0, the policy's
                 speed] (a multirotor can slow down and stop); None: the policy's speed.
-            swarm: version-2 policies: which vehicles are neighbours and how they move (see
-                `SwarmPicture`); None: every vehicle with a known position, all on their arcs.
-                Version 1 ignores it.
+            swarm: which vehicles are neighbours and how they move (see `SwarmPicture`);
+                None: every vehicle with a known position, all on their arcs. A version-1
+                policy does not see it; the shield does (it decides for the vehicles on this
+                controller's arcs, and keeps them clear of every neighbour).
+            obstacle_age_s: (M,) age of each obstacle's report (now − its time), which widens
+                the shield's required clearance; None: 0, exactly known (as the simulator's
+                sensing: `obstacle_picture` gives every report's).
+
+        With the shield on, the shield's heading change replaces the policy's where the
+        policy's would not keep clear, and the speed is the lower of ``speed_m_s`` and the
+        shield's (which checks every candidate at the policy's speed first).
         """
         layout = self.policy.layout
         heading = self.heading_at(now)
         raw = ne_to_sim(np.asarray(positions_ne_m, dtype=np.float64))
-        known = np.isfinite(raw).all(axis=-1)
+        known: BoolArray = np.asarray(np.isfinite(raw).all(axis=-1))
         pos = np.where(np.isfinite(raw), raw, 0.0)
         vel = heading_velocity(heading, self.spec.speed_m_s)
         obs_xy = ne_to_sim(np.asarray(obstacles_ne_m, dtype=np.float64).reshape(-1, 2))
         obs_v = ne_to_sim(np.asarray(obstacle_vel_ne_m_s, dtype=np.float64).reshape(-1, 2))
+        sw = SwarmPicture.everyone(self.n) if swarm is None else swarm
         neighbours: dict[str, Any] = {}
         if layout.version == 2:
-            sw = SwarmPicture.everyone(self.n) if swarm is None else swarm
             arc = heading_velocity(heading, self.speed_m_s[:, None])
             told = ne_to_sim(np.nan_to_num(np.asarray(sw.vel_ne_m_s, dtype=np.float64)))
             vel = np.where(np.asarray(sw.on_arc)[:, None], arc, told)
@@ -230,12 +294,21 @@ class SwarmController:
             **neighbours,
         )
         flat = built.flat()
-        action = np.clip(self.policy.act(flat)[0], -1.0, 1.0).astype(np.float32)
-        turn = action.astype(np.float64) * self.spec.max_turn_rad
-        self.h0, self.turn, self.t0[:] = heading, turn, now
+        proposed = np.clip(self.policy.act(flat)[0], -1.0, 1.0).astype(np.float32)
         cruise = self.spec.speed_m_s
         wanted = np.full(self.n, cruise) if speed_m_s is None else np.asarray(speed_m_s, float)
-        self.speed_m_s = np.clip(np.nan_to_num(wanted, nan=0.0), 0.0, cruise)
+        speed = np.clip(np.nan_to_num(wanted, nan=0.0), 0.0, cruise)
+        flown = np.asarray(sw.on_arc, dtype=bool) & known
+        action, checked = proposed, None
+        if self.shield.mode != "off":
+            age = np.zeros(len(obs_xy)) if obstacle_age_s is None else obstacle_age_s
+            obstacles = (obs_xy, obs_v, np.asarray(age, dtype=np.float64).reshape(-1))
+            checked = self._shield(pos, heading, speed, proposed, flown, known, sw, obstacles)
+            action = np.where(flown, checked.action[0], proposed).astype(np.float32)
+            speed = np.where(flown, np.minimum(speed, checked.speed_m_s[0]), speed)
+        turn = action.astype(np.float64) * self.spec.max_turn_rad
+        self.h0, self.turn, self.t0[:] = heading, turn, now
+        self.speed_m_s = speed
         return Decision(
             now,
             flat[0],
@@ -245,7 +318,52 @@ class SwarmController:
             np.asarray(positions_ne_m),
             sim_to_ne(obs_xy),
             self.speed_m_s.copy(),
+            proposed,
+            flown,
+            checked,
         )
+
+    def _shield(
+        self,
+        pos: FloatArray,
+        heading: FloatArray,
+        speed: FloatArray,
+        proposed: NDArray[np.float32],
+        flown: BoolArray,
+        known: BoolArray,
+        sw: SwarmPicture,
+        obstacles: tuple[FloatArray, FloatArray, FloatArray],
+    ) -> ShieldDecision:
+        """`sim.shield.shield` on this decision (simulator frame, B = 1).
+
+        It decides for the vehicles flown here (``flown``) and keeps them clear of the
+        obstacles (each report's age widening the clearance) and of the swarm's present
+        vehicles: those flown here on their proposed arcs at their commanded speeds (as the
+        simulator's adapter `sim.shield.shield_state` does), a peer's vehicle straight on at
+        its telemetry's velocity, one holding at its target at rest.
+        """
+        on_arc = np.asarray(sw.on_arc, dtype=bool)
+        told = ne_to_sim(np.nan_to_num(np.asarray(sw.vel_ne_m_s, dtype=np.float64)))
+        told_speed = np.hypot(told[:, 0], told[:, 1])
+        moving = ~on_arc & (told_speed > MOVING_M_S)
+        course = np.where(moving, np.arctan2(told[:, 1], told[:, 0]), heading)
+        swarm = ShieldSwarm(
+            pos_m=pos[None],
+            heading_rad=course[None],
+            target_m=self.targets_xy[None],
+            deciding=flown[None],
+            present=(np.asarray(sw.present, dtype=bool) & known)[None],
+            speed_m_s=np.where(on_arc, speed, told_speed)[None],
+        )
+        obs_xy, obs_v, ages = obstacles
+        threats = Threats(
+            intruder_pos_m=obs_xy[None],
+            intruder_vel_m_s=np.nan_to_num(obs_v)[None],  # no velocity reported: at rest
+            intruder_known=np.asarray(np.isfinite(obs_xy).all(axis=-1))[None],
+            intruder_age_s=np.maximum(ages, 0.0)[None],
+        )
+        committed = np.where(on_arc, proposed, 0.0)
+        return shield(self.shield, self.shield_vehicle, swarm, threats, committed[None])
 
     def setpoint(self, slot: int, now: float) -> tuple[float, float, float]:
         """(north m/s, east m/s, yaw rad) of vehicle ``slot`` on its arc now."""
@@ -282,13 +400,28 @@ def swarm_picture(rows: Sequence[tuple[Member, Status]]) -> SwarmPicture:
     )
 
 
+@dataclass(frozen=True)
+class Obstacles:
+    """What the policy and the shield must avoid, north/east, predicted to the decision time.
+
+    Attributes:
+        ne_m, vel_ne_m_s: (M, 2) positions and velocities.
+        age_s: (M,) age of each one's report: now − the ADS-B report's time, or now − the
+            last position of a vehicle no longer flown; at least `MIN_REPORT_AGE_S`.
+    """
+
+    ne_m: FloatArray
+    vel_ne_m_s: FloatArray
+    age_s: FloatArray
+
+
 def obstacle_picture(
     traffic: TrafficPicture,
     rows: Sequence[tuple[Member, Status]],
     now: float,
     band_m: float,
-) -> tuple[FloatArray, FloatArray]:
-    """(M, 2) positions and velocities north/east of every obstacle the policy must avoid.
+) -> Obstacles:
+    """Every obstacle the policy must avoid.
 
     The ADS-B intruders within ±``band_m`` of the swarm's mean height (nearest the swarm centre
     first, capped by the picture), and the vehicles no longer flown by the policy (`OBSTACLE`:
@@ -299,14 +432,16 @@ def obstacle_picture(
     heights = [t.height_m for t in tracks if math.isfinite(t.height_m)]
     centre = np.mean(known, axis=0) if known else None
     height = float(np.mean(heights)) if heights else 0.0
-    pos, vel = [], []
+    pos, vel, age = [], [], []
     for intr in traffic.current(now, height, band_m, near_ne_m=centre):
         pos.append(intr.predicted_ne_m(now))
         vel.append(intr.vel_ne_m_s)
+        age.append(max(MIN_REPORT_AGE_S, now - intr.t))
     for m, status in rows:
         if status in OBSTACLE and math.isfinite(m.track.t_position):
             pos.append(m.track.predicted_ne_m(now))
             vel.append(m.track.vel_ned_m_s[:2])
+            age.append(max(MIN_REPORT_AGE_S, now - m.track.t_position))
     if not pos:
-        return np.zeros((0, 2)), np.zeros((0, 2))
-    return np.array(pos), np.array(vel)
+        return Obstacles(np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0))
+    return Obstacles(np.array(pos), np.array(vel), np.array(age))

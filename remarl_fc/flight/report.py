@@ -10,7 +10,7 @@ Pure functions of the vehicles' rows and statuses; the runtime calls them.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -18,6 +18,7 @@ from numpy.typing import NDArray
 
 from remarl_fc.flight.config import Member
 from remarl_fc.flight.control import Decision, SwarmController
+from remarl_fc.flight.shielding import Check
 from remarl_fc.flight.status import Status
 from remarl_fc.flight.tracking import NO_FIX
 from remarl_fc.flight.traffic import ROUTINE_REJECTIONS
@@ -45,31 +46,41 @@ def status_lines(rows: Rows, targets_ne_m: NDArray[np.float64], now: float) -> s
 
 
 def decision_rows(
-    rows: Rows, controller: SwarmController, d: Decision, decide_s: Sequence[float]
+    rows: Rows,
+    controller: SwarmController,
+    d: Decision,
+    decide_s: Sequence[float],
+    checks: Mapping[int, Check] | None = None,
 ) -> list[dict[str, Any]]:
-    """The decision log's rows for one decision: one per vehicle."""
+    """The decision log's rows for one decision: one per vehicle.
+
+    A vehicle the shield checked (``checks``, by system id) gets its ``shield`` field
+    (`Check.fields`); with the shield off there are none.
+    """
     out = []
     for m, status in rows:
         k = m.slot
         vn, ve, yaw = controller.setpoint(k, d.t)
-        out.append(
-            {
-                "t": round(d.t, 3),
-                "system_id": m.system_id,
-                "slot": k,
-                "status": status.value,
-                "ne_m": [round(float(v), 2) for v in d.positions_ne_m[k]],
-                "height_m": round(m.track.height_m, 2),
-                "obs": [round(float(v), 4) for v in d.obs[k]],
-                "action": round(float(d.action[k]), 4),
-                "turn_rad": round(float(d.turn_rad[k]), 4),
-                "speed_m_s": round(float(d.speed_m_s[k]), 3),
-                "heading_rad": round(float(d.heading_rad[k]), 4),
-                "setpoint": {"vn": round(vn, 3), "ve": round(ve, 3), "yaw": round(yaw, 4)},
-                "obstacles_ne_m": [[round(float(v), 2) for v in p] for p in d.obstacles_ne_m],
-                "decide_ms": round(decide_s[-1] * 1000, 3) if decide_s else None,
-            }
-        )
+        row: dict[str, Any] = {
+            "t": round(d.t, 3),
+            "system_id": m.system_id,
+            "slot": k,
+            "status": status.value,
+            "ne_m": [round(float(v), 2) for v in d.positions_ne_m[k]],
+            "height_m": round(m.track.height_m, 2),
+            "obs": [round(float(v), 4) for v in d.obs[k]],
+            "action": round(float(d.action[k]), 4),
+            "turn_rad": round(float(d.turn_rad[k]), 4),
+            "speed_m_s": round(float(d.speed_m_s[k]), 3),
+            "heading_rad": round(float(d.heading_rad[k]), 4),
+            "setpoint": {"vn": round(vn, 3), "ve": round(ve, 3), "yaw": round(yaw, 4)},
+            "obstacles_ne_m": [[round(float(v), 2) for v in p] for p in d.obstacles_ne_m],
+            "decide_ms": round(decide_s[-1] * 1000, 3) if decide_s else None,
+        }
+        check = (checks or {}).get(m.system_id)
+        if check is not None:
+            row["shield"] = check.fields()
+        out.append(row)
     return out
 
 

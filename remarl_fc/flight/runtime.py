@@ -5,15 +5,16 @@
 
 One `asyncio.TaskGroup` owns every task, each named ``remarl.<what>``: ``heartbeat`` (1 Hz),
 ``mission`` (prepare every vehicle — `remarl_fc.flight.prepare` — then one policy decision
-per dt), ``setpoints`` (at ≥ 10 Hz one tick of the sans-I/O core `remarl_fc.flight.core`:
-telemetry snapshots in; setpoints, holds and events out), ``holds`` (the hold modes the core
-asks for, each waiting for its ACK), ``bus_rx``/``bus_tx`` (`remarl_fc.flight.peers`).
+per dt, through the safety shield; `remarl_fc.flight.shielding` records what it did),
+``setpoints`` (at ≥ 10 Hz one tick of the sans-I/O core `remarl_fc.flight.core`: telemetry
+snapshots in; setpoints, holds and events out), ``holds`` (the hold modes the core asks for,
+each waiting for its ACK), ``bus_rx``/``bus_tx`` (`remarl_fc.flight.peers`).
 Frames come in through `remarl_fc.flight.receive` (the source gate); commands go out through
 `remarl_fc.flight.commands`. Every wait has a deadline on the flight clock and raises; on any
 exit — the end of the mission, an error, Ctrl-C — every vehicle still flown is told to hold.
 
 This module is the one place that owns a flight's tasks, clocks and resources, so it stays
-whole (about 450 lines): every decision it carries out is made elsewhere, without I/O.
+whole (about 490 lines): every decision it carries out is made elsewhere, without I/O.
 """
 
 from __future__ import annotations
@@ -64,6 +65,7 @@ from remarl_fc.flight.report import (
     status_lines,
     vehicle_summaries,
 )
+from remarl_fc.flight.shielding import Check, ShieldTally, checks_of
 from remarl_fc.flight.status import Status
 from remarl_fc.flight.traffic import TrafficPicture
 from remarl_fc.flight.trust import SourceGate
@@ -117,7 +119,9 @@ class SwarmRuntime(StackOwner):
             self.bus, self.members, self.traffic, self.clock, cfg.peer_timeout_s,
             lambda m: self.vehicles[m.system_id].status.value,
         )  # fmt: skip
-        self.controller = SwarmController(policy, spec, mission.targets_ne_m())
+        self.controller = SwarmController(policy, spec, mission.targets_ne_m(), shield=cfg.shield)
+        self.shield = ShieldTally(cfg.shield.mode)
+        """What the safety shield did (`remarl_fc.flight.shielding`)."""
         self.vehicles: dict[int, Vehicle] = {
             m.system_id: Vehicle(m.system_id, m.slot) for m in self.members
         }
@@ -264,7 +268,7 @@ class SwarmRuntime(StackOwner):
             if now > end:
                 await self.hold_all(reason="max flight time")
                 return
-            self._decide(now)
+            self.decide(now)
             t_next += dt
             await self.clock.sleep(t_next - self.clock.now())
         for sysid in sorted(mine):
@@ -275,23 +279,56 @@ class SwarmRuntime(StackOwner):
                     "every other vehicle done: given up",
                 )
 
-    def _decide(self, now: float) -> None:
+    def decide(self, now: float) -> None:
+        """One swarm decision at ``now`` (the mission task calls it every dt).
+
+        The policy through the shield (`SwarmController.decide`), then the decision log's
+        rows, the shield's records (`remarl_fc.flight.shielding`) and the status lines.
+        """
         self._sync_peers(now)
         positions = np.array([m.track.predicted_ne_m(now) for m in self.members])
         rows = self._report_rows()
-        obstacles, obstacle_vel = obstacle_picture(self.traffic, rows, now, self.cfg.adsb_band_m)
+        obstacles = obstacle_picture(self.traffic, rows, now, self.cfg.adsb_band_m)
         t0 = time.perf_counter()
         decision = self.controller.decide(
-            now, positions, obstacles, obstacle_vel, swarm=swarm_picture(rows)
+            now,
+            positions,
+            obstacles.ne_m,
+            obstacles.vel_ne_m_s,
+            swarm=swarm_picture(rows),
+            obstacle_age_s=obstacles.age_s,
         )
         self.decide_s.append(time.perf_counter() - t0)
         self.decisions += 1
+        ids = [m.system_id for m in self.members]
+        checks = checks_of(decision, ids, self.spec.max_turn_rad, self.cfg.shield.mode)
+        self.shield.add(checks)
         if self._log is not None:
-            for row in decision_rows(rows, self.controller, decision, self.decide_s):
+            by_id = {c.system_id: c for c in checks}
+            for row in decision_rows(rows, self.controller, decision, self.decide_s, by_id):
                 self._log.write(row)
             self._log.flush()
+        for c in checks:
+            if c.intervened:
+                self._intervention(c)
         if self.on_status is not None:
             self.on_status(self.status_line(now))
+
+    def _intervention(self, c: Check) -> None:
+        """An intervention of the shield (in monitor mode a would-be one) to the tlog and console.
+
+        A STATUSTEXT in the tlog of the vehicle's link, written but not sent (the vehicles and
+        their ground stations get no extra traffic), and a line on the console.
+        """
+        m = self.by_sysid[c.system_id]
+        link = m.link if m.link is not None else (self.links[0] if self.links else None)
+        if link is not None and link.tlog is not None:
+            text = c.text(self.spec.speed_m_s).encode("ascii", "replace")
+            link.tlog.write(
+                self.codec.encode(self.codec.factory.statustext_encode(c.severity(), text))
+            )
+        if self.on_status is not None:
+            self.on_status(f"t={c.t:6.1f}s vehicle {c.system_id}: {c.console()}")
 
     def _report_rows(self) -> list[tuple[Member, Status]]:
         return [(m, self.vehicles[m.system_id].status) for m in self.members]
@@ -435,6 +472,7 @@ class SwarmRuntime(StackOwner):
             "link": link,
             "traffic": traffic,
             "anomalies": anomalies(rows, link, traffic),
+            "shield": self.shield.summary([m.system_id for m in self.local_members()]),
             "vehicles": vehicles,
             "reached": [v["system_id"] for v in vehicles if reached_on_trusted_telemetry(v)],
         }
