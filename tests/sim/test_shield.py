@@ -113,10 +113,10 @@ def test_monitor_never_changes_the_action_and_reports_what_on_would_do(seed, n, 
     np.testing.assert_array_equal(watch.shield_speed_m_s, act.speed_m_s)
 
 
-@settings(max_examples=60, deadline=None)
+@settings(max_examples=100, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1))
 def test_where_some_admissible_action_keeps_separation_the_shielded_one_does(seed):
-    """About two thousand random decisions (60 examples × 16 environments × 1–3 UAVs), each
+    """About three thousand random decisions (100 examples × 16 environments × 1–3 UAVs), each
     UAV's decision checked by the dense simulation, and every admissible candidate too where
     the shield intervened."""
     rng = np.random.default_rng(seed)
