@@ -202,7 +202,9 @@ def fly_response(
     start = (0.5 * h - response.delay_s) / dt_s  # (B, N): fraction of the arc at s_0
     shape = moving.shape
     middles = (np.arange(steps) + 0.5) * h  # s_k
-    lagging = int(np.count_nonzero(middles < response.delay_s.max(initial=0.0)))
+    lagging = int(
+        np.count_nonzero(middles < np.maximum.reduce(response.delay_s, axis=None, initial=0.0))
+    )
     # e^(i·angle) of this step's first direction and turn, and of the last arc's first direction
     angles = np.empty((3 if lagging else 2, *shape))
     np.multiply(cmd.turn_rad, start, out=angles[0])
@@ -240,7 +242,9 @@ def fly_response(
     track[0] = pos_m[..., 0] + 1j * pos_m[..., 1]
     for k in range(steps):
         np.add(track[k], move[k], out=track[k + 1])
-    flown = np.abs(move).sum(axis=0)  # along the time axis: added in order, as step by step
+    # along the time axis: added in order, as step by step (`np.add.reduce`: ``.sum``'s numbers
+    # without its Python wrapper)
+    flown = np.add.reduce(np.abs(move), axis=0)
     at_substeps = track[::per_sub]
     xs = at_substeps.real.astype(np.float32)  # (T + 1, B, N)
     ys = at_substeps.imag.astype(np.float32)

@@ -101,18 +101,17 @@ def _swept_chunk_xy(
     tau = x0 * dx
     tau += y0 * dy
     np.maximum(dd, np.finfo(dd.dtype).tiny, out=dd)
-    tau /= dd
-    np.negative(tau, out=tau)
-    np.maximum(tau, 0.0, out=tau)  # the closest instant of each sub-interval (np.clip's
-    np.minimum(tau, 1.0, out=tau)  # numbers without its Python wrapper)
+    tau /= dd  # −τ, τ the closest instant of each sub-interval: clipped to [−1, 0] (np.clip's
+    np.minimum(tau, 0.0, out=tau)  # numbers without its Python wrapper) and taken away below:
+    np.maximum(tau, -1.0, out=tau)  # x0 − dx·(−τ) is x0 + dx·τ exactly, with no negation pass
     dx *= tau
-    dx += x0
+    np.subtract(x0, dx, out=dx)
     dy *= tau
-    dy += y0
+    np.subtract(y0, dy, out=dy)
     dx *= dx
     dy *= dy
     dx += dy
-    smallest: NDArray[np.floating[Any]] = np.sqrt(dx.min(axis=0))
+    smallest: NDArray[np.floating[Any]] = np.sqrt(np.minimum.reduce(dx, axis=0))
     return smallest
 
 

@@ -158,7 +158,9 @@ def pso_separate(
             pair_active = None
         else:
             dist[~pair_active] = np.inf
-    dmin: FloatArray = dist.min(axis=0, initial=np.inf)
+    # `np.minimum.reduce` and the like: the array methods' numbers without their Python
+    # wrappers (a search calls them every iteration)
+    dmin: FloatArray = np.minimum.reduce(dist, axis=0, initial=np.inf)
     feasible = dmin >= cfg.threshold_m
     positions, cost = q.copy(), np.full(b, cfg.threshold_m)
     shift, searched = np.zeros(b), np.zeros(b, dtype=bool)
@@ -231,7 +233,7 @@ def _spread(
         deficit = np.subtract(goal, dist)
         if weight is not None:
             deficit *= weight  # pairs with an inactive UAV: no deficit
-        todo = deficit.max(axis=0, initial=0.0) > tolerance
+        todo = np.maximum.reduce(deficit, axis=0, initial=0.0) > tolerance
         left = np.count_nonzero(todo)
         moving = None
         if 2 * left <= len(todo):  # most are done: go on with the others only
@@ -336,8 +338,8 @@ class _Cost:
         """
         d2, shift2 = self._squares(state)
         np.subtract(self.threshold2, d2, out=d2)
-        violation = np.maximum(d2, 0.0, out=d2).sum(axis=0)  # Σ max(0, d̄² − d_ij²), m²
-        cost: FloatArray = np.sqrt(shift2.max(axis=0))
+        violation = np.add.reduce(np.maximum(d2, 0.0, out=d2), axis=0)  # Σ max(0, d̄² − d_ij²), m²
+        cost: FloatArray = np.sqrt(np.maximum.reduce(shift2, axis=0))
         infeasible = violation > 0.0
         violation += INFEASIBLE_COST - self.threshold
         violation *= infeasible

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
-from typing import TypeVar
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -116,6 +116,21 @@ class SwarmState:
         """B."""
         return int(self.pos_m.shape[0])
 
+    def evolve(self, **changes: Any) -> SwarmState:
+        """This state with the given fields replaced: `dataclasses.replace`'s result.
+
+        A step makes several new states, and `dataclasses.replace` passes all 23 fields through
+        the constructor (7 µs, against 1 µs here): the fields are copied as they are instead
+        (the same objects; only their names are checked).
+        """
+        unknown = changes.keys() - self.__dict__.keys()
+        if unknown:
+            raise TypeError(f"SwarmState has no field {', '.join(sorted(unknown))}")
+        new = object.__new__(SwarmState)
+        new.__dict__.update(self.__dict__)
+        new.__dict__.update(changes)
+        return new
+
     def hovering(self, arrival: Arrival) -> BoolArray:
         """(B, N) UAVs that arrived and hover where they stopped, while the episode goes on.
 
@@ -123,7 +138,8 @@ class SwarmState:
         """
         if arrival == "leave":
             return np.zeros_like(self.reached)
-        running = self.active.any(axis=-1, keepdims=True)
+        # `.any`'s numbers without its Python wrapper (every step asks)
+        running = np.logical_or.reduce(self.active, axis=-1, keepdims=True)
         hover: BoolArray = self.reached & running
         return hover
 
@@ -194,16 +210,25 @@ def merge_where(old: T, new: T, mask: BoolArray) -> T:
 def _merge_at(old: T, new: T, envs: IntArray) -> T:
     """`merge_where` with the selected environments as indices, ``envs`` (count,).
 
-    Found once, used by every array: an index assignment skips the search a mask makes.
+    Found once, used by every array: an index assignment skips the search a mask makes. It runs
+    at every autoreset, so it stays lean: the arrays among a dataclass's fields are merged in
+    its loop (no call each), and the merged dataclass is built by its constructor (what
+    `dataclasses.replace` does, given every field).
     """
     if isinstance(old, np.ndarray):
         out = old.copy()
         out[envs] = new
         return out
     if dataclasses.is_dataclass(old) and not isinstance(old, type):
-        fields = {
-            f.name: _merge_at(getattr(old, f.name), getattr(new, f.name), envs)
-            for f in dataclasses.fields(old)
-        }
-        return dataclasses.replace(old, **fields)
+        merged: dict[str, Any] = {}
+        for f in dataclasses.fields(old):
+            value = getattr(old, f.name)
+            if isinstance(value, np.ndarray):  # most fields: no call for them
+                array = value.copy()
+                array[envs] = getattr(new, f.name)
+                merged[f.name] = array
+            else:
+                merged[f.name] = _merge_at(value, getattr(new, f.name), envs)
+        built: T = type(old)(**merged)
+        return built
     return old

@@ -139,7 +139,7 @@ class SwarmSim:
         levels, _ = assign_contour_levels(
             pos, state.sources(cfg.uav.speed_m_s), cfg.field, cfg.pso, rng
         )
-        return dataclasses.replace(state, levels=levels)
+        return state.evolve(levels=levels)
 
     def reset_where(
         self, state: SwarmState, mask: BoolArray, rng: np.random.Generator
@@ -183,7 +183,7 @@ class SwarmSim:
             tracks, state.obstacle_pos_m, state.obstacle_vel_m_s, now, since, sensors, rng
         )
         error = gps_error(state.pos_m.shape, sensors.gps_sigma_m, rng)
-        return dataclasses.replace(state, tracks=tracks, gps_error_m=error)
+        return state.evolve(tracks=tracks, gps_error_m=error)
 
     def observe(
         self,
@@ -295,8 +295,7 @@ class SwarmSim:
             window, terms = score(state, flight, turn, acted, out.collided, cfg, heading_cos_sin)
         else:
             window, terms = state.window, _unscored(turn)
-        moved = dataclasses.replace(
-            state,
+        moved = state.evolve(
             pos_m=flight.pos_m,
             heading_rad=flight.heading_rad,
             active=out.active,

@@ -168,12 +168,12 @@ def closest_approaches(
 ) -> Approaches:
     """Every kind of closest approach of a step in one float32 call (step 2).
 
-    UAV–obstacle (N·M), UAV–UAV pairs (P, ``pairs`` i < j), UAV–own target (N): the relative
-    positions of all of them, (T + 1, N·M + P + N, B) per coordinate with the batch innermost,
-    are float32 differences (the targets cast to float32 first). Separations count for every
-    UAV ``present`` (flying, or hovering where it arrived) — a pair of UAVs when at least one
-    of them flies; the approach to the target only for the UAVs that ``acted``. ``members``
-    (N, N − 1) (`pair_members`) lists the pairs of each UAV.
+    UAV–obstacle (N·M), UAV–UAV pairs (P, ``pairs`` i < j in `np.triu_indices` order), UAV–own
+    target (N): the relative positions of all of them, (T + 1, N·M + P + N, B) per coordinate
+    with the batch innermost, are float32 differences (the targets cast to float32 first).
+    Separations count for every UAV ``present`` (flying, or hovering where it arrived) — a pair
+    of UAVs when at least one of them flies; the approach to the target only for the UAVs that
+    ``acted``. ``members`` (N, N − 1) (`pair_members`) lists the pairs of each UAV.
     """
     i, j = pairs
     steps, b, n = flight.uav_x.shape
@@ -192,7 +192,12 @@ def closest_approaches(
             o.transpose(0, 2, 1)[:, None],
             out=r[:, :k_uo].reshape(steps, n, m, b),
         )
-        np.subtract(uav[:, i], uav[:, j], out=r[:, k_uo : k_uo + k_uu])
+        # the pairs of UAV a (a < b, `np.triu_indices` order) are one run: x_a − x_b for all b
+        # > a by broadcasting, no gathered copies
+        start = k_uo
+        for a in range(n - 1):
+            np.subtract(uav[:, a : a + 1], uav[:, a + 1 :], out=r[:, start : start + n - 1 - a])
+            start += n - 1 - a
         np.subtract(uav, t.T.astype(np.float32), out=r[:, k_uo + k_uu :])
         rel.append(r)
     swept = swept_min_distance_xy(*rel).astype(np.float64)  # (N·M + P + N, B)
@@ -200,9 +205,10 @@ def closest_approaches(
     counted = present[:, i] & present[:, j] & (acted[:, i] | acted[:, j])
     d_pair = np.where(counted.T, swept[k_uo : k_uo + k_uu], np.inf)  # (P, B)
     # Each UAV's pairs gathered pair-major, (N, N − 1, B): the minimum runs along the batch.
-    min_uu = np.ascontiguousarray(d_pair[members].min(axis=1, initial=np.inf).T)
+    # (`np.minimum.reduce` and the like below: the methods' numbers without their wrappers)
+    min_uu = np.ascontiguousarray(np.minimum.reduce(d_pair[members], axis=1, initial=np.inf).T)
     return Approaches(
-        min_u2o_m=np.where(present, d_uo.min(axis=-1, initial=np.inf), np.inf),
+        min_u2o_m=np.where(present, np.minimum.reduce(d_uo, axis=-1, initial=np.inf), np.inf),
         min_u2u_m=min_uu,
         target_m=np.where(acted, swept[k_uo + k_uu :].T, np.inf),
     )
@@ -257,10 +263,10 @@ def outcome(
     collided_u2u = near.min_u2u_m < d_col_m
     collided = collided_u2o | collided_u2u
     arrived = acted & ~collided & (near.target_m <= d_col_m)
-    any_collision = cast(BoolArray, collided.any(axis=-1))
+    any_collision = cast(BoolArray, np.logical_or.reduce(collided, axis=-1))
     reached = state.reached | arrived
-    all_reached = cast(BoolArray, reached.all(axis=-1))
-    running = cast(BoolArray, acted.any(axis=-1))
+    all_reached = cast(BoolArray, np.logical_and.reduce(reached, axis=-1))
+    running = cast(BoolArray, np.logical_or.reduce(acted, axis=-1))
     terminated = running & (any_collision | all_reached)
     steps = state.steps + running
     truncated = running & ~terminated & (steps >= max_steps)
@@ -333,8 +339,8 @@ def accumulate(
     return EpisodeStats(
         energy_rad=stats.energy_rad + np.abs(turn),
         flown_m=stats.flown_m + flown_m,
-        min_u2o_m=np.minimum(stats.min_u2o_m, near.min_u2o_m.min(axis=-1)),
-        min_u2u_m=np.minimum(stats.min_u2u_m, near.min_u2u_m.min(axis=-1)),
+        min_u2o_m=np.minimum(stats.min_u2o_m, np.minimum.reduce(near.min_u2o_m, axis=-1)),
+        min_u2u_m=np.minimum(stats.min_u2u_m, np.minimum.reduce(near.min_u2u_m, axis=-1)),
         swarming_return=stats.swarming_return + terms.swarming,
         total_return=stats.total_return + terms.total,
     )
@@ -356,7 +362,9 @@ def begin_avoidance(
         The state with the new levels, and (B,) where they were assigned.
     """
     active = state.active
-    begin = ~state.avoiding & ~over & (obs.sensed & active[..., None]).any(axis=(1, 2))
+    begin = (
+        ~state.avoiding & ~over & np.logical_or.reduce(obs.sensed & active[..., None], axis=(1, 2))
+    )
     if not begin.any():
         return state, begin
     sub = FieldSources(
@@ -371,4 +379,4 @@ def begin_avoidance(
     )
     new_levels = state.levels.copy()
     new_levels[begin] = levels
-    return dataclasses.replace(state, levels=new_levels, avoiding=state.avoiding | begin), begin
+    return state.evolve(levels=new_levels, avoiding=state.avoiding | begin), begin

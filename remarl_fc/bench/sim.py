@@ -225,14 +225,29 @@ def _qualnames() -> Callable[[_Key], str]:
     return qualname
 
 
+REAL_NEIGHBOURS = 6
+"""Neighbour rows (k) of the "real" world's version-2 observation: the generalist's."""
+
+REAL_INTRUDERS = 8
+"""Intruder rows (m) of the "real" world's version-2 observation: the generalist's."""
+
 WORLDS: dict[str, dict[str, Any]] = {
     "paper": {},
-    "real": REAL_WORLD,
+    "real": {
+        **REAL_WORLD,
+        "sensing": {
+            "observation": 2,
+            "max_neighbours": REAL_NEIGHBOURS,
+            "max_obstacles": REAL_INTRUDERS,
+        },
+    },
 }
 """``bench sim`` worlds, as scenario overrides: "paper" (ideal vehicles, exact sensing: the
 scenario as shipped) and "real" (each UAV ArduCopter's or PX4's fitted response, randomised
-per UAV, intruders through ADS-B, GPS noise: what the robust policies train on,
-``policies/zoo/robust/3u2o.toml``)."""
+per UAV, intruders through ADS-B, GPS noise, and the neighbours in the observation: version 2
+with the generalist's k = 6 neighbour and m = 8 intruder rows, `sim.observation`; the
+vehicles and sensors are what the robust policies train on, ``policies/zoo/robust/3u2o.toml``,
+the observation what the generalist reads)."""
 
 
 def _vector_env(

@@ -63,7 +63,8 @@ def add_bench(sub: Any) -> None:
         "--world",
         ["paper", "real"],
         help="paper: ideal vehicles, exact sensing (default); real: fitted ArduCopter/PX4 "
-        "response randomised per UAV, ADS-B intruders, GPS noise",
+        "response randomised per UAV, ADS-B intruders, GPS noise, and the generalist's "
+        "observation (6 neighbours, 8 intruders)",
     )
     b.add_argument(
         "--no-parts",

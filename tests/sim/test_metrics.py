@@ -105,3 +105,26 @@ def test_path_length_ratio():
     target = np.array([[200.0, 0.0], [120.0, 160.0]])
     ratio = path_length_ratio(np.array([200.0, 300.0]), start, target)
     np.testing.assert_allclose(ratio, [1.0, 1.5])
+
+
+@given(seed=st.integers(0, 2**31), steps=st.integers(1, 9), kind=st.sampled_from("rzst"))
+def test_the_two_component_kernel_gives_the_general_kernels_numbers(seed, steps, kind):
+    """`swept_min_distance_parts` on (x, y) (its lean kernel) and on (x, y, 0) (the general
+    one): the same float32 numbers, bit for bit, degenerate motions included."""
+    from sim.metrics import swept_min_distance_parts
+
+    rng = np.random.default_rng(seed)
+    shape = (steps + 1, 300)
+    if kind == "r":  # anywhere
+        x, y = rng.normal(0, 50, shape), rng.normal(0, 50, shape)
+    elif kind == "z":  # on a grid: zeros, equal instants, ties
+        x, y = rng.integers(-2, 3, shape) * 1.0, rng.integers(-2, 3, shape) * 1.0
+    elif kind == "s":  # standing still: no motion in a sub-interval
+        x = np.repeat(rng.normal(0, 5, (1, 300)), steps + 1, axis=0)
+        y = -0.5 * x
+    else:  # tiny: squares below float32's smallest normal
+        x, y = rng.normal(0, 1e-20, shape), rng.normal(0, 1e-20, shape)
+    x, y = x.astype(np.float32), y.astype(np.float32)
+    lean = swept_min_distance_parts((x, y))
+    general = swept_min_distance_parts((x, y, np.zeros_like(x)))
+    np.testing.assert_array_equal(lean.view(np.uint32), general.view(np.uint32))

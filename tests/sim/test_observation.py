@@ -267,3 +267,79 @@ def test_v2_rotating_the_world_and_reordering_the_uavs_leaves_each_observation_u
     a = build_observations(LAYOUT_V2, **w).storage[:, order]
     b = build_observations(LAYOUT_V2, **moved).storage
     np.testing.assert_allclose(a, b, atol=5e-4)
+
+
+def crowded_world(rng, b, n, m, *, lattice):
+    """A v2 world with the hard cases: exact distance ties (a lattice), coincident UAVs, equal
+    headings and velocities (zero differences), intruders in and out of range."""
+    w = world(rng, b=b, n=n, m=m)
+    if lattice:
+        w["own_pos_m"] = rng.integers(-5, 6, (b, n, 2)) * 20.0
+        w["obstacle_pos_m"] = rng.integers(-5, 6, (b, m, 2)) * 20.0
+    else:
+        w["own_pos_m"] = rng.uniform(-120, 120, (b, n, 2))
+    if n > 1:
+        w["own_pos_m"][0, 1] = w["own_pos_m"][0, 0]  # coincident
+        w["own_heading_rad"][1] = w["own_heading_rad"][1, 0]  # one heading
+        w["own_vel_m_s"][1] = w["own_vel_m_s"][1, 0]
+    return w
+
+
+@pytest.mark.parametrize("lattice", [False, True])
+@pytest.mark.parametrize(
+    ("n", "m", "k", "intruder_rows", "aperture"),
+    [
+        (5, 1, 6, 8, np.radians(270)),  # the bench's real world: every other UAV kept
+        (6, 4, 2, 3, 2 * np.pi),  # fewer rows than candidates, all around
+        (4, 3, 3, 5, np.radians(120)),
+        (2, 2, 1, 1, np.radians(270)),
+    ],
+)
+def test_v2_placed_rows_are_the_sorted_rows_of_the_direct_formula(
+    monkeypatch, lattice, n, m, k, intruder_rows, aperture
+):
+    """Every UAV's rows placed by rank (`_place_rows`) hold the numbers of sorting each UAV's
+    vehicles and computing the rows kept (the direct formula, `_sorted_order`), ties included;
+    rows that hold no vehicle are +0."""
+    import sim.observation as observation
+
+    layout = ObservationLayout(intruder_rows, 100.0, aperture, 10.0, k, 2)
+    rng = np.random.default_rng(n * 31 + m + lattice)
+    for trial in range(6):
+        w = crowded_world(rng, 16, n, m, lattice=lattice)
+        extra = {
+            "obstacle_valid": rng.random((16, m)) < 0.8,
+            "uav_valid": rng.random((16, n)) < 0.8 if trial % 2 else None,
+            "heading_known": rng.random((16, n)) < 0.7 if trial % 3 == 2 else None,
+        }
+        if trial % 3 == 1:
+            extra["commanded_heading_rad"] = w["own_heading_rad"] + rng.normal(0, 0.3, (16, n))
+        placed = build_observations(layout, **w, **extra)
+        monkeypatch.setattr(observation, "RANK_CANDIDATES_MAX", -1)  # sort every block
+        sorted_ = build_observations(layout, **w, **extra)
+        monkeypatch.undo()
+        np.testing.assert_array_equal(placed.storage, sorted_.storage)  # −0 == +0
+        np.testing.assert_array_equal(placed.sensed, sorted_.sensed)
+        nb, it, nb_mask, it_mask = v2_rows(placed, layout)
+        for rows, mask in ((nb, nb_mask), (it, it_mask)):
+            empty = rows[mask == 0.0]
+            assert not np.signbit(empty).any() and not empty.any()
+
+
+def test_v2_many_uavs_sort_each_uavs_neighbours_first():
+    """Above `RANK_CANDIDATES_MAX` candidates the rows kept are sorted out first; either way
+    the nearest seen are kept, nearest first."""
+    from sim.observation import RANK_CANDIDATES_MAX
+
+    n = RANK_CANDIDATES_MAX + 3
+    layout = ObservationLayout(2, 100.0, 2 * np.pi, 10.0, 3, 2)
+    rng = np.random.default_rng(4)
+    w = world(rng, b=3, n=n, m=RANK_CANDIDATES_MAX + 2)
+    w["own_pos_m"] = rng.uniform(-60, 60, (3, n, 2))
+    obs = build_observations(layout, **w)
+    nb, _, nb_mask, it_mask = v2_rows(obs, layout)
+    gaps = np.linalg.norm(w["own_pos_m"][:, None] - w["own_pos_m"][:, :, None], axis=-1)
+    gaps[:, np.arange(n), np.arange(n)] = np.inf
+    nearest = np.sort(np.where(gaps <= 100.0, gaps, np.inf), axis=-1)[..., :3]
+    np.testing.assert_allclose(nb[..., 4], np.where(nb_mask > 0, nearest / 100.0, 0.0), atol=1e-6)
+    assert it_mask.shape[-1] == 2

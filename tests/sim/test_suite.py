@@ -76,7 +76,9 @@ def test_bad_suite_files_say_what_is_wrong(tmp_path, text, message):
 
 
 def test_unknown_suite_lists_the_shipped_ones():
-    with pytest.raises(ConfigError, match="unknown suite 'nightly'; shipped: smoke, standard"):
+    with pytest.raises(
+        ConfigError, match="unknown suite 'nightly'; shipped: generalist-extra, smoke, standard"
+    ):
         load_suite("nightly")
 
 

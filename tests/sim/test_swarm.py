@@ -223,3 +223,17 @@ def test_a_v2_scenario_trains_with_neighbours_in_its_observations():
     for _ in range(5):
         obs, *_ = env.step(np.zeros((3, 3), np.float32))
     assert np.isfinite(obs).all()
+
+
+def test_evolve_is_dataclasses_replace():
+    cfg = load_scenario("3u2o")
+    state = initial_state(cfg, np.random.default_rng(0), 4)
+    levels = np.ones_like(state.levels)
+    evolved = state.evolve(levels=levels, steps=state.steps + 1)
+    replaced = dataclasses.replace(state, levels=evolved.levels, steps=evolved.steps)
+    assert all(
+        getattr(evolved, f.name) is getattr(replaced, f.name) for f in dataclasses.fields(state)
+    )
+    assert evolved.levels is levels and state.levels is not levels  # the state is not changed
+    with pytest.raises(TypeError, match="no field level"):
+        state.evolve(level=levels)
