@@ -78,7 +78,8 @@ class ShieldConfig:
 
     headings: int = 21
     """Candidate heading changes, evenly spaced over [−a_max, a_max] (odd: 0 included), besides
-    the proposed one."""
+    the proposed one: 4.5° apart at the paper's a_max = 45°. 15 (6.4° apart) cost a sixth
+    less time and 1% of 3u2o's and of 5u2o's success behind the zoo policies (100 episodes)."""
 
     slow_fractions: tuple[float, ...] = (0.5, 0.0)
     """Speeds tried after every full-speed candidate failed, as fractions of the cruise speed,
@@ -227,9 +228,12 @@ def shield(
     if fails.any():
         # 2. The failing UAVs' bands: every heading change at full speed, then slower ones.
         grid = np.broadcast_to(np.linspace(-1.0, 1.0, cfg.headings), (b, n, cfg.headings))
-        unit_x, unit_y = _at_times(
-            displacements(swarm.heading_rad, grid * a_max, 1.0, dt, horizon), split
-        )
+        flown = _at_times(
+            displacements(swarm.heading_rad[fails], grid[fails] * a_max, 1.0, dt, horizon), split
+        )  # the failing UAVs' candidates only
+        unit_x = np.zeros((b, n, *flown[0].shape[1:]))
+        unit_y = np.zeros_like(unit_x)
+        unit_x[fails], unit_y[fails] = flown
         theirs = paths.of(fails)
         best = clear[..., 0].copy()  # the largest clearance so far (the fallback's)
         fallback = (prop.copy(), full.copy(), proposed_cpa.copy())
@@ -370,7 +374,10 @@ def _clearance(
     to_go = np.maximum(np.hypot(gap[:, 0], gap[:, 1]) / cruise_m_s, dt_s)  # (S,)
     start, end = times[:-1, None], times[1:, None]
     reach = np.clip((to_go - start) / (end - start), 0.0, 1.0)  # (P − 1, S)
-    seg = segment_closest_sq(rx, ry, reach[..., None])  # (P − 1, S, K)
+    # float32 from here: relative positions of a few hundred metres keep 0.1 mm, and the
+    # segment arithmetic, most of the shield's time, moves half the bytes
+    f32 = np.float32
+    seg = segment_closest_sq(rx.astype(f32), ry.astype(f32), reach[..., None].astype(f32))
     seg[start >= to_go] = np.inf  # segments that start after the arrival
     pair_cpa = seg.min(axis=0)  # (S, K)
     np.sqrt(seg, out=seg)
@@ -437,10 +444,14 @@ def _threat_paths(
     Sorted by UAV. Most of the N·M and N·N pairs are far apart: gathered away, they cost
     nothing.
     """
-    n = swarm.heading_rad.shape[1]
+    b, n = swarm.heading_rad.shape
     horizon = float(times[-1])
     deciding = swarm.deciding
-    parts: list[tuple[NDArray[np.intp], FloatArray, FloatArray, FloatArray]] = []
+    p = len(times)
+    # Every UAV's threat slots, dense: the M intruders, then its J nearest UAVs; positions
+    # (P, B, N, slots), requirements (P − 1, B, N, slots), which slots count (B, N, slots).
+    # Gathered in (environment, UAV, slot) order, the pairs come sorted by their UAV.
+    xs, ys, needs, masks = [], [], [], []
     m = threats.intruder_pos_m.shape[1]
     if m:  # intruders: straight at constant velocity; the requirement grows with uncertainty
         q, w = threats.intruder_pos_m, threats.intruder_vel_m_s
@@ -449,16 +460,17 @@ def _threat_paths(
         speed = np.hypot(w[..., 0], w[..., 1])  # (B, M)
         grow = cfg.track_growth_m_s * (threats.intruder_age_s + horizon)
         reach = (vehicle.cruise_m_s + speed + cfg.track_growth_m_s) * horizon + required + grow
-        near = deciding[..., None] & threats.intruder_known[:, None] & (dist <= reach[:, None])
-        env, uav, obs = np.nonzero(near)
-        t = times[:, None]
-        tx = q[env, obs, 0] + w[env, obs, 0] * t  # (P, S)
-        ty = q[env, obs, 1] + w[env, obs, 1] * t
-        age = threats.intruder_age_s[env, obs]
+        masks.append(
+            deciding[..., None] & threats.intruder_known[:, None] & (dist <= reach[:, None])
+        )
+        t = times[:, None, None]
+        xs.append(np.broadcast_to((q[..., 0] + w[..., 0] * t)[:, :, None], (p, b, n, m)))
+        ys.append(np.broadcast_to((q[..., 1] + w[..., 1] * t)[:, :, None], (p, b, n, m)))
+        age = threats.intruder_age_s
         # a report's error grows with its age and with the time predicted ahead; exact
         # sensing (age 0, the simulator's paper world) has none
-        need = required + np.where(age > 0, cfg.track_growth_m_s, 0.0) * (age + times[1:, None])
-        parts.append((env * n + uav, tx, ty, need))
+        growth = np.where(age > 0, cfg.track_growth_m_s, 0.0) * (age + times[1:, None, None])
+        needs.append(np.broadcast_to((required + growth)[:, :, None], (p - 1, b, n, m)))
     others = min(cfg.neighbours, n - 1)
     if others > 0:  # the nearest present UAVs within reach, on their committed arcs
         rel = swarm.pos_m[:, :, None] - swarm.pos_m[:, None]  # (B, N, N, 2)
@@ -467,36 +479,36 @@ def _threat_paths(
         dist = np.where(swarm.present[:, None, :] & deciding[..., None], dist, np.inf)
         both = 2.0 * vehicle.cruise_m_s * horizon + required  # two UAVs closing head-on
         idx = np.argpartition(dist, others - 1, axis=-1)[..., :others]  # (B, N, J)
-        near = np.take_along_axis(dist, idx, -1) <= both
-        env, uav, slot = np.nonzero(near)
-        nb = idx[env, uav, slot]
+        masks.append(np.take_along_axis(dist, idx, -1) <= both)
         nx, ny = _at_times(
             displacements(
-                swarm.heading_rad[env, nb],
-                (proposed[env, nb] * vehicle.max_turn_rad)[:, None],
-                swarm.speed_m_s[env, nb][:, None],
+                swarm.heading_rad,
+                (proposed * vehicle.max_turn_rad)[..., None],
+                swarm.speed_m_s[..., None],
                 vehicle.dt_s,
                 horizon,
             ),
             split,
-        )  # (S, 1, P)
-        tx = swarm.pos_m[env, nb, 0] + nx[:, 0].T
-        ty = swarm.pos_m[env, nb, 1] + ny[:, 0].T
+        )  # (B, N, 1, P): every UAV's committed arc, once
+        envs = np.arange(b)[:, None, None]
+        xs.append(np.moveaxis(swarm.pos_m[envs, idx, 0, None] + nx[envs, idx, 0], -1, 0))
+        ys.append(np.moveaxis(swarm.pos_m[envs, idx, 1, None] + ny[envs, idx, 0], -1, 0))
         # past the neighbour horizon nothing is required (−inf: never binding)
         ahead = times[:-1] < cfg.neighbour_horizon_s - 1e-9
-        need = np.where(ahead[:, None], required, -np.inf) * np.ones(len(env))
-        parts.append((env * n + uav, tx, ty, need))
-    if not parts:
-        empty = np.zeros((len(times), 0))
+        need = np.where(ahead, required, -np.inf)[:, None, None, None]
+        needs.append(np.broadcast_to(need, (p - 1, b, n, others)))
+    if not masks:
+        empty = np.zeros((p, 0))
         return ThreatPaths(times, np.zeros(0, dtype=np.intp), empty, empty, empty[1:])
-    owner = np.concatenate([p[0] for p in parts])
-    order = np.argsort(owner, kind="stable")
+    mask = np.concatenate(masks, axis=-1)
+    env, uav, slot = np.nonzero(mask)
+    pick = (slice(None), env, uav, slot)
     return ThreatPaths(
         times,
-        owner[order],
-        np.concatenate([p[1] for p in parts], axis=1)[:, order],
-        np.concatenate([p[2] for p in parts], axis=1)[:, order],
-        np.concatenate([p[3] for p in parts], axis=1)[:, order],
+        env * n + uav,
+        np.concatenate(xs, axis=-1)[pick],
+        np.concatenate(ys, axis=-1)[pick],
+        np.concatenate(needs, axis=-1)[pick],
     )
 
 
