@@ -10,10 +10,16 @@ the safety shield (`sim.shield`).
 
 from __future__ import annotations
 
+from typing import Any, TypeVar
+
 import numpy as np
+from numpy.typing import NDArray
 
 from sim.arrays import FloatArray
 from sim.kinematics import sinc_series
+
+F = TypeVar("F", bound=np.floating[Any])
+"""The float type of a path's coordinates (float64, or float32 where the shield saves bytes)."""
 
 ARC_SEGMENTS = 4
 """Chords per predicted arc (the first decision step): the chord of a 5 m sub-arc turning by at
@@ -67,8 +73,8 @@ def closest_approach(rx: FloatArray, ry: FloatArray) -> FloatArray:
 
 
 def segment_closest_sq(
-    rx: FloatArray, ry: FloatArray, limit: FloatArray | None = None
-) -> FloatArray:
+    rx: NDArray[F], ry: NDArray[F], limit: NDArray[np.floating[Any]] | None = None
+) -> NDArray[F]:
     """Squared closest distance to the origin on each segment of paths, time first.
 
     (P, ...) points → (P − 1, ...) segments (`closest_approach`'s closed form); with time the

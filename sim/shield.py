@@ -39,7 +39,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from sim.arrays import BoolArray, FloatArray
+from sim.arrays import BoolArray, Float32Array, FloatArray
 from sim.config import ScenarioConfig
 from sim.prediction import ARC_SEGMENTS, displacements, segment_closest_sq, time_points
 from sim.sensors import picture
@@ -217,8 +217,10 @@ def shield(
     )
 
     # 1. The proposal of every UAV at full speed: most pass, and their decision is made.
-    unit_x, unit_y = _at_times(
-        displacements(swarm.heading_rad, prop[..., None] * a_max, 1.0, dt, horizon), split
+    unit_x, unit_y = _time_first(
+        _at_times(
+            displacements(swarm.heading_rad, prop[..., None] * a_max, 1.0, dt, horizon), split
+        )
     )
     clear, cpa = _clearance(unit_x, unit_y, cruise, swarm, paths, dt, cruise)
     proposed_cpa = cpa[..., 0]
@@ -231,9 +233,9 @@ def shield(
         flown = _at_times(
             displacements(swarm.heading_rad[fails], grid[fails] * a_max, 1.0, dt, horizon), split
         )  # the failing UAVs' candidates only
-        unit_x = np.zeros((b, n, *flown[0].shape[1:]))
-        unit_y = np.zeros_like(unit_x)
-        unit_x[fails], unit_y[fails] = flown
+        band = np.zeros((b, n, *flown[0].shape[1:])), np.zeros((b, n, *flown[0].shape[1:]))
+        band[0][fails], band[1][fails] = flown
+        unit_x, unit_y = _time_first(band)
         theirs = paths.of(fails)
         best = clear[..., 0].copy()  # the largest clearance so far (the fallback's)
         fallback = (prop.copy(), full.copy(), proposed_cpa.copy())
@@ -329,6 +331,18 @@ def _at_times(
     return out[0], out[1]
 
 
+def _time_first(xy: tuple[FloatArray, FloatArray]) -> tuple[Float32Array, Float32Array]:
+    """Displacements (B, N, K, P) as C-contiguous float32 (P, B, N, K).
+
+    Time first, so that every segment operation runs over contiguous blocks (an elementwise
+    result keeps its input's memory order: a moved axis alone would leave time innermost).
+    float32: relative positions of a few hundred metres keep 0.1 mm, and the segment
+    arithmetic, most of the shield's time, moves half the bytes.
+    """
+    x, y = (np.ascontiguousarray(np.moveaxis(d, -1, 0), dtype=np.float32) for d in xy)
+    return x, y
+
+
 def required_m(cfg: ShieldConfig, vehicle: Vehicle) -> float:
     """The separation every check requires before uncertainty: d_col + margin, metres."""
     return vehicle.d_col_m + cfg.margin_m
@@ -341,8 +355,8 @@ def _at(values: FloatArray, index: NDArray[np.intp]) -> FloatArray:
 
 
 def _clearance(
-    unit_x: FloatArray,
-    unit_y: FloatArray,
+    unit_x: Float32Array,
+    unit_y: Float32Array,
     speed_m_s: float,
     swarm: Swarm,
     paths: ThreatPaths,
@@ -351,11 +365,12 @@ def _clearance(
 ) -> tuple[FloatArray, FloatArray]:
     """(clearance, closest approach), each (B, N, K), of the candidates flown at one speed.
 
-    ``unit_x``, ``unit_y`` (B, N, K, P): each candidate's displacement at 1 m/s (a
-    displacement scales with the speed). Clearance: the smallest (distance − required) over
-    every threat and segment; +inf with no threat (and the closest approach +inf too).
+    ``unit_x``, ``unit_y`` (P, B, N, K) (`_time_first`): each candidate's displacement at
+    1 m/s (a displacement scales with the speed). Clearance: the smallest (distance −
+    required) over every threat and segment; +inf with no threat (and the closest approach
+    +inf too).
     """
-    b, n, k, _ = unit_x.shape
+    _, b, n, k = unit_x.shape
     times = paths.times
     clearance = np.full((b, n, k), np.inf)
     cpa_sq = np.full((b, n, k), np.inf)
@@ -364,9 +379,9 @@ def _clearance(
         return clearance, np.sqrt(cpa_sq)
     env, uav = np.divmod(owner, n)
     # Time first from here on: every segment operation runs over contiguous blocks.
-    rx = _flown(np.moveaxis(unit_x[env, uav], -1, 0), speed_m_s, cruise_m_s)  # (P, S, K)
+    rx = _flown(unit_x[:, env, uav], speed_m_s, cruise_m_s)  # (P, S, K), contiguous float32
     rx += (swarm.pos_m[env, uav, 0] - paths.x)[..., None]
-    ry = _flown(np.moveaxis(unit_y[env, uav], -1, 0), speed_m_s, cruise_m_s)
+    ry = _flown(unit_y[:, env, uav], speed_m_s, cruise_m_s)
     ry += (swarm.pos_m[env, uav, 1] - paths.y)[..., None]
     # Nothing after the UAV reaches its target is checked: each segment ends there at the
     # latest (the whole coming step is always checked: the UAV flies it).
@@ -374,10 +389,7 @@ def _clearance(
     to_go = np.maximum(np.hypot(gap[:, 0], gap[:, 1]) / cruise_m_s, dt_s)  # (S,)
     start, end = times[:-1, None], times[1:, None]
     reach = np.clip((to_go - start) / (end - start), 0.0, 1.0)  # (P − 1, S)
-    # float32 from here: relative positions of a few hundred metres keep 0.1 mm, and the
-    # segment arithmetic, most of the shield's time, moves half the bytes
-    f32 = np.float32
-    seg = segment_closest_sq(rx.astype(f32), ry.astype(f32), reach[..., None].astype(f32))
+    seg = segment_closest_sq(rx, ry, reach[..., None].astype(np.float32))
     seg[start >= to_go] = np.inf  # segments that start after the arrival
     pair_cpa = seg.min(axis=0)  # (S, K)
     np.sqrt(seg, out=seg)
@@ -391,14 +403,14 @@ def _clearance(
     return clearance, np.sqrt(cpa_sq)
 
 
-def _flown(unit: FloatArray, speed_m_s: float, cruise_m_s: float) -> FloatArray:
+def _flown(unit: Float32Array, speed_m_s: float, cruise_m_s: float) -> Float32Array:
     """Displacements (P, ...) of a candidate flown at ``speed_m_s`` from its 1 m/s ones.
 
     The arc at that speed over the coming step, then on at the cruise speed: slowing down (or
     stopping) holds for one step and the next decision goes on, so a stop never hides a
     conflict beyond the horizon by standing in an intruder's way.
     """
-    out: FloatArray = unit * speed_m_s
+    out: Float32Array = unit * np.float32(speed_m_s)
     if speed_m_s != cruise_m_s:
         end = CHORDS  # the arc's last point, at dt; the straight part's follow
         out[end + 1 :] = out[end] + (unit[end + 1 :] - unit[end]) * cruise_m_s
