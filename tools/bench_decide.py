@@ -28,6 +28,9 @@ def main() -> None:
     parser.add_argument("--hidden", type=int, default=SHIPPED_HIDDEN)
     parser.add_argument("--neighbours", type=int, default=SHIPPED_NEIGHBOURS, help="k")
     parser.add_argument("--intruders", type=int, default=SHIPPED_INTRUDERS, help="m")
+    parser.add_argument(
+        "--policy", default=None, help="a generalist (zoo name or file) instead of random weights"
+    )
     parser.add_argument("--json", action="store_true", help="print the result as JSON")
     args = parser.parse_args()
     result = bench_decide(
@@ -36,6 +39,7 @@ def main() -> None:
         hidden=args.hidden,
         neighbours=args.neighbours,
         intruders=args.intruders,
+        policy_name=args.policy,
     )
     if args.json:
         print(json.dumps(result, indent=2))

@@ -5,7 +5,8 @@
 
 Measures remarl-fc (full reMARL reward, autoreset) in each world (`remarl_fc.bench.sim.WORLDS`:
 "paper", ideal vehicles and exact sensing; "real", the fitted ArduCopter/PX4 response randomised
-per UAV, ADS-B intruders and GPS noise) with uniform random actions and with
+per UAV, ADS-B intruders, GPS noise and the neighbours in the observation, version 2 with k = 6
+and m = 8) with uniform random actions and with
 N(0, 0.1) exploration around straight flight, and each part's share of a step with uniform
 actions (a separate profiled run, `remarl_fc.bench.sim.part_shares`; the throughput is timed
 without the profiler). If `vmas` is importable, VMAS "navigation" with

@@ -9,7 +9,11 @@ from remarl_fc.policy_io import load_policy, zoo_dir, zoo_names
 from sim.scenarios import load_scenario, scenario_names
 
 
-@pytest.mark.parametrize("name", zoo_names())
+GENERALISTS = [n for n in zoo_names() if load_policy(n).generalist]
+"""The zoo's generalists: one policy for any swarm, evaluated on the encounter suite."""
+
+
+@pytest.mark.parametrize("name", [n for n in zoo_names() if n not in GENERALISTS])
 def test_zoo_policy_loads_and_matches_its_scenario(name):
     policy = load_policy(name)
     assert policy.meta["scenario"] == name
@@ -23,7 +27,26 @@ def test_zoo_policy_loads_and_matches_its_scenario(name):
 
 
 def test_zoo_names_are_scenarios():
-    assert set(zoo_names()) <= set(scenario_names())
+    assert set(zoo_names()) - set(GENERALISTS) <= set(scenario_names())
+
+
+@pytest.mark.parametrize("name", GENERALISTS)
+def test_a_zoo_generalist_flies_any_swarm_and_carries_its_suite_results(name):
+    from sim.swarm import SwarmSim
+
+    policy = load_policy(name)
+    assert policy.uav_range == (1, 50)
+    for scenario in ("2u1o", "7u2o", "50u8o"):
+        cfg = load_scenario(scenario)
+        policy.check_scenario(cfg)
+        sim = SwarmSim(cfg, scored=False)
+        state = sim.initial_state(np.random.default_rng(0), 1)
+        actions = policy.act(sim.observe(state, layout=policy.layout).flat())
+        assert actions.shape == (1, cfg.uav.count) and np.isfinite(actions).all()
+    report = json.loads((zoo_dir() / f"{name}.eval.json").read_text())
+    assert report["suite"] == "standard" and len(report["families"]) >= 38
+    assert all(f["episodes"] >= 200 for f in report["families"].values())
+    assert report["success_rate"] == pytest.approx(policy.meta["metrics"]["success_rate"])
 
 
 def test_the_robust_3u2o_policy_carries_the_world_it_was_trained_in():

@@ -1,0 +1,112 @@
+"""Evaluate a generalist run on the standard suite and ship it to the zoo with its results.
+
+    python tools/ship_generalist.py runs/generalist-s1 [--checkpoint best] [--workers 1]
+
+Exports the run's checkpoint to a temporary policy file, flies it on every family of the
+standard suite with and without the safety shield (`remarl-fc eval --suite standard --policy
+FILE --shield on`), writes ``policies/zoo/generalist.eval.json`` (per family: success over all
+and over the solvable episodes, collisions, interventions; with and without the shield), and
+exports ``policies/zoo/generalist.safetensors`` again with the suite means in its metadata.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import tempfile
+from pathlib import Path
+from typing import Any
+
+from policies.generalist_train import export_generalist_run
+from remarl_fc.offline.suite import MethodSpec, evaluate_suite
+from remarl_fc.policy_io import zoo_dir
+from sim.heap import keep_freed_memory
+from sim.shield import ShieldConfig
+from sim.suite import load_suite
+
+KEPT = (
+    "uavs",
+    "obstacles",
+    "episodes",
+    "solvable_episodes",
+    "success_rate",
+    "success_rate_solvable",
+    "collision_rate_u2o",
+    "collision_rate_u2u",
+    "energy_rad",
+    "intervention_rate",
+    "reaction_time_median_ms",
+)
+
+
+def _mean(values: list[float]) -> float:
+    finite = [v for v in values if v is not None and not math.isnan(v)]
+    return sum(finite) / len(finite) if finite else math.nan
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("run", help="the --out folder of remarl-fc train --generalist")
+    parser.add_argument("--checkpoint", default="best", choices=["best", "last"])
+    parser.add_argument("--workers", type=int, default=1)
+    args = parser.parse_args()
+    keep_freed_memory()
+    run = Path(args.run)
+    suite = load_suite("standard")
+    with tempfile.TemporaryDirectory() as tmp:
+        policy = Path(tmp) / "generalist.safetensors"
+        export_generalist_run(run, policy, checkpoint=args.checkpoint)
+        results = evaluate_suite(
+            suite,
+            [MethodSpec("policy", str(policy))],
+            workers=args.workers,
+            shield=ShieldConfig(mode="on"),
+        )
+    raw = run / f"suite-{args.checkpoint}.json"  # kept beside the run, whatever happens next
+    raw.write_text(json.dumps({"results": results}, indent=1, default=float))
+    families: dict[str, dict[str, Any]] = {}
+    for r in results:
+        row = {k: r.get(k) for k in KEPT}
+        row["success_rate"] = r["success_rate_unshielded"]
+        row["success_rate_solvable"] = r["success_rate_solvable_unshielded"]
+        row["collision_rate_u2o"] = r["collision_rate_u2o_unshielded"]
+        row["collision_rate_u2u"] = r["collision_rate_u2u_unshielded"]
+        row["shielded"] = {
+            "success_rate": r["success_rate"],
+            "success_rate_solvable": r["success_rate_solvable"],
+            "collision_rate_u2o": r["collision_rate_u2o"],
+            "collision_rate_u2u": r["collision_rate_u2u"],
+        }
+        families[r["family"]] = row
+    episodes = sum(f["episodes"] for f in families.values())
+    u2u = sum(f["collision_rate_u2u"] * f["episodes"] for f in families.values()) / episodes
+    metrics = {
+        "success_rate": _mean([f["success_rate"] for f in families.values()]),
+        "success_rate_solvable": _mean([f["success_rate_solvable"] for f in families.values()]),
+        "collision_rate_u2u": u2u,
+        "shielded_success_rate_solvable": _mean(
+            [f["shielded"]["success_rate_solvable"] for f in families.values()]
+        ),
+    }
+    config = json.loads((run / "config.json").read_text())["generalist"]
+    report = {
+        "policy": "generalist (policies/zoo/generalist.safetensors)",
+        "suite": suite.name,
+        "suite_version": suite.version,
+        "seed": suite.seed,
+        "checkpoint": args.checkpoint,
+        "training": {k: config.get(k) for k in ("suites", "minutes", "seed", "teacher", "hidden")},
+        **metrics,
+        "families": families,
+    }
+    out = zoo_dir() / "generalist"
+    out.with_suffix(".eval.json").write_text(json.dumps(report, indent=2, default=float) + "\n")
+    export_generalist_run(
+        run, out.with_suffix(".safetensors"), checkpoint=args.checkpoint, metrics=metrics
+    )
+    print(json.dumps(metrics, indent=2))
+
+
+if __name__ == "__main__":
+    main()
