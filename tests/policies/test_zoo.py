@@ -8,7 +8,6 @@ import pytest
 from remarl_fc.policy_io import load_policy, zoo_dir, zoo_names
 from sim.scenarios import load_scenario, scenario_names
 
-
 GENERALISTS = [n for n in zoo_names() if load_policy(n).generalist]
 """The zoo's generalists: one policy for any swarm, evaluated on the encounter suite."""
 
