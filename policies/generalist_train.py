@@ -271,12 +271,13 @@ def validate(
         cfg = world.cfg
         sim = SwarmSim(cfg, scored=False)
         batch = draw(world.family, cfg, VALIDATION_SEED, 0, episodes)
-        state = sim.start(batch, np.random.default_rng(0))
+        unused = np.random.default_rng(0)  # an unscored step draws nothing
+        state = sim.start(batch, unused)
         success = np.zeros(episodes, dtype=bool)
         finished = np.zeros(episodes, dtype=bool)
         for _ in range(cfg.max_steps):
             actions = actor_actions(nets, sim.observe(state).flat(), device)
-            state, result = sim.step(state, actions, np.random.default_rng(0))
+            state, result = sim.step(state, actions, unused)
             done = (result.terminated | result.truncated) & ~finished
             success |= done & result.success
             finished |= done

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
@@ -288,5 +289,17 @@ def test_the_teacher_is_orca_through_the_shield():
     sim = SwarmSim(cfg)
     state = sim.initial_state(np.random.default_rng(0), 3)
     world = World(None, cfg, False, sim, state, sim.observe(state).flat(), 3)  # type: ignore[arg-type]
+    # a few steps in, so ORCA turns and the shield has something to check
+    for _ in range(4):
+        state, _ = sim.step(state, np.zeros((3, 3), np.float32), np.random.default_rng(0))
+    world.state = state
     actions = teacher_actions(world)
     assert actions.shape == (3, 3) and (np.abs(actions) <= 1).all()
+    from sim.orca import orca_actions
+    from sim.shield import ShieldConfig, shield_state, vehicle_of
+
+    orca = orca_actions(state, cfg)
+    straight_only = dataclasses.replace(vehicle_of(cfg), can_slow=False)
+    expected = shield_state(ShieldConfig(mode="on"), cfg, state, orca, straight_only).action
+    np.testing.assert_array_equal(actions, expected)
+    assert not np.array_equal(actions, np.zeros_like(actions))  # not a constant stand-in
