@@ -30,9 +30,9 @@ TINY = 1e-12
 """Floor of lengths and squared lengths that divide, in their units (m, m/s, m², m²/s²)."""
 
 
-def time_points(dt_s: float, horizon_s: float) -> FloatArray:
-    """(P,) instants of the predicted motion, seconds: the arc's chords, then τ."""
-    arc = np.linspace(0.0, dt_s, ARC_SEGMENTS + 1)
+def time_points(dt_s: float, horizon_s: float, chords: int = ARC_SEGMENTS) -> FloatArray:
+    """(P,) instants of the predicted motion, seconds: the arc's ``chords`` chords, then τ."""
+    arc = np.linspace(0.0, dt_s, chords + 1)
     return np.append(arc, horizon_s) if horizon_s > dt_s else arc
 
 
@@ -42,14 +42,16 @@ def displacements(
     speed_m_s: float | FloatArray,
     dt_s: float,
     horizon_s: float,
+    chords: int = ARC_SEGMENTS,
 ) -> tuple[FloatArray, FloatArray]:
     """Own displacement (x, y), each (..., C, P), of every candidate at `time_points`.
 
     The arc of the first step as the simulator flies it (chord L·u·sinc(u·a/2) along
-    h + u·a/2), then straight on heading h + a at the same speed until τ. ``speed_m_s``: one
-    speed, or one per candidate (broadcast to ``turn_rad``'s (..., C)).
+    h + u·a/2, sampled at ``chords`` chords), then straight on heading h + a at the same speed
+    until τ. ``speed_m_s``: one speed, or one per candidate (broadcast to ``turn_rad``'s
+    (..., C)).
     """
-    u = np.linspace(0.0, 1.0, ARC_SEGMENTS + 1)  # (S + 1,)
+    u = np.linspace(0.0, 1.0, chords + 1)  # (S + 1,)
     half = 0.5 * turn_rad[..., None] * u  # (..., C, S + 1); |half| ≤ a_max/2 ≤ π/4
     chord = np.asarray(speed_m_s)[..., None] * dt_s * u * sinc_series(half)
     direction = heading_rad[..., None, None] + half

@@ -41,7 +41,7 @@ from numpy.typing import NDArray
 
 from sim.arrays import BoolArray, Float32Array, FloatArray
 from sim.config import ScenarioConfig
-from sim.prediction import ARC_SEGMENTS, displacements, segment_closest_sq, time_points
+from sim.prediction import displacements, segment_closest_sq
 from sim.sensors import picture
 from sim.state import SwarmState
 from sim.vehicle import load_profile
@@ -212,17 +212,17 @@ def shield(
     times, split = _times(dt, horizon, cfg.neighbour_horizon_s)  # (P,)
     a_max = vehicle.max_turn_rad
     deciding = swarm.deciding
-    paths = _threat_paths(
-        cfg, vehicle, swarm, threats, prop, times, split, required_m(cfg, vehicle)
+    # Every UAV's proposal at 1 m/s, (B, N, 1, P): its own first candidate, and (at its
+    # speed) the committed arc its neighbours check against.
+    committed = _at_times(
+        displacements(swarm.heading_rad, prop[..., None] * a_max, 1.0, dt, horizon, CHORDS),
+        split,
     )
+    paths = _threat_paths(cfg, vehicle, swarm, threats, committed, times, required_m(cfg, vehicle))
 
     # 1. The proposal of every UAV at full speed: most pass, and their decision is made.
-    unit_x, unit_y = _time_first(
-        _at_times(
-            displacements(swarm.heading_rad, prop[..., None] * a_max, 1.0, dt, horizon), split
-        )
-    )
-    clear, cpa = _clearance(unit_x, unit_y, cruise, swarm, paths, dt, cruise)
+    unit_x, unit_y = (d.reshape(-1, b * n, 1) for d in _time_first(committed))  # (P, B·N, 1)
+    clear, cpa = _clearance(unit_x, unit_y, paths.owner, cruise, paths, (b, n), cruise)
     proposed_cpa = cpa[..., 0]
     fails = deciding & (clear[..., 0] < 0.0)
     turn, speed, flown_cpa = prop.copy(), full.copy(), proposed_cpa.copy()
@@ -230,12 +230,15 @@ def shield(
     if fails.any():
         # 2. The failing UAVs' bands: every heading change at full speed, then slower ones.
         grid = np.broadcast_to(np.linspace(-1.0, 1.0, cfg.headings), (b, n, cfg.headings))
-        flown = _at_times(
-            displacements(swarm.heading_rad[fails], grid[fails] * a_max, 1.0, dt, horizon), split
-        )  # the failing UAVs' candidates only
-        band = np.zeros((b, n, *flown[0].shape[1:])), np.zeros((b, n, *flown[0].shape[1:]))
-        band[0][fails], band[1][fails] = flown
-        unit_x, unit_y = _time_first(band)
+        unit_x, unit_y = _time_first(
+            _at_times(
+                displacements(
+                    swarm.heading_rad[fails], grid[fails] * a_max, 1.0, dt, horizon, CHORDS
+                ),
+                split,
+            )
+        )  # (P, F, K): the F failing UAVs' candidates only
+        row = np.cumsum(fails.reshape(-1)) - 1  # each failing UAV's place among them
         theirs = paths.of(fails)
         best = clear[..., 0].copy()  # the largest clearance so far (the fallback's)
         fallback = (prop.copy(), full.copy(), proposed_cpa.copy())
@@ -246,7 +249,8 @@ def shield(
             todo = fails & ~found
             if not todo.any():
                 break
-            c, d = _clearance(unit_x, unit_y, v, swarm, theirs.of(todo), dt, cruise)
+            mine = theirs.of(todo)
+            c, d = _clearance(unit_x, unit_y, row[mine.owner], v, mine, (b, n), cruise)
             ok = (c >= 0.0) & todo[..., None]
             pick = np.where(ok, np.abs(grid - prop[..., None]), np.inf).argmin(axis=-1)
             now = ok.any(axis=-1)
@@ -285,19 +289,9 @@ def shield(
 
 
 CHORDS = 2
-"""Chords of the predicted arc (every other point of `sim.prediction`'s): the chord of a 10 m
-arc turning by at most π/8 lies within L·a_max/(8·2²) = 0.25 m of it at the defaults, inside
-the margin; half the segments of ORCA's four."""
-
-_STRIDE = ARC_SEGMENTS // CHORDS
-
-
-def _arc_subset(values: FloatArray) -> FloatArray:
-    """Points (..., P) of `sim.prediction` with the arc thinned to `CHORDS` chords."""
-    keep = list(range(0, ARC_SEGMENTS + 1, _STRIDE)) + list(
-        range(ARC_SEGMENTS + 1, values.shape[-1])
-    )
-    return values[..., keep]
+"""Chords of the predicted arc (half `sim.prediction`'s): the chord of a 10 m arc turning by
+at most π/8 lies within L·a_max/(8·2²) = 0.25 m of it at the defaults, inside the margin;
+half the segments of ORCA's four."""
 
 
 def _times(dt_s: float, horizon_s: float, neighbour_s: float) -> tuple[FloatArray, float | None]:
@@ -306,11 +300,12 @@ def _times(dt_s: float, horizon_s: float, neighbour_s: float) -> tuple[FloatArra
     The arc's chords, then the neighbour horizon where it lies inside the straight part, then
     the horizon; the split as a fraction of the straight part (None: not inside it).
     """
-    times = _arc_subset(time_points(dt_s, horizon_s))
+    arc = [i * (dt_s / CHORDS) for i in range(CHORDS)] + [dt_s]  # `time_points`'s values
+    straight = [horizon_s] if horizon_s > dt_s else []
     if not dt_s < neighbour_s < horizon_s:
-        return times, None
+        return np.array(arc + straight), None
     split = (neighbour_s - dt_s) / (horizon_s - dt_s)
-    return np.insert(times, len(times) - 1, neighbour_s), split
+    return np.array([*arc, neighbour_s, *straight]), split
 
 
 def _at_times(
@@ -318,10 +313,9 @@ def _at_times(
 ) -> tuple[FloatArray, FloatArray]:
     """`sim.prediction.displacements` (..., P) at the points of `_times`.
 
-    The arc thinned to `CHORDS` chords, and the split point inserted: the straight part is
-    linear in time, so the point is interpolated exactly.
+    The split point inserted: the straight part is linear in time, so it is interpolated
+    exactly.
     """
-    xy = (_arc_subset(xy[0]), _arc_subset(xy[1]))
     if split is None:
         return xy
     out = []
@@ -332,7 +326,7 @@ def _at_times(
 
 
 def _time_first(xy: tuple[FloatArray, FloatArray]) -> tuple[Float32Array, Float32Array]:
-    """Displacements (B, N, K, P) as C-contiguous float32 (P, B, N, K).
+    """Displacements (..., K, P) as C-contiguous float32 (P, ..., K).
 
     Time first, so that every segment operation runs over contiguous blocks (an elementwise
     result keeps its input's memory order: a moved axis alone would leave time innermost).
@@ -357,47 +351,39 @@ def _at(values: FloatArray, index: NDArray[np.intp]) -> FloatArray:
 def _clearance(
     unit_x: Float32Array,
     unit_y: Float32Array,
+    row: NDArray[np.intp],
     speed_m_s: float,
-    swarm: Swarm,
     paths: ThreatPaths,
-    dt_s: float,
+    swarm_shape: tuple[int, int],
     cruise_m_s: float,
 ) -> tuple[FloatArray, FloatArray]:
     """(clearance, closest approach), each (B, N, K), of the candidates flown at one speed.
 
-    ``unit_x``, ``unit_y`` (P, B, N, K) (`_time_first`): each candidate's displacement at
-    1 m/s (a displacement scales with the speed). Clearance: the smallest (distance −
-    required) over every threat and segment; +inf with no threat (and the closest approach
-    +inf too).
+    ``unit_x``, ``unit_y`` (P, R, K) (`_time_first`): candidates' displacements at 1 m/s (a
+    displacement scales with the speed); ``row`` (S,): the row of each pair's UAV. Clearance:
+    the smallest (distance − required) over every threat and segment; +inf with no threat
+    (and the closest approach +inf too).
     """
-    _, b, n, k = unit_x.shape
-    times = paths.times
+    b, n = swarm_shape
+    k = unit_x.shape[-1]
     clearance = np.full((b, n, k), np.inf)
     cpa_sq = np.full((b, n, k), np.inf)
-    owner = paths.owner
-    if not len(owner):
+    if not len(paths.owner):
         return clearance, np.sqrt(cpa_sq)
-    env, uav = np.divmod(owner, n)
     # Time first from here on: every segment operation runs over contiguous blocks.
-    rx = _flown(unit_x[:, env, uav], speed_m_s, cruise_m_s)  # (P, S, K), contiguous float32
-    rx += (swarm.pos_m[env, uav, 0] - paths.x)[..., None]
-    ry = _flown(unit_y[:, env, uav], speed_m_s, cruise_m_s)
-    ry += (swarm.pos_m[env, uav, 1] - paths.y)[..., None]
-    # Nothing after the UAV reaches its target is checked: each segment ends there at the
-    # latest (the whole coming step is always checked: the UAV flies it).
-    gap = swarm.target_m[env, uav] - swarm.pos_m[env, uav]
-    to_go = np.maximum(np.hypot(gap[:, 0], gap[:, 1]) / cruise_m_s, dt_s)  # (S,)
-    start, end = times[:-1, None], times[1:, None]
-    reach = np.clip((to_go - start) / (end - start), 0.0, 1.0)  # (P − 1, S)
-    seg = segment_closest_sq(rx, ry, reach[..., None].astype(np.float32))
-    seg[start >= to_go] = np.inf  # segments that start after the arrival
+    rx = _flown(unit_x[:, row], speed_m_s, cruise_m_s)  # (P, S, K), contiguous float32
+    rx += paths.rel_x[..., None]
+    ry = _flown(unit_y[:, row], speed_m_s, cruise_m_s)
+    ry += paths.rel_y[..., None]
+    seg = segment_closest_sq(rx, ry, paths.reach[..., None])
+    seg[paths.after] = np.inf  # segments that start after the arrival
     pair_cpa = seg.min(axis=0)  # (S, K)
     np.sqrt(seg, out=seg)
     seg -= paths.need[..., None]
     pair_clear = seg.min(axis=0)
     # Per UAV: the worst pair (the pairs come grouped by owner, in order).
-    starts = np.flatnonzero(np.r_[True, owner[1:] != owner[:-1]])
-    owners = owner[starts]
+    starts = paths.starts
+    owners = paths.owner[starts]
     clearance.reshape(b * n, k)[owners] = np.minimum.reduceat(pair_clear, starts, axis=0)
     cpa_sq.reshape(b * n, k)[owners] = np.minimum.reduceat(pair_cpa, starts, axis=0)
     return clearance, np.sqrt(cpa_sq)
@@ -419,25 +405,48 @@ def _flown(unit: Float32Array, speed_m_s: float, cruise_m_s: float) -> Float32Ar
 
 @dataclass(frozen=True)
 class ThreatPaths:
-    """Every (UAV, threat) pair to check and the threat's predicted path.
+    """Every (UAV, threat) pair to check, and the threat's predicted path relative to it.
 
     Attributes:
-        times: (P,) the time points. owner: (S,) b·N + i of each pair's UAV, non-decreasing.
-        x, y: (P, S) the threat's position at each time point. need: (P − 1, S) the distance
-        each segment requires.
+        owner: (S,) b·N + i of each pair's UAV, non-decreasing. starts: where each owner's
+        pairs start. rel_x, rel_y: (P, S) the UAV's position now minus the threat's at each
+        time point. need: (P − 1, S) the distance each segment requires. reach: (P − 1, S)
+        the fraction of each segment flown before the UAV reaches its target (float32).
+        after: (P − 1, S) the segments that start after it: not checked.
     """
 
-    times: FloatArray
     owner: NDArray[np.intp]
-    x: FloatArray
-    y: FloatArray
+    starts: NDArray[np.intp]
+    rel_x: FloatArray
+    rel_y: FloatArray
     need: FloatArray
+    reach: Float32Array
+    after: BoolArray
+
+    @staticmethod
+    def grouped(
+        owner: NDArray[np.intp],
+        rel_x: FloatArray,
+        rel_y: FloatArray,
+        need: FloatArray,
+        reach: Float32Array,
+        after: BoolArray,
+    ) -> ThreatPaths:
+        """The pairs (sorted by owner) with the start of each owner's group."""
+        starts = np.flatnonzero(owner[1:] != owner[:-1]) + 1
+        starts = np.concatenate([np.zeros(min(len(owner), 1), dtype=np.intp), starts])
+        return ThreatPaths(owner, starts, rel_x, rel_y, need, reach, after)
 
     def of(self, uavs: BoolArray) -> ThreatPaths:
         """The pairs of the UAVs selected by ``uavs`` (B, N) alone."""
         keep = uavs.reshape(-1)[self.owner]
-        return ThreatPaths(
-            self.times, self.owner[keep], self.x[:, keep], self.y[:, keep], self.need[:, keep]
+        return ThreatPaths.grouped(
+            self.owner[keep],
+            self.rel_x[:, keep],
+            self.rel_y[:, keep],
+            self.need[:, keep],
+            self.reach[:, keep],
+            self.after[:, keep],
         )
 
 
@@ -446,24 +455,23 @@ def _threat_paths(
     vehicle: Vehicle,
     swarm: Swarm,
     threats: Threats,
-    proposed: FloatArray,
+    committed: tuple[FloatArray, FloatArray],
     times: FloatArray,
-    split: float | None,
     required: float,
 ) -> ThreatPaths:
     """The (UAV, threat) pairs that can come within the required distance, and their paths.
 
-    Sorted by UAV. Most of the N·M and N·N pairs are far apart: gathered away, they cost
-    nothing.
+    ``committed``: (B, N, 1, P) every UAV's proposal at 1 m/s (`_at_times`). Sorted by UAV.
+    Most of the N·M and N·N pairs are far apart: gathered away, they cost nothing.
     """
     b, n = swarm.heading_rad.shape
     horizon = float(times[-1])
     deciding = swarm.deciding
     p = len(times)
-    # Every UAV's threat slots, dense: the M intruders, then its J nearest UAVs; positions
-    # (P, B, N, slots), requirements (P − 1, B, N, slots), which slots count (B, N, slots).
-    # Gathered in (environment, UAV, slot) order, the pairs come sorted by their UAV.
-    xs, ys, needs, masks = [], [], [], []
+    # Every threat of an environment, (P, B, T): its M intruders, then its N UAVs; each UAV's
+    # slots (B, N, M + J) name which of them it checks (its J nearest UAVs): the pairs are
+    # the slots that count, gathered in (environment, UAV, slot) order (sorted by UAV).
+    xs, ys, needs, slots, masks = [], [], [], [], []
     m = threats.intruder_pos_m.shape[1]
     if m:  # intruders: straight at constant velocity; the requirement grows with uncertainty
         q, w = threats.intruder_pos_m, threats.intruder_vel_m_s
@@ -475,14 +483,15 @@ def _threat_paths(
         masks.append(
             deciding[..., None] & threats.intruder_known[:, None] & (dist <= reach[:, None])
         )
+        slots.append(np.broadcast_to(np.arange(m), (b, n, m)))
         t = times[:, None, None]
-        xs.append(np.broadcast_to((q[..., 0] + w[..., 0] * t)[:, :, None], (p, b, n, m)))
-        ys.append(np.broadcast_to((q[..., 1] + w[..., 1] * t)[:, :, None], (p, b, n, m)))
+        xs.append(q[..., 0] + w[..., 0] * t)
+        ys.append(q[..., 1] + w[..., 1] * t)
         age = threats.intruder_age_s
         # a report's error grows with its age and with the time predicted ahead; exact
         # sensing (age 0, the simulator's paper world) has none
         growth = np.where(age > 0, cfg.track_growth_m_s, 0.0) * (age + times[1:, None, None])
-        needs.append(np.broadcast_to((required + growth)[:, :, None], (p - 1, b, n, m)))
+        needs.append(required + growth)
     others = min(cfg.neighbours, n - 1)
     if others > 0:  # the nearest present UAVs within reach, on their committed arcs
         rel = swarm.pos_m[:, :, None] - swarm.pos_m[:, None]  # (B, N, N, 2)
@@ -492,35 +501,40 @@ def _threat_paths(
         both = 2.0 * vehicle.cruise_m_s * horizon + required  # two UAVs closing head-on
         idx = np.argpartition(dist, others - 1, axis=-1)[..., :others]  # (B, N, J)
         masks.append(np.take_along_axis(dist, idx, -1) <= both)
-        nx, ny = _at_times(
-            displacements(
-                swarm.heading_rad,
-                (proposed * vehicle.max_turn_rad)[..., None],
-                swarm.speed_m_s[..., None],
-                vehicle.dt_s,
-                horizon,
-            ),
-            split,
-        )  # (B, N, 1, P): every UAV's committed arc, once
-        envs = np.arange(b)[:, None, None]
-        xs.append(np.moveaxis(swarm.pos_m[envs, idx, 0, None] + nx[envs, idx, 0], -1, 0))
-        ys.append(np.moveaxis(swarm.pos_m[envs, idx, 1, None] + ny[envs, idx, 0], -1, 0))
+        slots.append(m + idx)
+        speed = swarm.speed_m_s[None]  # every UAV's committed arc at its speed
+        xs.append(swarm.pos_m[None, ..., 0] + np.moveaxis(committed[0][..., 0, :], -1, 0) * speed)
+        ys.append(swarm.pos_m[None, ..., 1] + np.moveaxis(committed[1][..., 0, :], -1, 0) * speed)
         # past the neighbour horizon nothing is required (−inf: never binding)
         ahead = times[:-1] < cfg.neighbour_horizon_s - 1e-9
-        need = np.where(ahead, required, -np.inf)[:, None, None, None]
-        needs.append(np.broadcast_to(need, (p - 1, b, n, others)))
+        needs.append(
+            np.broadcast_to(np.where(ahead, required, -np.inf)[:, None, None], (p - 1, b, n))
+        )
     if not masks:
         empty = np.zeros((p, 0))
-        return ThreatPaths(times, np.zeros(0, dtype=np.intp), empty, empty, empty[1:])
-    mask = np.concatenate(masks, axis=-1)
-    env, uav, slot = np.nonzero(mask)
-    pick = (slice(None), env, uav, slot)
-    return ThreatPaths(
-        times,
+        return ThreatPaths.grouped(
+            np.zeros(0, dtype=np.intp),
+            empty,
+            empty,
+            empty[1:],
+            empty[1:].astype(np.float32),
+            np.zeros((p - 1, 0), dtype=bool),
+        )
+    env, uav, slot = np.nonzero(np.concatenate(masks, axis=-1))
+    threat = np.concatenate(slots, axis=-1)[env, uav, slot]
+    # Nothing after a UAV reaches its target is checked: each segment ends there at the
+    # latest (the whole coming step is always checked: the UAV flies it).
+    gap = swarm.target_m - swarm.pos_m
+    to_go = np.maximum(np.hypot(gap[..., 0], gap[..., 1]) / vehicle.cruise_m_s, vehicle.dt_s)
+    to_go = to_go[env, uav]  # (S,)
+    start, end = times[:-1, None], times[1:, None]
+    return ThreatPaths.grouped(
         env * n + uav,
-        np.concatenate(xs, axis=-1)[pick],
-        np.concatenate(ys, axis=-1)[pick],
-        np.concatenate(needs, axis=-1)[pick],
+        (swarm.pos_m[env, uav, 0] - np.concatenate(xs, axis=-1)[:, env, threat]).astype(np.float32),
+        (swarm.pos_m[env, uav, 1] - np.concatenate(ys, axis=-1)[:, env, threat]).astype(np.float32),
+        np.concatenate(needs, axis=-1)[:, env, threat],
+        np.clip((to_go - start) / (end - start), 0.0, 1.0).astype(np.float32),
+        start >= to_go,
     )
 
 

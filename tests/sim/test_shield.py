@@ -235,3 +235,23 @@ def test_bad_settings_are_refused():
         ShieldConfig(headings=4)
     with pytest.raises(ValueError, match="horizon"):
         ShieldConfig(horizon_s=0.0)
+
+
+@pytest.mark.parametrize(
+    ("dt_s", "horizon_s", "neighbour_s"),
+    [(2.0, 10.0, 4.0), (2.0, 2.0, 4.0), (1.5, 7.3, 3.1), (0.3, 0.9, 5.0), (2.0, 10.0, 1.0)],
+)
+def test_shield_times_are_the_predictions_time_points(
+    dt_s: float, horizon_s: float, neighbour_s: float
+) -> None:
+    """The shield's instants are `time_points`' at its chords, bit for bit, plus the split."""
+    from sim.prediction import time_points
+    from sim.shield import CHORDS, _times
+
+    times, split = _times(dt_s, horizon_s, neighbour_s)
+    if split is None:
+        np.testing.assert_array_equal(times, time_points(dt_s, horizon_s, CHORDS))
+    else:
+        assert times[-2] == neighbour_s
+        np.testing.assert_array_equal(np.delete(times, -2), time_points(dt_s, horizon_s, CHORDS))
+        assert split == pytest.approx((neighbour_s - dt_s) / (horizon_s - dt_s))
