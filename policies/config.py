@@ -206,6 +206,39 @@ class GeneralistConfig:
     """α of TD3+BC at the start of fine-tuning: the actor's loss is −Q/mean|Q| + α·(π − a_teacher)²
     on the teacher's transitions (Fujimoto & Gu 2021's normalisation)."""
 
+    learner: str = "td3"
+    """"td3" (off-policy: one replay buffer of every UAV's transitions, `policies.generalist`)
+    or "ppo" (on-policy: clipped surrogate over rollouts of every world, GAE,
+    `policies.generalist_ppo`); the side-by-side at equal wall time is in docs/MODEL.md."""
+
+    ppo_rollout: int = 16
+    """PPO: steps of every world per update (≈ 22,000 UAV transitions on the default mixture)."""
+
+    ppo_epochs: int = 4
+    """PPO: passes over each rollout."""
+
+    ppo_minibatch: int = 2048
+    """PPO: UAV transitions per gradient step."""
+
+    ppo_clip: float = 0.2
+    """PPO: ε of the clipped probability ratio."""
+
+    ppo_lambda: float = 0.95
+    """PPO: λ of the generalised advantage estimate."""
+
+    ppo_lr: float = 3e-4
+    """PPO: Adam learning rate of the actor, the value network and the log std."""
+
+    ppo_log_std: float = -1.2
+    """PPO: initial log std of the Gaussian policy on the normalised action (σ ≈ 0.3, TD3's
+    starting exploration noise)."""
+
+    ppo_entropy: float = 0.0
+    """PPO: weight of the entropy bonus."""
+
+    ppo_value_weight: float = 0.5
+    """PPO: weight of the value loss."""
+
     real_share: float = 0.35
     """Share of families flown in the real world (fitted ArduCopter/PX4 responses randomised
     per UAV, ADS-B intruders, GPS noise) rather than the paper's ideal one."""
@@ -233,6 +266,9 @@ class GeneralistConfig:
             check(getattr(self, name) > 0, name, "must be > 0")
         check(0 < self.gamma < 1, "gamma", "must be in (0, 1)")
         check(0.0 <= self.real_share <= 1.0, "real_share", "must be in [0, 1]")
+        check(self.learner in ("td3", "ppo"), "learner", 'must be "td3" or "ppo"')
+        check(0 < self.ppo_clip < 1 and 0 <= self.ppo_lambda <= 1, "ppo_clip", "out of range")
+        check(self.ppo_lr > 0 and self.ppo_entropy >= 0, "ppo_lr", "must be > 0")
         check(self.separation_weight >= 0, "separation_weight", "must be >= 0")
         check(self.minutes >= 0 and self.eval_minutes > 0, "minutes", "must be >= 0")
         check_at_least(
@@ -246,6 +282,9 @@ class GeneralistConfig:
             "buffer_size",
             "updates_per_iteration",
             "policy_delay",
+            "ppo_rollout",
+            "ppo_epochs",
+            "ppo_minibatch",
             "total_iterations",
             "eval_episodes",
         )

@@ -39,10 +39,11 @@ from typing import Any
 import numpy as np
 import torch
 from numpy.typing import NDArray
+from torch import nn
 
 from policies.config import GeneralistConfig
 from policies.ddpg import soft_update
-from policies.generalist import AgentReplay, TD3Nets, clone_step, td3_update
+from policies.generalist import AgentReplay, SetNet, TD3Nets, clone_step, td3_update
 from policies.train import load_checkpoint, reward_upper_bound, save_checkpoint, summary_writer
 from sim.arrays import BoolArray, FloatArray
 from sim.config import ScenarioConfig
@@ -153,18 +154,52 @@ def make_worlds(
     return worlds
 
 
-def step_world(
+@dataclass(frozen=True)
+class WorldStep:
+    """One step of a world, dense over its (B, N) UAVs.
+
+    Attributes:
+        obs: (B, N, D) the observations acted on. action: (B, N) the actions flown.
+        reward: (B, N) the reward (reMARL minus the separation term). acted: (B, N) the UAVs
+        that flew the step. terminal: (B, N) their trajectory ended (arrived, or the episode
+        terminated). terminal_value: (B, N) the value after a terminal step (the goal's for an
+        arrival, 0 after a collision). next_obs: (B, N, D) the observations after the step, of
+        the old episodes where one ended. done: (B,) the environments whose episode ended (and
+        restarted).
+    """
+
+    obs: NDArray[np.float32]
+    action: NDArray[np.float32]
+    reward: NDArray[np.float32]
+    acted: BoolArray
+    terminal: BoolArray
+    terminal_value: NDArray[np.float32]
+    next_obs: NDArray[np.float32]
+    done: BoolArray
+
+    def transitions(self) -> dict[str, NDArray[Any]]:
+        """The transitions of the UAVs that acted, one row each (`AgentReplay.add`)."""
+        acted = self.acted
+        return {
+            "obs": self.obs[acted],
+            "action": self.action[acted],
+            "reward": self.reward[acted],
+            "next_obs": self.next_obs[acted],
+            "terminal": self.terminal[acted],
+            "terminal_value": self.terminal_value[acted],
+        }
+
+
+def advance_world(
     world: World,
     actions: NDArray[np.float32],
     cfg: GeneralistConfig,
     goal_value: float,
     rng: np.random.Generator,
-    teacher: NDArray[np.float32] | None = None,
-) -> tuple[dict[str, NDArray[Any]], list[dict[str, Any]]]:
-    """Step one world; returns its UAV transitions and the metrics of the episodes that ended.
+) -> tuple[WorldStep, list[dict[str, Any]]]:
+    """Step one world; returns the step and the metrics of the episodes that ended.
 
-    Finished environments restart at once with the family's next episodes. ``teacher`` (B, N):
-    the teacher's actions at this step, stored with the transitions (for behaviour cloning).
+    Finished environments restart at once with the family's next episodes.
     """
     sim, c = world.sim, world.cfg
     state, result = sim.step(world.state, actions, rng)
@@ -173,18 +208,17 @@ def step_world(
         result.min_u2u_m, c.d_col_m, cfg.separation_weight, cfg.separation_factor
     )
     next_obs = result.obs.flat()
-    terminal = acted & (result.arrived | result.terminated[:, None])
-    transitions = {
-        "obs": world.obs[acted],
-        "action": actions[acted],
-        "reward": reward[acted].astype(np.float32),
-        "next_obs": next_obs[acted],
-        "terminal": terminal[acted],
-        "terminal_value": np.where(result.arrived, goal_value, 0.0)[acted].astype(np.float32),
-    }
-    if teacher is not None:
-        transitions["teacher"] = teacher[acted].astype(np.float32)
     done = result.terminated | result.truncated
+    step = WorldStep(
+        obs=world.obs,
+        action=actions,
+        reward=reward.astype(np.float32),
+        acted=acted,
+        terminal=acted & (result.arrived | result.terminated[:, None]),
+        terminal_value=np.where(result.arrived, goal_value, 0.0).astype(np.float32),
+        next_obs=next_obs.copy() if done.any() else next_obs,
+        done=done,
+    )
     ended: list[dict[str, Any]] = []
     if done.any():
         metrics = episode_metrics(state, result, done)
@@ -195,6 +229,26 @@ def step_world(
         state = merge_where(state, fresh, done)
         next_obs[done] = sim.observe(fresh).flat()
     world.state, world.obs = state, next_obs
+    return step, ended
+
+
+def step_world(
+    world: World,
+    actions: NDArray[np.float32],
+    cfg: GeneralistConfig,
+    goal_value: float,
+    rng: np.random.Generator,
+    teacher: NDArray[np.float32] | None = None,
+) -> tuple[dict[str, NDArray[Any]], list[dict[str, Any]]]:
+    """Step one world; returns its UAV transitions and the metrics of the episodes that ended.
+
+    ``teacher`` (B, N): the teacher's actions at this step, stored with the transitions (for
+    behaviour cloning).
+    """
+    step, ended = advance_world(world, actions, cfg, goal_value, rng)
+    transitions = step.transitions()
+    if teacher is not None:
+        transitions["teacher"] = teacher[step.acted].astype(np.float32)
     return transitions, ended
 
 
@@ -251,17 +305,17 @@ def learn_from_teacher(
     return {"teacher/success": float(np.mean(episodes)) if episodes else 0.0, **losses}
 
 
-def actor_actions(nets: TD3Nets, obs: NDArray[np.float32], device: str) -> NDArray[np.float32]:
+def actor_actions(actor: SetNet, obs: NDArray[np.float32], device: str) -> NDArray[np.float32]:
     """Deterministic actions (...,) of the actor for flat observations (..., D)."""
     with torch.no_grad():
         flat = torch.from_numpy(np.ascontiguousarray(obs.reshape(-1, obs.shape[-1]))).to(device)
-        out = nets.actor(flat).cpu().numpy()
+        out = actor(flat).cpu().numpy()
     actions: NDArray[np.float32] = out.reshape(obs.shape[:-1]).astype(np.float32)
     return actions
 
 
 def validate(
-    nets: TD3Nets, worlds: list[World], layout: ObservationLayout, episodes: int, device: str
+    actor: SetNet, worlds: list[World], layout: ObservationLayout, episodes: int, device: str
 ) -> dict[str, Any]:
     """Success per family on ``episodes`` validation episodes (ideal world, unscored)."""
     per_family: dict[str, float] = {}
@@ -276,7 +330,7 @@ def validate(
         success = np.zeros(episodes, dtype=bool)
         finished = np.zeros(episodes, dtype=bool)
         for _ in range(cfg.max_steps):
-            actions = actor_actions(nets, sim.observe(state).flat(), device)
+            actions = actor_actions(actor, sim.observe(state).flat(), device)
             state, result = sim.step(state, actions, unused)
             done = (result.terminated | result.truncated) & ~finished
             success |= done & result.success
@@ -301,6 +355,197 @@ def resolve_device(name: str) -> str:
     return name
 
 
+@dataclass
+class RunBook:
+    """What both learners share: the worlds, the clock, checkpoints, validation and logs.
+
+    ``nets`` is the learner's (`TD3Nets`, `policies.generalist_ppo.PPONets`): anything with
+    an ``actor``, ``modules()`` and ``optimisers()``. The counters (``iteration``,
+    ``updates``, ``transitions``) are the learner's to advance.
+    """
+
+    cfg: GeneralistConfig
+    out_dir: Path
+    nets: Any
+    layout: ObservationLayout
+    worlds: list[World]
+    device: str
+    rng: np.random.Generator
+    goal_value: float
+    resumed: bool
+    writer: Any
+    iteration: int = 0
+    updates: int = 0
+    transitions: int = 0
+    best: float = -1.0
+    elapsed_before: float = 0.0
+    start: float = 0.0
+    last_eval: float = 0.0
+    last_save: float = 0.0
+    summary: dict[str, Any] = dataclasses.field(default_factory=dict)
+
+    @classmethod
+    def open(
+        cls,
+        cfg: GeneralistConfig,
+        out_dir: Path,
+        create: Callable[[ObservationLayout, GeneralistConfig, str], Any],
+        *,
+        resume: bool,
+    ) -> RunBook:
+        """Start the run in ``out_dir`` (resuming ``last.safetensors`` if asked and there)."""
+        out_dir.mkdir(parents=True, exist_ok=True)
+        device = resolve_device(cfg.device)
+        torch.manual_seed(cfg.seed)
+        rng = np.random.default_rng(cfg.seed)
+        base = family_scenario(load_suite(cfg.suites[0]).families[0])
+        layout = generalist_layout(cfg, base)
+        worlds = make_worlds(cfg, layout, np.random.default_rng([cfg.seed, 1]))
+        nets = create(layout, cfg, device)
+        goal_value = reward_upper_bound(base, "remarl") / (1.0 - cfg.gamma)
+        book = cls(cfg, out_dir, nets, layout, worlds, device, rng, goal_value, False, None)
+        last = out_dir / "last.safetensors"
+        if resume and last.exists():
+            meta = load_checkpoint(last, nets)
+            book.iteration, book.updates = int(meta["iteration"]), int(meta["updates"])
+            book.best, book.elapsed_before = float(meta["best_success"]), float(meta["elapsed_s"])
+            book.resumed = book.iteration > 0
+            book.rng = np.random.default_rng([cfg.seed, book.iteration])
+            for world in worlds:  # new episodes: the stream goes on where the run left it
+                world.drawn += int(meta.get("drawn", {}).get(world.family.name, 0))
+        (out_dir / "config.json").write_text(
+            json.dumps(
+                {
+                    "generalist": dataclasses.asdict(cfg),
+                    "layout": dataclasses.asdict(layout),
+                    "worlds": [
+                        {
+                            "family": w.family.name,
+                            "uavs": w.cfg.uav.count,
+                            "envs": w.envs,
+                            "real": w.real,
+                        }
+                        for w in worlds
+                    ],
+                },
+                indent=2,
+            )
+        )
+        book.writer = summary_writer(out_dir)
+        book.start = book.last_eval = book.last_save = time.monotonic()
+        return book
+
+    def elapsed(self) -> float:
+        """Seconds of the run, resumes included."""
+        return self.elapsed_before + time.monotonic() - self.start
+
+    def out_of_time(self) -> bool:
+        """The budget (``minutes``) is spent."""
+        return bool(self.cfg.minutes) and self.elapsed() >= 60 * self.cfg.minutes
+
+    def fraction_done(self) -> float:
+        """The run's fraction of its budget, in [0, 1] (0 without one)."""
+        if not self.cfg.minutes:
+            return 0.0
+        return min(self.elapsed() / max(60 * self.cfg.minutes, 1e-9), 1.0)
+
+    def checkpoint(self, path: Path) -> None:
+        """Networks, optimisers and counters to ``path``."""
+        save_checkpoint(
+            path,
+            self.nets,
+            {
+                "schema": CHECKPOINT_SCHEMA,
+                "learner": self.cfg.learner,
+                "iteration": self.iteration,
+                "updates": self.updates,
+                "best_success": self.best,
+                "elapsed_s": self.elapsed(),
+                "layout": dataclasses.asdict(self.layout),
+                "hidden": self.cfg.hidden,
+                "drawn": {w.family.name: w.drawn for w in self.worlds},
+            },
+        )
+
+    def save_last(self) -> None:
+        """``last.safetensors`` now."""
+        self.checkpoint(self.out_dir / "last.safetensors")
+
+    def log(
+        self,
+        recent: list[dict[str, Any]],
+        scalars: dict[str, float],
+        progress: Callable[[dict[str, float]], None] | None,
+        every: int = 20,
+    ) -> None:
+        """Every ``every`` iterations: recent episodes' rates and ``scalars`` to the logs."""
+        if self.iteration % every or not recent:
+            return
+        out = {
+            "iteration": float(self.iteration),
+            "charts/success": float(np.mean([float(r["success"]) for r in recent])),
+            "charts/collision_u2u": float(np.mean([float(r["collision_u2u"]) for r in recent])),
+            "charts/collision_u2o": float(np.mean([float(r["collision_u2o"]) for r in recent])),
+            "charts/transitions": float(self.transitions),
+            "perf/elapsed_min": self.elapsed() / 60,
+            **scalars,
+        }
+        if self.writer is not None:
+            for key, value in out.items():
+                if math.isfinite(value):
+                    self.writer.add_scalar(key, value, self.iteration)
+        if progress is not None:
+            progress(out)
+
+    def save_and_validate_if_due(self, *, now: bool = False) -> None:
+        """Checkpoint and validate when due, keeping ``best.safetensors``.
+
+        A checkpoint every `CHECKPOINT_MINUTES` (a crash loses at most that), a validation
+        every ``eval_minutes`` (or ``now``).
+        """
+        if time.monotonic() - self.last_save >= 60 * CHECKPOINT_MINUTES:
+            self.last_save = time.monotonic()
+            self.save_last()
+        if not now and time.monotonic() - self.last_eval < 60 * self.cfg.eval_minutes:
+            return
+        self.save_last()
+        self.last_eval = time.monotonic()
+        result = validate(
+            self.nets.actor, self.worlds, self.layout, self.cfg.eval_episodes, self.device
+        )
+        record = {"iteration": self.iteration, "elapsed_s": self.elapsed(), **result}
+        with (self.out_dir / "evals.jsonl").open("a") as f:
+            f.write(json.dumps(record) + "\n")
+        if self.writer is not None:
+            self.writer.add_scalar("eval/success_mean", result["success_mean"], self.iteration)
+            self.writer.add_scalar("eval/success_min", result["success_min"], self.iteration)
+        if result["success_mean"] >= self.best:
+            self.best = result["success_mean"]
+            self.checkpoint(self.out_dir / "best.safetensors")
+        self.save_last()
+        self.summary["last_eval"] = record
+
+    def finish(self) -> dict[str, Any]:
+        """Final checkpoints and the summary."""
+        self.save_last()
+        if not (self.out_dir / "best.safetensors").exists():
+            self.checkpoint(self.out_dir / "best.safetensors")
+        if self.writer is not None:
+            self.writer.close()
+        self.summary.update(
+            {
+                "learner": self.cfg.learner,
+                "iterations": self.iteration,
+                "updates": self.updates,
+                "transitions": self.transitions,
+                "best_success": self.best,
+                "elapsed_s": self.elapsed(),
+                "out": str(self.out_dir),
+            }
+        )
+        return self.summary
+
+
 def train_generalist(
     cfg: GeneralistConfig,
     out_dir: Path,
@@ -308,99 +553,42 @@ def train_generalist(
     resume: bool = False,
     progress: Callable[[dict[str, float]], None] | None = None,
 ) -> dict[str, Any]:
-    """Train (or resume) the generalist; returns the final summary.
+    """Train (or resume) the generalist with ``cfg.learner``; returns the final summary.
 
     Ctrl-C saves ``last.safetensors`` before it propagates, so the run can be resumed.
     """
-    out_dir.mkdir(parents=True, exist_ok=True)
-    device = resolve_device(cfg.device)
-    torch.manual_seed(cfg.seed)
-    rng = np.random.default_rng(cfg.seed)
-    base = family_scenario(load_suite(cfg.suites[0]).families[0])
-    layout = generalist_layout(cfg, base)
-    worlds = make_worlds(cfg, layout, np.random.default_rng([cfg.seed, 1]))
-    nets = TD3Nets.create(layout, cfg, device)
+    if cfg.learner == "ppo":
+        from policies.generalist_ppo import train_generalist_ppo
+
+        return train_generalist_ppo(cfg, out_dir, resume=resume, progress=progress)
+    book = RunBook.open(cfg, out_dir, TD3Nets.create, resume=resume)
+    nets: TD3Nets = book.nets
+    worlds, layout, device = book.worlds, book.layout, book.device
     buffer = AgentReplay(cfg.buffer_size, layout.size)
-    goal_value = reward_upper_bound(base, "remarl") / (1.0 - cfg.gamma)
-
-    iteration, updates, best, elapsed_before = 0, 0, -1.0, 0.0
-    last_path, best_path = out_dir / "last.safetensors", out_dir / "best.safetensors"
-    if resume and last_path.exists():
-        meta = load_checkpoint(last_path, nets)
-        iteration, updates = int(meta["iteration"]), int(meta["updates"])
-        best, elapsed_before = float(meta["best_success"]), float(meta["elapsed_s"])
-        rng = np.random.default_rng([cfg.seed, iteration])
-        for world in worlds:  # new episodes: the stream goes on where the run left it
-            world.drawn += int(meta.get("drawn", {}).get(world.family.name, 0))
-    (out_dir / "config.json").write_text(
-        json.dumps(
-            {
-                "generalist": dataclasses.asdict(cfg),
-                "layout": dataclasses.asdict(layout),
-                "worlds": [
-                    {
-                        "family": w.family.name,
-                        "uavs": w.cfg.uav.count,
-                        "envs": w.envs,
-                        "real": w.real,
-                    }
-                    for w in worlds
-                ],
-            },
-            indent=2,
-        )
-    )
-    writer = summary_writer(out_dir)
-    start = time.monotonic()
-    last_eval = last_save = start
-    warm = 0 if resume and iteration > 0 else cfg.warmup_transitions
+    warm = 0 if book.resumed else cfg.warmup_transitions
     recent: list[dict[str, Any]] = []
-    transitions_seen = 0
     env_s = learn_s = 0.0
-
-    def elapsed() -> float:
-        return elapsed_before + time.monotonic() - start
-
-    def checkpoint(path: Path) -> None:
-        save_checkpoint(
-            path,
-            nets,
-            {
-                "schema": CHECKPOINT_SCHEMA,
-                "iteration": iteration,
-                "updates": updates,
-                "best_success": best,
-                "elapsed_s": elapsed(),
-                "layout": dataclasses.asdict(layout),
-                "hidden": cfg.hidden,
-                "drawn": {w.family.name: w.drawn for w in worlds},
-            },
-        )
-
-    summary: dict[str, Any] = {}
-    taught = cfg.teacher != "none" and not (resume and iteration > 0)
-    if taught:
-        scalars = learn_from_teacher(nets, worlds, buffer, cfg, goal_value, rng, device)
+    if cfg.teacher != "none" and not book.resumed:
+        scalars = learn_from_teacher(nets, worlds, buffer, cfg, book.goal_value, book.rng, device)
         warm = 0  # the clone explores from here
         if progress is not None:
-            progress({"iteration": 0.0, "perf/elapsed_min": elapsed() / 60, **scalars})
-        if writer is not None:
+            progress({"iteration": 0.0, "perf/elapsed_min": book.elapsed() / 60, **scalars})
+        if book.writer is not None:
             for key, value in scalars.items():
-                writer.add_scalar(key, value, 0)
-        last_eval = time.monotonic() - 60 * cfg.eval_minutes  # validate the clone at once
+                book.writer.add_scalar(key, value, 0)
+        book.last_eval -= 60 * cfg.eval_minutes  # validate the clone at once
     try:
-        while iteration < cfg.total_iterations:
-            if cfg.minutes and elapsed() >= 60 * cfg.minutes:
-                break
-            frac = min(elapsed() / max(60 * cfg.minutes, 1e-9), 1.0) if cfg.minutes else 0.0
+        while book.iteration < cfg.total_iterations and not book.out_of_time():
+            frac = book.fraction_done()
             sigma = cfg.noise_start + (cfg.noise_end - cfg.noise_start) * frac
+            rng = book.rng
             t0 = time.perf_counter()
             # ---- act in every world (one actor call for all of them), store, restart
             if warm > 0:
                 actions = [rng.uniform(-1, 1, w.obs.shape[:2]).astype(np.float32) for w in worlds]
             else:
                 flat = np.concatenate([w.obs.reshape(-1, layout.size) for w in worlds])
-                out = actor_actions(nets, flat, device)
+                out = actor_actions(nets.actor, flat, device)
                 out += rng.normal(0.0, sigma, out.shape).astype(np.float32)
                 np.clip(out, -1.0, 1.0, out=out)
                 sizes = np.cumsum([w.obs.shape[0] * w.obs.shape[1] for w in worlds])[:-1]
@@ -409,15 +597,15 @@ def train_generalist(
                     for a, w in zip(np.split(out, sizes), worlds, strict=True)
                 ]
             for world, act in zip(worlds, actions, strict=True):
-                transitions, ended = step_world(world, act, cfg, goal_value, rng)
+                transitions, ended = step_world(world, act, cfg, book.goal_value, rng)
                 buffer.add(**transitions)
                 count = len(transitions["obs"])
-                transitions_seen += count
+                book.transitions += count
                 warm -= count
                 for row in ended:
                     recent.append({"family": world.family.name, **row})
             recent = recent[-2000:]
-            iteration += 1
+            book.iteration += 1
             env_s += time.perf_counter() - t0
 
             # ---- learn
@@ -426,72 +614,24 @@ def train_generalist(
                 t1 = time.perf_counter()
                 bc = cfg.bc_weight * max(0.0, 1.0 - 2.0 * frac) if cfg.teacher != "none" else 0.0
                 for _ in range(cfg.updates_per_iteration):
-                    updates += 1
+                    book.updates += 1
                     batch = buffer.sample(cfg.batch_size, rng, device)
-                    losses |= td3_update(nets, batch, cfg, updates % cfg.policy_delay == 0, bc)
+                    update_actor = book.updates % cfg.policy_delay == 0
+                    losses |= td3_update(nets, batch, cfg, update_actor, bc)
                 learn_s += time.perf_counter() - t1
 
-            # ---- log
-            if iteration % 20 == 0 and recent:
-                success = [float(r["success"]) for r in recent]
-                u2u = [float(r["collision_u2u"]) for r in recent]
-                u2o = [float(r["collision_u2o"]) for r in recent]
-                scalars = {
-                    "iteration": float(iteration),
-                    "charts/success": float(np.mean(success)),
-                    "charts/collision_u2u": float(np.mean(u2u)),
-                    "charts/collision_u2o": float(np.mean(u2o)),
-                    "charts/transitions": float(transitions_seen),
-                    "charts/noise": sigma,
-                    "perf/simulator_share": env_s / max(env_s + learn_s, 1e-9),
-                    "perf/elapsed_min": elapsed() / 60,
-                    **losses,
-                }
-                if writer is not None:
-                    for key, value in scalars.items():
-                        if math.isfinite(value):
-                            writer.add_scalar(key, value, iteration)
-                if progress is not None:
-                    progress(scalars)
-
-            # ---- checkpoint (a crash loses at most CHECKPOINT_MINUTES), validate
-            if time.monotonic() - last_save >= 60 * CHECKPOINT_MINUTES:
-                last_save = time.monotonic()
-                checkpoint(last_path)
-            if time.monotonic() - last_eval >= 60 * cfg.eval_minutes:
-                checkpoint(last_path)
-                last_eval = time.monotonic()
-                result = validate(nets, worlds, layout, cfg.eval_episodes, device)
-                record = {"iteration": iteration, "elapsed_s": elapsed(), **result}
-                with (out_dir / "evals.jsonl").open("a") as f:
-                    f.write(json.dumps(record) + "\n")
-                if writer is not None:
-                    writer.add_scalar("eval/success_mean", result["success_mean"], iteration)
-                    writer.add_scalar("eval/success_min", result["success_min"], iteration)
-                if result["success_mean"] >= best:
-                    best = result["success_mean"]
-                    checkpoint(best_path)
-                checkpoint(last_path)
-                summary["last_eval"] = record
+            # ---- log, checkpoint, validate
+            scalars = {
+                "charts/noise": sigma,
+                "perf/simulator_share": env_s / max(env_s + learn_s, 1e-9),
+                **losses,
+            }
+            book.log(recent, scalars, progress)
+            book.save_and_validate_if_due()
     except KeyboardInterrupt:
-        checkpoint(last_path)
+        book.save_last()
         raise
-    checkpoint(last_path)
-    if not best_path.exists():
-        checkpoint(best_path)
-    if writer is not None:
-        writer.close()
-    summary.update(
-        {
-            "iterations": iteration,
-            "updates": updates,
-            "transitions": transitions_seen,
-            "best_success": best,
-            "elapsed_s": elapsed(),
-            "out": str(out_dir),
-        }
-    )
-    return summary
+    return book.finish()
 
 
 def export_generalist_run(
@@ -511,12 +651,22 @@ def export_generalist_run(
     cfg = GeneralistConfig(**raw)
     base = family_scenario(load_suite(cfg.suites[0]).families[0])
     layout = generalist_layout(cfg, base)
-    nets = TD3Nets.create(layout, dataclasses.replace(cfg, device="cpu"), "cpu")
-    meta = load_checkpoint(run_dir / f"{checkpoint}.safetensors", nets)
+    cpu = dataclasses.replace(cfg, device="cpu")
+    if cfg.learner == "ppo":
+        from policies.generalist_ppo import PPONets
+
+        ppo = PPONets.create(layout, cpu, "cpu")
+        meta = load_checkpoint(run_dir / f"{checkpoint}.safetensors", ppo)
+        actor: nn.Module = ppo.actor
+        critic: nn.Module = ppo.value  # the value network, of the critic's shape
+    else:
+        td3 = TD3Nets.create(layout, cpu, "cpu")
+        meta = load_checkpoint(run_dir / f"{checkpoint}.safetensors", td3)
+        actor, critic = td3.actor, td3.critics[0]
     return export_generalist(
         out,
-        nets.actor.state_dict(),
-        nets.critics[0].state_dict(),
+        actor.state_dict(),
+        critic.state_dict(),
         base_cfg=with_layout(base, layout),
         hidden=cfg.hidden,
         uav_range=(1, cfg.max_uavs),

@@ -65,6 +65,12 @@ def add_train(sub: Any) -> None:
         ["auto", "cpu", "cuda"],
         help="generalist: where the networks learn (default auto: cuda when present)",
     )
+    add_choice(
+        p,
+        "--learner",
+        ["td3", "ppo"],
+        help="generalist: the learner (default td3; ppo: the side-by-side of docs/MODEL.md)",
+    )
     finish(p, cmd_train)
 
 
@@ -215,6 +221,7 @@ def cmd_train_generalist(args: argparse.Namespace) -> int:
         minutes=args.minutes or defaults.minutes,
         seed=args.seed,
         device=args.device or defaults.device,
+        learner=args.learner or defaults.learner,
     )
     out = Path(args.out or f"runs/generalist-s{cfg.seed}")
     with progress_bar(enabled=not args.json) as progress:

@@ -1,0 +1,262 @@
+"""The generalist's on-policy learner: PPO over rollouts of every world of the mixture.
+
+The side-by-side of TD3 (`policies.generalist_train`) that the choice of learner rests on
+(docs/MODEL.md): the same worlds, network (`policies.generalist.SetNet`), reward, validation
+and run folder; only the learning differs. A Gaussian policy on the normalised heading change,
+its mean the actor's output and its log std one learned number (the flown action is the sample
+clipped to [−1, 1]); a value network of the critic's shape read at action 0 (its action input
+unused). Every iteration flies every world ``ppo_rollout`` steps, estimates advantages per
+UAV with GAE(λ) (an arrival is the absorbing goal, a collision ends with 0, as in TD3; the
+rollout's end and a timed-out episode bootstrap from the value), then takes ``ppo_epochs``
+passes of clipped-surrogate steps (Schulman et al. 2017) over the UAV transitions.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from numpy.typing import NDArray
+from torch import Tensor, nn
+
+from policies.config import GeneralistConfig
+from policies.generalist import SetNet
+from sim.arrays import BoolArray
+from sim.observation import ObservationLayout
+
+LOG_2PI = math.log(2.0 * math.pi)
+"""log 2π, of the Gaussian's density."""
+
+
+class LogStd(nn.Module):
+    """The policy's log standard deviation: one learned number, every UAV and state."""
+
+    def __init__(self, value: float) -> None:
+        super().__init__()
+        self.value = nn.Parameter(torch.tensor(float(value)))
+
+
+@dataclass
+class PPONets:
+    """The actor (the Gaussian's mean), its log std, the value network and one optimiser."""
+
+    actor: SetNet
+    value: SetNet
+    log_std: LogStd
+    opt: torch.optim.Optimizer
+
+    @classmethod
+    def create(cls, layout: ObservationLayout, cfg: GeneralistConfig, device: str) -> PPONets:
+        """Fresh networks on ``device``."""
+        actor = SetNet(layout, cfg.hidden, critic=False).to(device)
+        value = SetNet(layout, cfg.hidden, critic=True).to(device)
+        log_std = LogStd(cfg.ppo_log_std).to(device)
+        params = [*actor.parameters(), *value.parameters(), *log_std.parameters()]
+        return cls(actor, value, log_std, torch.optim.Adam(params, lr=cfg.ppo_lr))
+
+    def modules(self) -> dict[str, nn.Module]:
+        """Every network by checkpoint name."""
+        return {"actor": self.actor, "value": self.value, "log_std": self.log_std}
+
+    def optimisers(self) -> dict[str, torch.optim.Optimizer]:
+        """Every optimiser by checkpoint name."""
+        return {"opt": self.opt}
+
+    def values(self, obs: Tensor) -> Tensor:
+        """V(obs) (B,) of flat observations (B, D)."""
+        out: Tensor = self.value(obs, obs.new_zeros(obs.shape[0]))
+        return out
+
+
+def log_prob(mean: Tensor, log_std: Tensor, sample: Tensor) -> Tensor:
+    """Log density of ``sample`` under N(mean, exp(log_std)²), elementwise."""
+    z = (sample - mean) * torch.exp(-log_std)
+    return -0.5 * z * z - log_std - 0.5 * LOG_2PI
+
+
+def advantages(
+    reward: NDArray[np.float32],
+    value: NDArray[np.float32],
+    next_value: NDArray[np.float32],
+    terminal: BoolArray,
+    terminal_value: NDArray[np.float32],
+    cut: BoolArray,
+    gamma: float,
+    lam: float,
+) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
+    """GAE(λ) advantages and value targets, (T, ...) each, of per-UAV trajectories.
+
+    ``terminal``: the trajectory ended at the step (bootstrap ``terminal_value``); ``cut``:
+    it does not go on into the next step of the rollout (its episode ended, or the rollout
+    did): bootstrap V(next observation). A UAV that flew a step and is neither terminal nor
+    cut flies the next one, so the recursion only meets entries of UAVs that acted.
+    """
+    adv = np.zeros_like(reward)
+    running = np.zeros_like(reward[0])
+    for t in range(reward.shape[0] - 1, -1, -1):
+        boot = np.where(terminal[t], terminal_value[t], next_value[t])
+        delta = reward[t] + gamma * boot - value[t]
+        running = delta + gamma * lam * np.where(terminal[t] | cut[t], 0.0, running)
+        adv[t] = running
+    return adv, adv + value
+
+
+def ppo_update(
+    nets: PPONets,
+    obs: Tensor,
+    sample: Tensor,
+    old_log_prob: Tensor,
+    adv: Tensor,
+    target: Tensor,
+    cfg: GeneralistConfig,
+) -> dict[str, float]:
+    """One clipped-surrogate step on a minibatch of UAV transitions."""
+    mean = nets.actor(obs)
+    new_log_prob = log_prob(mean, nets.log_std.value, sample)
+    ratio = torch.exp(new_log_prob - old_log_prob)
+    clipped = torch.clamp(ratio, 1.0 - cfg.ppo_clip, 1.0 + cfg.ppo_clip)
+    policy_loss = -torch.min(ratio * adv, clipped * adv).mean()
+    value_loss = 0.5 * ((nets.values(obs) - target) ** 2).mean()
+    entropy = nets.log_std.value + 0.5 * (LOG_2PI + 1.0)
+    loss = policy_loss + cfg.ppo_value_weight * value_loss - cfg.ppo_entropy * entropy
+    nets.opt.zero_grad(set_to_none=True)
+    loss.backward()
+    params = [p for group in nets.opt.param_groups for p in group["params"]]
+    nn.utils.clip_grad_norm_(params, cfg.grad_clip)
+    nets.opt.step()
+    return {
+        "losses/policy": float(policy_loss.detach()),
+        "losses/value": float(value_loss.detach()),
+        "charts/log_std": float(nets.log_std.value.detach()),
+        "charts/clip_fraction": float(((ratio - 1.0).abs() > cfg.ppo_clip).float().mean()),
+    }
+
+
+def train_generalist_ppo(
+    cfg: GeneralistConfig,
+    out_dir: Path,
+    *,
+    resume: bool = False,
+    progress: Callable[[dict[str, float]], None] | None = None,
+) -> dict[str, Any]:
+    """Train (or resume) the generalist with PPO; the run folder as TD3's."""
+    from policies.generalist_train import RunBook, actor_actions, advance_world
+
+    book = RunBook.open(cfg, out_dir, PPONets.create, resume=resume)
+    nets: PPONets = book.nets
+    worlds, layout, device, rng = book.worlds, book.layout, book.device, book.rng
+    recent: list[dict[str, Any]] = []
+    env_s = learn_s = 0.0
+    try:
+        while book.iteration < cfg.total_iterations and not book.out_of_time():
+            t0 = time.perf_counter()
+            # ---- fly every world ppo_rollout steps with the Gaussian policy
+            std = float(torch.exp(nets.log_std.value.detach()))
+            flown: list[list[Any]] = [[] for _ in worlds]
+            for _ in range(cfg.ppo_rollout):
+                flat = np.concatenate([w.obs.reshape(-1, layout.size) for w in worlds])
+                mean = actor_actions(nets.actor, flat, device)
+                sample = (mean + std * rng.standard_normal(mean.shape)).astype(np.float32)
+                action = np.clip(sample, -1.0, 1.0)
+                sizes = np.cumsum([w.obs.shape[0] * w.obs.shape[1] for w in worlds])[:-1]
+                for k, (world, a, u) in enumerate(
+                    zip(worlds, np.split(action, sizes), np.split(sample, sizes), strict=True)
+                ):
+                    shape = world.obs.shape[:2]
+                    step, ended = advance_world(world, a.reshape(shape), cfg, book.goal_value, rng)
+                    flown[k].append((step, u.reshape(shape)))
+                    book.transitions += int(step.acted.sum())
+                    recent += [{"family": world.family.name, **row} for row in ended]
+            recent = recent[-2000:]
+            book.iteration += 1
+            env_s += time.perf_counter() - t0
+
+            # ---- advantages per world, then the clipped-surrogate epochs over every UAV
+            t1 = time.perf_counter()
+            columns = _rollout_columns(nets, flown, cfg, layout.size, device)
+            losses: dict[str, float] = {}
+            count = len(columns["adv"])
+            adv = columns["adv"]
+            columns["adv"] = (adv - adv.mean()) / (adv.std() + 1e-8)
+            tensors = {k: torch.from_numpy(v).to(device) for k, v in columns.items()}
+            for _ in range(cfg.ppo_epochs):
+                order = torch.from_numpy(rng.permutation(count)).to(device)
+                for start in range(0, count, cfg.ppo_minibatch):
+                    idx = order[start : start + cfg.ppo_minibatch]
+                    batch = {k: v[idx] for k, v in tensors.items()}
+                    losses = ppo_update(
+                        nets,
+                        batch["obs"],
+                        batch["sample"],
+                        batch["log_prob"],
+                        batch["adv"],
+                        batch["target"],
+                        cfg,
+                    )
+                    book.updates += 1
+            learn_s += time.perf_counter() - t1
+
+            book.log(
+                recent,
+                {
+                    "charts/noise": std,
+                    "perf/simulator_share": env_s / max(env_s + learn_s, 1e-9),
+                    **losses,
+                },
+                progress,
+                every=1,
+            )
+            book.save_and_validate_if_due()
+    except KeyboardInterrupt:
+        book.save_last()
+        raise
+    return book.finish()
+
+
+def _rollout_columns(
+    nets: PPONets,
+    flown: list[list[Any]],
+    cfg: GeneralistConfig,
+    size: int,
+    device: str,
+) -> dict[str, NDArray[np.float32]]:
+    """The UAV transitions of a rollout (obs, sample, log_prob, adv, target) as flat columns."""
+    out: dict[str, list[NDArray[np.float32]]] = {
+        k: [] for k in ("obs", "sample", "log_prob", "adv", "target")
+    }
+    log_std = nets.log_std.value.detach()
+    for steps in flown:
+        obs = np.stack([s.obs for s, _ in steps])  # (T, B, N, D)
+        nxt = np.stack([s.next_obs for s, _ in steps])
+        sample = np.stack([u for _, u in steps])  # (T, B, N)
+        lead = obs.shape[:-1]
+        with torch.no_grad():
+            both = torch.from_numpy(np.concatenate([obs, nxt]).reshape(-1, size)).to(device)
+            values = nets.values(both).cpu().numpy().reshape(2, *lead)
+            mean = nets.actor(both[: both.shape[0] // 2])
+            logp = log_prob(mean, log_std, torch.from_numpy(sample.reshape(-1)).to(device))
+        acted = np.stack([s.acted for s, _ in steps])
+        cut = np.stack([np.broadcast_to(s.done[:, None], lead[1:]) for s, _ in steps])
+        cut[-1] = True  # the rollout ends: bootstrap from the value
+        adv, target = advantages(
+            np.stack([s.reward for s, _ in steps]),
+            values[0],
+            values[1],
+            np.stack([s.terminal for s, _ in steps]),
+            np.stack([s.terminal_value for s, _ in steps]),
+            cut,
+            cfg.gamma,
+            cfg.ppo_lambda,
+        )
+        out["obs"].append(obs[acted])
+        out["sample"].append(sample[acted])
+        out["log_prob"].append(logp.cpu().numpy().reshape(lead)[acted])
+        out["adv"].append(adv[acted])
+        out["target"].append(target[acted])
+    return {k: np.concatenate(v).astype(np.float32) for k, v in out.items()}

@@ -1,0 +1,155 @@
+"""The generalist's PPO learner: its advantages, its density, and a tiny run end to end."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import torch
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from policies.config import GeneralistConfig
+from policies.generalist_ppo import LOG_2PI, PPONets, advantages, log_prob
+from policies.generalist_train import train_generalist
+from sim.observation import ObservationLayout
+
+LAYOUT = ObservationLayout(8, 100.0, np.radians(270), 5.0, max_neighbours=6, version=2)
+
+TINY_SUITE = """
+name = "tiny"
+episodes = 2
+
+[[family]]
+name = "crossing-2u"
+distribution = "crossing"
+uavs = 2
+formation = "line"
+
+[[family]]
+name = "paper-2u1o"
+distribution = "scenario"
+scenario = "2u1o"
+"""
+
+
+def slow_advantages(reward, value, next_value, terminal, terminal_value, cut, gamma, lam):
+    """GAE(λ) of each UAV's trajectory, one entry at a time (the definition)."""
+    t_len = reward.shape[0]
+    adv = np.zeros_like(reward)
+    for idx in np.ndindex(reward.shape[1:]):
+        for t in range(t_len):
+            total, weight, s = 0.0, 1.0, t
+            while True:
+                boot = terminal_value[(s, *idx)] if terminal[(s, *idx)] else next_value[(s, *idx)]
+                delta = reward[(s, *idx)] + gamma * boot - value[(s, *idx)]
+                total += weight * delta
+                if terminal[(s, *idx)] or cut[(s, *idx)]:
+                    break
+                weight *= gamma * lam
+                s += 1
+            adv[(t, *idx)] = total
+    return adv
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    steps=st.integers(1, 7),
+    gamma=st.floats(0.5, 0.99),
+    lam=st.floats(0.0, 1.0),
+)
+def test_advantages_are_gae_of_each_trajectory(seed, steps, gamma, lam):
+    rng = np.random.default_rng(seed)
+    shape = (steps, 3, 2)
+    reward, value, next_value, terminal_value = (
+        rng.normal(0, 1, shape).astype(np.float32) for _ in range(4)
+    )
+    terminal = rng.random(shape) < 0.2
+    cut = rng.random(shape) < 0.2
+    cut[-1] = True
+    adv, target = advantages(reward, value, next_value, terminal, terminal_value, cut, gamma, lam)
+    expected = slow_advantages(reward, value, next_value, terminal, terminal_value, cut, gamma, lam)
+    np.testing.assert_allclose(adv, expected, rtol=1e-4, atol=1e-4)
+    np.testing.assert_allclose(target, adv + value, rtol=1e-6)
+
+
+def test_a_terminal_step_bootstraps_its_terminal_value_and_nothing_after():
+    ones = np.ones((3, 1), np.float32)
+    terminal = np.array([[False], [True], [False]])
+    cut = np.array([[False], [False], [True]])
+    next_value = np.array([[0.0], [-50.0], [100.0]], np.float32)  # V(s1) = 0 = value[1]
+    adv, _ = advantages(ones, 0 * ones, next_value, terminal, 10 * ones, cut, 0.5, 1.0)
+    # step 1 ends the trajectory with the goal's value 10 (its V(next) unused): 1 + 0.5·10;
+    # step 0 adds its reward and half of that; step 2 (a new trajectory, cut by the rollout's
+    # end) bootstraps V(next) = 100
+    np.testing.assert_allclose(adv[:, 0], [1 + 0.5 * 6, 6, 1 + 0.5 * 100])
+
+
+def test_log_prob_is_the_gaussian_density():
+    mean, sample = torch.tensor([0.1, -0.4, 0.9]), torch.tensor([0.3, -0.4, -1.2])
+    log_std = torch.tensor(-1.2)
+    expected = torch.distributions.Normal(mean, torch.exp(log_std)).log_prob(sample)
+    torch.testing.assert_close(log_prob(mean, log_std, sample), expected)
+    assert pytest.approx(np.log(2 * np.pi)) == LOG_2PI
+
+
+def test_the_value_network_ignores_the_action_input():
+    nets = PPONets.create(LAYOUT, GeneralistConfig(hidden=8), "cpu")
+    obs = torch.from_numpy(np.random.default_rng(0).normal(0, 1, (5, LAYOUT.size)).astype("f4"))
+    v = nets.values(obs)
+    assert v.shape == (5,) and torch.isfinite(v).all()
+    torch.testing.assert_close(v, nets.value(obs, torch.zeros(5)))
+
+
+def test_a_tiny_ppo_run_trains_validates_resumes_and_exports(tmp_path):
+    from policies.generalist_train import export_generalist_run
+    from remarl_fc.policy_io import load_policy
+    from sim.scenarios import load_scenario
+    from sim.swarm import SwarmSim
+
+    suite = tmp_path / "tiny.toml"
+    suite.write_text(TINY_SUITE)
+    cfg = GeneralistConfig(
+        suites=(str(suite),),
+        learner="ppo",
+        agents_per_family=4,
+        hidden=8,
+        ppo_rollout=4,
+        ppo_epochs=2,
+        ppo_minibatch=8,
+        minutes=0.0,
+        total_iterations=3,
+        eval_minutes=1e-6,
+        eval_episodes=2,
+        real_share=0.5,
+        device="cpu",
+    )
+    out = tmp_path / "run"
+    seen: list[dict[str, float]] = []
+    summary = train_generalist(cfg, out, progress=seen.append)
+    assert summary["learner"] == "ppo" and summary["iterations"] == 3
+    assert summary["updates"] > 0 and summary["transitions"] > 0
+    assert seen and "losses/policy" in seen[-1] and "charts/log_std" in seen[-1]
+    evals = [json.loads(line) for line in (out / "evals.jsonl").read_text().splitlines()]
+    assert evals and set(evals[-1]["families"]) <= {"crossing-2u", "paper-2u1o"}
+    again = train_generalist(
+        GeneralistConfig(**{**cfg.__dict__, "total_iterations": 5}), out, resume=True
+    )
+    assert again["iterations"] == 5 and again["updates"] > summary["updates"]
+
+    policy_file = tmp_path / "generalist.safetensors"
+    meta = export_generalist_run(out, policy_file, checkpoint="last")
+    assert meta["network"] == "set"
+    policy = load_policy(str(policy_file))
+    scen = load_scenario("3u2o")
+    sim = SwarmSim(scen, scored=False)
+    state = sim.initial_state(np.random.default_rng(0), 2)
+    actions = policy.act(sim.observe(state, layout=policy.layout).flat())
+    assert actions.shape == (2, 3) and np.isfinite(actions).all()
+
+
+def test_an_unknown_learner_is_refused():
+    with pytest.raises(ValueError, match="learner"):
+        GeneralistConfig(learner="sac")
