@@ -84,29 +84,15 @@ def draw_heatmap(results: list[dict[str, Any]], out: Path, title: str) -> None:
     _save(fig, out)
 
 
-def draw_worst(suite: Suite, result: dict[str, Any], spec: MethodSpec, out: Path) -> None:
-    """Fly a cell's worst episode again (the same episode, alone) and draw its trails."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+def _draw_episode(
+    ax: Any, cfg: Any, batch: Any, flown: Any, title: str, box: tuple[Any, Any] | None = None
+) -> None:
+    """One flown episode's trails, framed by ``box`` (low, size) or by what it shows."""
     from sim.render import draw_state
 
-    family = suite.family(result["family"])
-    k = int(result["worst_episode"])
-    cfg, batch = sample_family(family, suite.seed, [k])
-    act, _ = resolve_method(spec, family, cfg)
-    if act is None:
-        return
-    flown = fly_episodes(cfg, batch, act, trail=True)
     assert flown.trail_m is not None
     trail, state = flown.trail_m[:, 0], flown.final  # (T, N, 2)
-    points = np.concatenate(
-        [trail.reshape(-1, 2), state.target_m[0], state.obstacle_pos_m[0], batch.obstacle_pos_m[0]]
-    )
-    low = points.min(axis=0) - PICTURE_MARGIN_M
-    size = points.max(axis=0) + PICTURE_MARGIN_M - low
+    low, size = box if box is not None else _frame(batch, flown)
     shift = -low
     moved = dataclasses.replace(
         state,
@@ -116,11 +102,103 @@ def draw_worst(suite: Suite, result: dict[str, Any], spec: MethodSpec, out: Path
         centre_m=state.centre_m + shift,
     )
     shown = dataclasses.replace(cfg, arena_length_m=float(size[0]), arena_width_m=float(size[1]))
-    fig, ax = plt.subplots(figsize=(6, 6 * min(2.0, size[1] / size[0])), constrained_layout=True)
     draw_state(ax, shown, moved, 0, trail + shift)
+    ax.set_title(title, fontsize=9)
+
+
+def _frame(batch: Any, *flown: Any) -> tuple[Any, Any]:
+    """(low corner, size) of a box around the trails, targets and obstacles of episodes."""
+    parts = []
+    for f in flown:
+        assert f.trail_m is not None
+        parts += [f.trail_m[:, 0].reshape(-1, 2), f.final.target_m[0], f.final.obstacle_pos_m[0]]
+    points = np.concatenate([*parts, batch.obstacle_pos_m[0]])
+    low = points.min(axis=0) - PICTURE_MARGIN_M
+    return low, points.max(axis=0) + PICTURE_MARGIN_M - low
+
+
+def draw_worst(suite: Suite, result: dict[str, Any], spec: MethodSpec, out: Path) -> None:
+    """Fly a cell's worst episode again (the same episode, alone) and draw its trails."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    family = suite.family(result["family"])
+    k = int(result["worst_episode"])
+    cfg, batch = sample_family(family, suite.seed, [k])
+    act, _ = resolve_method(spec, family, cfg)
+    if act is None:
+        return
+    flown = fly_episodes(cfg, batch, act, trail=True)
+    low, size = _frame(batch, flown)
+    fig, ax = plt.subplots(figsize=(6, 6 * min(2.0, size[1] / size[0])), constrained_layout=True)
     outcome = "success" if result["success_rate"] == 1.0 else "worst failure"
-    ax.set_title(f"{family.name}, episode {k} ({outcome}): {result['method']}", fontsize=9)
+    title = f"{family.name}, episode {k} ({outcome}): {result['method']}"
+    _draw_episode(ax, cfg, batch, flown, title, (low, size))
     _save(fig, out)
+
+
+def _outcome(row: dict[str, Any]) -> str:
+    if row["success"]:
+        return "success"
+    if row["collision_u2u"]:
+        return "UAV-UAV collision"
+    return "UAV-intruder collision" if row["collision_u2o"] else "timed out"
+
+
+def draw_versus(
+    suite: Suite,
+    family_name: str,
+    specs: tuple[MethodSpec, MethodSpec],
+    out: Path,
+    episodes: int = 40,
+) -> dict[str, Any]:
+    """Draw an episode the first method fails and the second flies, side by side.
+
+    The first such episode among the first ``episodes`` of the family's suite stream, both
+    flights in the same frame; returns what was found. Draws nothing (and says so:
+    ``episode`` None) where no episode differs that way.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    family = suite.family(family_name)
+    cfg, batch = sample_family(family, suite.seed, list(range(episodes)))
+    acts = []
+    for spec in specs:
+        act, why = resolve_method(spec, family, cfg)
+        if act is None:
+            raise ValueError(f"{spec.label} does not apply to {family_name}: {why}")
+        acts.append(act)
+    rows = [fly_episodes(cfg, batch, act).rows for act in acts]
+    success = [np.array([bool(r["success"]) for r in rs]) for rs in rows]
+    found = np.flatnonzero(~success[0] & success[1])
+    summary: dict[str, Any] = {
+        "family": family_name,
+        "episodes": episodes,
+        "success": {s.label: float(ok.mean()) for s, ok in zip(specs, success, strict=True)},
+        "episode": None,
+    }
+    if not found.size:
+        return summary
+    k = int(found[0])
+    one_cfg, one = sample_family(family, suite.seed, [k])
+    flown = [fly_episodes(one_cfg, one, act, trail=True) for act in acts]
+    low, size = _frame(one, *flown)
+    fig, axes = plt.subplots(
+        1, 2, figsize=(11, 5.5 * min(2.0, size[1] / size[0])), constrained_layout=True
+    )
+    for ax, spec, f, r in zip(axes, specs, flown, rows, strict=True):
+        title = f"{spec.label}: {_outcome(r[k])}"
+        _draw_episode(ax, one_cfg, one, f, title, (low, size))
+    fig.suptitle(f"{family_name}, episode {k} of suite {suite.name}", fontsize=10)
+    _save(fig, out)
+    summary["episode"] = k
+    summary["outcomes"] = {s.label: _outcome(r[k]) for s, r in zip(specs, rows, strict=True)}
+    return summary
 
 
 def draw_suite(

@@ -202,3 +202,21 @@ def test_a_generalist_runs_on_every_family_its_range_holds(capsys, tmp_path):
     refused = cells["paper-7u1o"]
     assert not refused["applicable"]
     assert "7 UAVs here but the policy flies 1 to 5" in refused["reason"]
+
+
+def test_versus_draws_an_episode_the_first_method_fails_and_the_second_flies(tmp_path):
+    from remarl_fc.offline.suite import MethodSpec
+    from remarl_fc.offline.suite_report import draw_versus
+    from sim.suite import load_suite
+
+    suite = load_suite("standard")
+    specs = (MethodSpec("method", "straight"), MethodSpec("method", "orca"))
+    out = tmp_path / "versus.png"
+    found = draw_versus(suite, "crossing-3u", specs, out, episodes=6)
+    assert found["episode"] is not None, found
+    assert found["outcomes"]["straight"] != "success" and found["outcomes"]["orca"] == "success"
+    assert found["success"]["orca"] > found["success"]["straight"]
+    assert out.stat().st_size > 5_000 and not list(tmp_path.glob("*.part"))
+    # the other way round no episode differs: nothing drawn, and said so
+    none = draw_versus(suite, "crossing-3u", specs[::-1], tmp_path / "none.png", episodes=6)
+    assert none["episode"] is None and not (tmp_path / "none.png").exists()

@@ -1,0 +1,50 @@
+"""Draw one suite episode that two methods fly differently, side by side.
+
+    python tools/versus.py FAMILY [FAMILY ...] [--first policy:generalist] [--second orca]
+        [--suite standard] [--episodes 40] [--out docs/img]
+
+For each family: the first of its suite episodes (of the first ``--episodes``) that the first
+method fails and the second flies to success, both flights in one frame, written to
+``OUT/versus-FAMILY.png`` (`remarl_fc.offline.suite_report.draw_versus`). A method is a
+`remarl-fc eval --method` name (orca, potential-field, straight, zoo) or ``policy:NAME`` (a zoo
+name or a policy file). Prints one JSON line per family: both methods' success on the episodes
+looked at, the episode drawn (null: none differs that way) and how each ended.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from remarl_fc.offline.suite import MethodSpec
+from remarl_fc.offline.suite_report import draw_versus
+from sim.suite import load_suite
+
+
+def spec_of(text: str) -> MethodSpec:
+    """``policy:NAME`` or a method name."""
+    kind, sep, name = text.partition(":")
+    return MethodSpec("policy", name) if sep and kind == "policy" else MethodSpec("method", text)
+
+
+def main() -> None:
+    """Draw every family asked for."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("families", nargs="+", help="family names of the suite")
+    parser.add_argument("--first", default="policy:generalist", help="the method that fails")
+    parser.add_argument("--second", default="orca", help="the method that succeeds")
+    parser.add_argument("--suite", default="standard")
+    parser.add_argument("--episodes", type=int, default=40, help="episodes looked at")
+    parser.add_argument("--out", default="docs/img", help="folder of the pictures")
+    args = parser.parse_args()
+    suite = load_suite(args.suite)
+    specs = (spec_of(args.first), spec_of(args.second))
+    for family in args.families:
+        out = Path(args.out) / f"versus-{family}.png"
+        found = draw_versus(suite, family, specs, out, episodes=args.episodes)
+        print(json.dumps({**found, "picture": str(out) if found["episode"] is not None else None}))
+
+
+if __name__ == "__main__":
+    main()
