@@ -124,6 +124,11 @@ class GeneralistConfig:
     agents_per_family: int = 24
     """UAVs stepped per family and iteration (environments = ceil(this / N), at least 1)."""
 
+    family_weights: tuple[tuple[str, float], ...] = ()
+    """(pattern, weight) pairs: a family whose name matches a shell pattern (the first that
+    does) runs ``weight`` times its share of UAVs, ceil(weight · agents_per_family / N)
+    environments; e.g. (("swarms-*", 3.0),) to train more on crossing swarms."""
+
     max_neighbours: int = 6
     """k: neighbour rows of the observation (version 2)."""
 
@@ -267,6 +272,11 @@ class GeneralistConfig:
         check(0 < self.gamma < 1, "gamma", "must be in (0, 1)")
         check(0.0 <= self.real_share <= 1.0, "real_share", "must be in [0, 1]")
         check(self.learner in ("td3", "ppo"), "learner", 'must be "td3" or "ppo"')
+        check(
+            all(len(p) == 2 and p[1] > 0 for p in self.family_weights),
+            "family_weights",
+            "must be (pattern, weight > 0) pairs",
+        )
         check(0 < self.ppo_clip < 1 and 0 <= self.ppo_lambda <= 1, "ppo_clip", "out of range")
         check(self.ppo_lr > 0 and self.ppo_entropy >= 0, "ppo_lr", "must be > 0")
         check(self.separation_weight >= 0, "separation_weight", "must be >= 0")

@@ -2,10 +2,12 @@
 
 Read it top to bottom. Every family of the configured suites (`GeneralistConfig.suites`) is a
 *world*: its scenario with the version-2 observation (k neighbours, m intruders), flown by
-ceil(agents_per_family / N) environments in the scored simulator (the reMARL reward), a share
-of them (``real_share``) in the real world (`sim.scenarios.REAL_WORLD`). One iteration steps
-every world once with the current actor plus exploration noise, stores every UAV's transition
-in one replay buffer, and takes TD3 steps (`policies.generalist`). A world's finished episodes
+ceil(w · agents_per_family / N) environments (w: its ``family_weights``, 1 by default) in the
+scored simulator (the reMARL reward), a share of them (``real_share``) in the real world
+(`sim.scenarios.REAL_WORLD`). One iteration steps every world once with the current actor plus
+exploration noise, stores every UAV's transition in one replay buffer, and takes TD3 steps
+(`policies.generalist`); with ``learner = "ppo"``, `policies.generalist_ppo` flies rollouts
+and takes PPO steps instead. A world's finished episodes
 restart at once with new episodes of its family, drawn from the run's own seed: the suites'
 evaluation episodes are never drawn in training.
 
@@ -28,6 +30,7 @@ The replay buffer is not saved; a resumed run refills it with the current policy
 from __future__ import annotations
 
 import dataclasses
+import fnmatch
 import json
 import math
 import time
@@ -134,6 +137,11 @@ def draw(family: Family, cfg: ScenarioConfig, seed: int, first: int, count: int)
     return draw_episodes(family, cfg, seed, range(first, first + count))
 
 
+def family_weight(cfg: GeneralistConfig, name: str) -> float:
+    """The weight of a family in the mixture: the first matching `family_weights` pattern's."""
+    return next((w for p, w in cfg.family_weights if fnmatch.fnmatchcase(name, p)), 1.0)
+
+
 def make_worlds(
     cfg: GeneralistConfig, layout: ObservationLayout, rng: np.random.Generator
 ) -> list[World]:
@@ -146,7 +154,7 @@ def make_worlds(
             family = dataclasses.replace(family, overrides={**family.overrides, **REAL_WORLD})
         scenario = with_layout(family_scenario(family), layout)
         n = scenario.uav.count
-        envs = max(1, math.ceil(cfg.agents_per_family / n))
+        envs = max(1, math.ceil(family_weight(cfg, family.name) * cfg.agents_per_family / n))
         sim = SwarmSim(scenario)
         state = sim.start(draw(family, scenario, cfg.seed, 0, envs), rng)
         obs = sim.observe(state).flat()
@@ -648,6 +656,7 @@ def export_generalist_run(
     config = json.loads((run_dir / "config.json").read_text())
     raw = dict(config["generalist"])
     raw["suites"] = tuple(raw["suites"])
+    raw["family_weights"] = tuple(tuple(p) for p in raw.get("family_weights", ()))
     cfg = GeneralistConfig(**raw)
     base = family_scenario(load_suite(cfg.suites[0]).families[0])
     layout = generalist_layout(cfg, base)

@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import math
 import sys
 from pathlib import Path
 from typing import Any
@@ -64,6 +65,14 @@ def add_train(sub: Any) -> None:
         "--device",
         ["auto", "cpu", "cuda"],
         help="generalist: where the networks learn (default auto: cuda when present)",
+    )
+    p.add_argument(
+        "--family-weight",
+        action="append",
+        default=[],
+        metavar="PATTERN=W",
+        help="generalist: families matching PATTERN (shell-style) run W times their share of "
+        "UAVs (repeatable; e.g. 'swarms-*=3')",
     )
     add_choice(
         p,
@@ -211,6 +220,20 @@ def cmd_train(args: argparse.Namespace) -> int:
     return 0
 
 
+def family_weight_arg(text: str) -> tuple[str, float]:
+    """``PATTERN=W`` of ``--family-weight`` as a (pattern, weight) pair."""
+    pattern, sep, weight = text.rpartition("=")
+    try:
+        value = float(weight)
+    except ValueError:
+        value = math.nan
+    if not sep or not pattern or not math.isfinite(value) or value <= 0:
+        raise ConfigError(
+            f"--family-weight wants PATTERN=W with W > 0 (e.g. 'swarms-*=3'), got {text!r}"
+        )
+    return pattern, value
+
+
 def cmd_train_generalist(args: argparse.Namespace) -> int:
     """``train --generalist``: the mixture run of `policies.generalist_train`."""
     from policies.config import GeneralistConfig
@@ -222,6 +245,7 @@ def cmd_train_generalist(args: argparse.Namespace) -> int:
         seed=args.seed,
         device=args.device or defaults.device,
         learner=args.learner or defaults.learner,
+        family_weights=tuple(family_weight_arg(text) for text in args.family_weight),
     )
     out = Path(args.out or f"runs/generalist-s{cfg.seed}")
     with progress_bar(enabled=not args.json) as progress:

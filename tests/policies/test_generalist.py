@@ -303,3 +303,28 @@ def test_the_teacher_is_orca_through_the_shield():
     expected = shield_state(ShieldConfig(mode="on"), cfg, state, orca, straight_only).action
     np.testing.assert_array_equal(actions, expected)
     assert not np.array_equal(actions, np.zeros_like(actions))  # not a constant stand-in
+
+
+def test_family_weights_scale_a_familys_environments():
+    from policies.generalist_train import family_weight, make_worlds
+
+    cfg = GeneralistConfig(
+        suites=("standard",), family_weights=(("swarms-*", 3.0), ("swarms-2x3", 9.0))
+    )
+    assert family_weight(cfg, "swarms-2x3") == 3.0  # the first pattern that matches
+    assert family_weight(cfg, "paper-3u2o") == 1.0
+    worlds = {w.family.name: w for w in make_worlds(cfg, LAYOUT, np.random.default_rng(0))}
+    assert worlds["swarms-2x3"].envs == 12 and worlds["swarms-2x5"].envs == 8  # ceil(72 / N)
+    assert worlds["paper-3u2o"].envs == 8
+    with pytest.raises(ValueError, match="family_weights"):
+        GeneralistConfig(family_weights=(("swarms-*", 0.0),))
+
+
+@pytest.mark.parametrize("text", ["swarms-*", "=3", "swarms-*=x", "swarms-*=-1", "a=nan"])
+def test_a_bad_family_weight_flag_says_what_to_write(text):
+    from remarl_fc.cli.learn import family_weight_arg
+    from remarl_fc.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="PATTERN=W"):
+        family_weight_arg(text)
+    assert family_weight_arg("swarms-*=2.5") == ("swarms-*", 2.5)
