@@ -68,7 +68,11 @@ def _pool(
     rows: NDArray[np.float64], mask: NDArray[np.float64], first: Layer, second: Layer
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Max and mean (..., h) of the encodings of the rows (..., R, c) the mask (..., R) keeps."""
-    e = _dense(_dense(rows, first), second)  # (..., R, h), ≥ 0
+    # One matrix product over every row of every UAV (a stacked product costs one call per
+    # UAV): each row's encoding is computed alone all the same, wherever it sits.
+    flat = rows.reshape(-1, rows.shape[-1])
+    h = second[0].shape[-1]
+    e = _dense(_dense(flat, first), second).reshape(*rows.shape[:-1], h)  # (..., R, h), ≥ 0
     e *= mask[..., None]
     count = np.maximum(mask.sum(axis=-1, keepdims=True), 1.0)
     if e.shape[-2] == 0:
