@@ -77,8 +77,8 @@ def add_train(sub: Any) -> None:
     add_choice(
         p,
         "--learner",
-        ["td3", "ppo"],
-        help="generalist: the learner (default td3; ppo: the side-by-side of docs/MODEL.md)",
+        ["ppo", "td3"],
+        help="generalist: the learner (default ppo, by the side-by-side of docs/MODEL.md §20)",
     )
     finish(p, cmd_train)
 

@@ -192,6 +192,7 @@ def test_tiny_generalist_run_trains_checkpoints_and_resumes(tmp_path):
     suite.write_text(TINY_SUITE)
     cfg = GeneralistConfig(
         suites=(str(suite),),
+        learner="td3",
         agents_per_family=4,
         hidden=8,
         batch_size=32,
@@ -229,6 +230,7 @@ def test_a_generalist_run_exports_a_policy_fly_can_load_for_any_n(tmp_path):
     suite.write_text(TINY_SUITE)
     cfg = GeneralistConfig(
         suites=(str(suite),),
+        learner="td3",
         agents_per_family=2,
         hidden=8,
         batch_size=16,
@@ -263,6 +265,7 @@ def test_a_teacher_run_flies_the_teacher_clones_it_then_fine_tunes(tmp_path):
         agents_per_family=4,
         hidden=8,
         batch_size=32,
+        learner="td3",
         teacher="orca-shield",
         teacher_transitions=200,
         bc_updates=20,

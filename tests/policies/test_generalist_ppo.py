@@ -153,3 +153,10 @@ def test_a_tiny_ppo_run_trains_validates_resumes_and_exports(tmp_path):
 def test_an_unknown_learner_is_refused():
     with pytest.raises(ValueError, match="learner"):
         GeneralistConfig(learner="sac")
+
+
+def test_ppo_is_the_default_and_a_teacher_needs_td3():
+    assert GeneralistConfig().learner == "ppo"
+    with pytest.raises(ValueError, match="teacher"):
+        GeneralistConfig(teacher="orca-shield")
+    assert GeneralistConfig(teacher="orca-shield", learner="td3").teacher == "orca-shield"
