@@ -6,9 +6,9 @@ every swarm, each reading the neighbour and intruder sets with a permutation-inv
 encoder. Transitions are per UAV, so swarms of any size feed one replay buffer
 (`AgentReplay`).
 
-The learner is TD3 (Fujimoto et al. 2018): the paper's DDPG with twin critics (the smaller
-target of the two), target-policy smoothing and a delayed actor. Why TD3 and not PPO, and what
-was measured, is in ``docs/MODEL.md``.
+The off-policy learner here is TD3 (Fujimoto et al. 2018): the paper's DDPG with twin critics
+(the smaller target of the two), target-policy smoothing and a delayed actor. The default
+learner is PPO (`policies.generalist_ppo`), by the side-by-side of ``docs/MODEL.md`` §20.
 """
 
 from __future__ import annotations

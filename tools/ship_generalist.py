@@ -96,7 +96,10 @@ def main() -> None:
         "suite_version": suite.version,
         "seed": suite.seed,
         "checkpoint": args.checkpoint,
-        "training": {k: config.get(k) for k in ("suites", "minutes", "seed", "teacher", "hidden")},
+        "training": {
+            k: config.get(k)
+            for k in ("learner", "suites", "minutes", "seed", "teacher", "hidden", "family_weights")
+        },
         **metrics,
         "families": families,
     }
