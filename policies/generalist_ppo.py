@@ -146,7 +146,13 @@ def train_generalist_ppo(
     progress: Callable[[dict[str, float]], None] | None = None,
 ) -> dict[str, Any]:
     """Train (or resume) the generalist with PPO; the run folder as TD3's."""
-    from policies.generalist_train import RunBook, actor_actions, advance_world
+    from policies.generalist_train import (
+        RunBook,
+        actor_actions,
+        advance_world,
+        joint_obs,
+        per_world,
+    )
 
     book = RunBook.open(cfg, out_dir, PPONets.create, resume=resume)
     nets: PPONets = book.nets
@@ -158,19 +164,26 @@ def train_generalist_ppo(
             t0 = time.perf_counter()
             # ---- fly every world ppo_rollout steps with the Gaussian policy
             std = float(torch.exp(nets.log_std.value.detach()))
+            log_std = float(nets.log_std.value.detach())
             flown: list[list[Any]] = [[] for _ in worlds]
             for _ in range(cfg.ppo_rollout):
-                flat = np.concatenate([w.obs.reshape(-1, layout.size) for w in worlds])
-                mean = actor_actions(nets.actor, flat, device)
-                sample = (mean + std * rng.standard_normal(mean.shape)).astype(np.float32)
+                mean = actor_actions(nets.actor, joint_obs(worlds, layout.size), device)
+                noise = rng.standard_normal(mean.shape)
+                sample = (mean + std * noise).astype(np.float32)
+                # the behaviour policy's log density of its own sample, (sample − mean)/σ = noise
+                density = (-0.5 * noise * noise - log_std - 0.5 * LOG_2PI).astype(np.float32)
                 action = np.clip(sample, -1.0, 1.0)
-                sizes = np.cumsum([w.obs.shape[0] * w.obs.shape[1] for w in worlds])[:-1]
-                for k, (world, a, u) in enumerate(
-                    zip(worlds, np.split(action, sizes), np.split(sample, sizes), strict=True)
+                for k, (world, a, u, lp) in enumerate(
+                    zip(
+                        worlds,
+                        per_world(action, worlds),
+                        per_world(sample, worlds),
+                        per_world(density, worlds),
+                        strict=True,
+                    )
                 ):
-                    shape = world.obs.shape[:2]
-                    step, ended = advance_world(world, a.reshape(shape), cfg, book.goal_value, rng)
-                    flown[k].append((step, u.reshape(shape)))
+                    step, ended = advance_world(world, a, cfg, book.goal_value, rng)
+                    flown[k].append((step, u, lp))
                     book.transitions += int(step.acted.sum())
                     recent += [{"family": world.family.name, **row} for row in ended]
             recent = recent[-2000:]
@@ -226,37 +239,36 @@ def _rollout_columns(
     size: int,
     device: str,
 ) -> dict[str, NDArray[np.float32]]:
-    """The UAV transitions of a rollout (obs, sample, log_prob, adv, target) as flat columns."""
+    """The UAV transitions of a rollout (obs, sample, log_prob, adv, target) as flat columns.
+
+    ``flown``: per world, per step, (`WorldStep`, sample, log density of the sample).
+    """
     out: dict[str, list[NDArray[np.float32]]] = {
         k: [] for k in ("obs", "sample", "log_prob", "adv", "target")
     }
-    log_std = nets.log_std.value.detach()
     for steps in flown:
-        obs = np.stack([s.obs for s, _ in steps])  # (T, B, N, D)
-        nxt = np.stack([s.next_obs for s, _ in steps])
-        sample = np.stack([u for _, u in steps])  # (T, B, N)
+        obs = np.stack([s.obs for s, _, _ in steps])  # (T, B, N, D)
+        nxt = np.stack([s.next_obs for s, _, _ in steps])
         lead = obs.shape[:-1]
         with torch.no_grad():
             both = torch.from_numpy(np.concatenate([obs, nxt]).reshape(-1, size)).to(device)
             values = nets.values(both).cpu().numpy().reshape(2, *lead)
-            mean = nets.actor(both[: both.shape[0] // 2])
-            logp = log_prob(mean, log_std, torch.from_numpy(sample.reshape(-1)).to(device))
-        acted = np.stack([s.acted for s, _ in steps])
-        cut = np.stack([np.broadcast_to(s.done[:, None], lead[1:]) for s, _ in steps])
+        acted = np.stack([s.acted for s, _, _ in steps])
+        cut = np.stack([np.broadcast_to(s.done[:, None], lead[1:]) for s, _, _ in steps])
         cut[-1] = True  # the rollout ends: bootstrap from the value
         adv, target = advantages(
-            np.stack([s.reward for s, _ in steps]),
+            np.stack([s.reward for s, _, _ in steps]),
             values[0],
             values[1],
-            np.stack([s.terminal for s, _ in steps]),
-            np.stack([s.terminal_value for s, _ in steps]),
+            np.stack([s.terminal for s, _, _ in steps]),
+            np.stack([s.terminal_value for s, _, _ in steps]),
             cut,
             cfg.gamma,
             cfg.ppo_lambda,
         )
         out["obs"].append(obs[acted])
-        out["sample"].append(sample[acted])
-        out["log_prob"].append(logp.cpu().numpy().reshape(lead)[acted])
+        out["sample"].append(np.stack([u for _, u, _ in steps])[acted])
+        out["log_prob"].append(np.stack([lp for _, _, lp in steps])[acted])
         out["adv"].append(adv[acted])
         out["target"].append(target[acted])
     return {k: np.concatenate(v).astype(np.float32) for k, v in out.items()}

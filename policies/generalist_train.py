@@ -313,6 +313,19 @@ def learn_from_teacher(
     return {"teacher/success": float(np.mean(episodes)) if episodes else 0.0, **losses}
 
 
+def joint_obs(worlds: list[World], size: int) -> NDArray[np.float32]:
+    """Every UAV's observation of every world, in order, as one (ΣB·N, D) batch."""
+    return np.concatenate([w.obs.reshape(-1, size) for w in worlds])
+
+
+def per_world(values: NDArray[Any], worlds: list[World]) -> list[NDArray[Any]]:
+    """Per-UAV values (ΣB·N,) in `joint_obs`' order as each world's (B, N)."""
+    sizes = np.cumsum([w.obs.shape[0] * w.obs.shape[1] for w in worlds])[:-1]
+    return [
+        v.reshape(w.obs.shape[:2]) for v, w in zip(np.split(values, sizes), worlds, strict=True)
+    ]
+
+
 def actor_actions(actor: SetNet, obs: NDArray[np.float32], device: str) -> NDArray[np.float32]:
     """Deterministic actions (...,) of the actor for flat observations (..., D)."""
     with torch.no_grad():
@@ -595,15 +608,10 @@ def train_generalist(
             if warm > 0:
                 actions = [rng.uniform(-1, 1, w.obs.shape[:2]).astype(np.float32) for w in worlds]
             else:
-                flat = np.concatenate([w.obs.reshape(-1, layout.size) for w in worlds])
-                out = actor_actions(nets.actor, flat, device)
+                out = actor_actions(nets.actor, joint_obs(worlds, layout.size), device)
                 out += rng.normal(0.0, sigma, out.shape).astype(np.float32)
                 np.clip(out, -1.0, 1.0, out=out)
-                sizes = np.cumsum([w.obs.shape[0] * w.obs.shape[1] for w in worlds])[:-1]
-                actions = [
-                    a.reshape(w.obs.shape[:2])
-                    for a, w in zip(np.split(out, sizes), worlds, strict=True)
-                ]
+                actions = per_world(out, worlds)
             for world, act in zip(worlds, actions, strict=True):
                 transitions, ended = step_world(world, act, cfg, book.goal_value, rng)
                 buffer.add(**transitions)

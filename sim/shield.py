@@ -239,7 +239,6 @@ def shield(
             )
         )  # (P, F, K): the F failing UAVs' candidates only
         row = np.cumsum(fails.reshape(-1)) - 1  # each failing UAV's place among them
-        theirs = paths.of(fails)
         best = clear[..., 0].copy()  # the largest clearance so far (the fallback's)
         fallback = (prop.copy(), full.copy(), proposed_cpa.copy())
         speeds = [cruise]
@@ -249,7 +248,7 @@ def shield(
             todo = fails & ~found
             if not todo.any():
                 break
-            mine = theirs.of(todo)
+            mine = paths.of(todo)
             c, d = _clearance(unit_x, unit_y, row[mine.owner], v, mine, (b, n), cruise)
             ok = (c >= 0.0) & todo[..., None]
             pick = np.where(ok, np.abs(grid - prop[..., None]), np.inf).argmin(axis=-1)

@@ -131,3 +131,28 @@ def mutate(meta: dict[str, Any], path: str, value: Any) -> dict[str, Any]:
     else:
         node[last] = value
     return out
+
+
+TINY_SUITE = """
+name = "tiny"
+episodes = 2
+
+[[family]]
+name = "crossing-2u"
+distribution = "crossing"
+uavs = 2
+formation = "line"
+
+[[family]]
+name = "paper-2u1o"
+distribution = "scenario"
+scenario = "2u1o"
+"""
+"""Two families of two UAVs: the mixture of the generalist trainers' tiny runs."""
+
+
+def tiny_suite(folder: Path) -> Path:
+    """`TINY_SUITE` written to ``folder``/tiny.toml."""
+    path = folder / "tiny.toml"
+    path.write_text(TINY_SUITE)
+    return path

@@ -22,12 +22,6 @@ from remarl_fc.offline.suite_report import draw_versus
 from sim.suite import load_suite
 
 
-def spec_of(text: str) -> MethodSpec:
-    """``policy:NAME`` or a method name."""
-    kind, sep, name = text.partition(":")
-    return MethodSpec("policy", name) if sep and kind == "policy" else MethodSpec("method", text)
-
-
 def main() -> None:
     """Draw every family asked for."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -39,7 +33,7 @@ def main() -> None:
     parser.add_argument("--out", default="docs/img", help="folder of the pictures")
     args = parser.parse_args()
     suite = load_suite(args.suite)
-    specs = (spec_of(args.first), spec_of(args.second))
+    specs = (MethodSpec.from_label(args.first), MethodSpec.from_label(args.second))
     for family in args.families:
         out = Path(args.out) / f"versus-{family}.png"
         found = draw_versus(suite, family, specs, out, episodes=args.episodes)

@@ -74,6 +74,12 @@ class MethodSpec:
         """The column name in tables."""
         return self.name if self.kind == "method" else f"policy:{self.name}"
 
+    @classmethod
+    def from_label(cls, label: str) -> MethodSpec:
+        """The spec of a `label`: ``policy:NAME`` or a method name."""
+        kind, sep, name = label.partition(":")
+        return cls("policy", name) if sep and kind == "policy" else cls("method", label)
+
 
 def zoo_policy_for(family: Family, cfg: ScenarioConfig) -> str | None:
     """The zoo policy for a family: its own scenario's, else the one for N with most obstacles."""

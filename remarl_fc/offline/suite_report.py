@@ -84,15 +84,13 @@ def draw_heatmap(results: list[dict[str, Any]], out: Path, title: str) -> None:
     _save(fig, out)
 
 
-def _draw_episode(
-    ax: Any, cfg: Any, batch: Any, flown: Any, title: str, box: tuple[Any, Any] | None = None
-) -> None:
-    """One flown episode's trails, framed by ``box`` (low, size) or by what it shows."""
+def _draw_episode(ax: Any, cfg: Any, flown: Any, title: str, box: tuple[Any, Any]) -> None:
+    """One flown episode's trails, framed by ``box`` (low corner, size: `_frame`)."""
     from sim.render import draw_state
 
     assert flown.trail_m is not None
     trail, state = flown.trail_m[:, 0], flown.final  # (T, N, 2)
-    low, size = box if box is not None else _frame(batch, flown)
+    low, size = box
     shift = -low
     moved = dataclasses.replace(
         state,
@@ -135,7 +133,7 @@ def draw_worst(suite: Suite, result: dict[str, Any], spec: MethodSpec, out: Path
     fig, ax = plt.subplots(figsize=(6, 6 * min(2.0, size[1] / size[0])), constrained_layout=True)
     outcome = "success" if result["success_rate"] == 1.0 else "worst failure"
     title = f"{family.name}, episode {k} ({outcome}): {result['method']}"
-    _draw_episode(ax, cfg, batch, flown, title, (low, size))
+    _draw_episode(ax, cfg, flown, title, (low, size))
     _save(fig, out)
 
 
@@ -193,7 +191,7 @@ def draw_versus(
     )
     for ax, spec, f, r in zip(axes, specs, flown, rows, strict=True):
         title = f"{spec.label}: {_outcome(r[k])}"
-        _draw_episode(ax, one_cfg, one, f, title, (low, size))
+        _draw_episode(ax, one_cfg, f, title, (low, size))
     fig.suptitle(f"{family_name}, episode {k} of suite {suite.name}", fontsize=10)
     _save(fig, out)
     summary["episode"] = k

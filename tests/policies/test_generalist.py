@@ -10,6 +10,7 @@ import pytest
 import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from tiny_policy import tiny_suite
 
 from policies.config import GeneralistConfig
 from policies.generalist import AgentReplay, SetNet, TD3Nets, td3_update
@@ -170,26 +171,8 @@ def test_replay_wraps_around():
     assert sorted(buffer.reward.tolist()) == [1, 1, 2, 2, 2]
 
 
-TINY_SUITE = """
-name = "tiny"
-episodes = 2
-
-[[family]]
-name = "crossing-2u"
-distribution = "crossing"
-uavs = 2
-formation = "line"
-
-[[family]]
-name = "paper-2u1o"
-distribution = "scenario"
-scenario = "2u1o"
-"""
-
-
 def test_tiny_generalist_run_trains_checkpoints_and_resumes(tmp_path):
-    suite = tmp_path / "tiny.toml"
-    suite.write_text(TINY_SUITE)
+    suite = tiny_suite(tmp_path)
     cfg = GeneralistConfig(
         suites=(str(suite),),
         learner="td3",
@@ -226,8 +209,7 @@ def test_a_generalist_run_exports_a_policy_fly_can_load_for_any_n(tmp_path):
     from sim.scenarios import load_scenario
     from sim.swarm import SwarmSim
 
-    suite = tmp_path / "tiny.toml"
-    suite.write_text(TINY_SUITE)
+    suite = tiny_suite(tmp_path)
     cfg = GeneralistConfig(
         suites=(str(suite),),
         learner="td3",
@@ -258,8 +240,7 @@ def test_a_generalist_run_exports_a_policy_fly_can_load_for_any_n(tmp_path):
 
 
 def test_a_teacher_run_flies_the_teacher_clones_it_then_fine_tunes(tmp_path):
-    suite = tmp_path / "tiny.toml"
-    suite.write_text(TINY_SUITE)
+    suite = tiny_suite(tmp_path)
     cfg = GeneralistConfig(
         suites=(str(suite),),
         agents_per_family=4,

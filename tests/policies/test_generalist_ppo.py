@@ -9,6 +9,7 @@ import pytest
 import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from tiny_policy import tiny_suite
 
 from policies.config import GeneralistConfig
 from policies.generalist_ppo import LOG_2PI, PPONets, advantages, log_prob
@@ -16,22 +17,6 @@ from policies.generalist_train import train_generalist
 from sim.observation import ObservationLayout
 
 LAYOUT = ObservationLayout(8, 100.0, np.radians(270), 5.0, max_neighbours=6, version=2)
-
-TINY_SUITE = """
-name = "tiny"
-episodes = 2
-
-[[family]]
-name = "crossing-2u"
-distribution = "crossing"
-uavs = 2
-formation = "line"
-
-[[family]]
-name = "paper-2u1o"
-distribution = "scenario"
-scenario = "2u1o"
-"""
 
 
 def slow_advantages(reward, value, next_value, terminal, terminal_value, cut, gamma, lam):
@@ -95,12 +80,17 @@ def test_log_prob_is_the_gaussian_density():
     assert pytest.approx(np.log(2 * np.pi)) == LOG_2PI
 
 
-def test_the_value_network_ignores_the_action_input():
+def test_the_value_network_is_the_critic_read_at_action_0():
+    from sim.setnet import set_shapes
+
     nets = PPONets.create(LAYOUT, GeneralistConfig(hidden=8), "cpu")
     obs = torch.from_numpy(np.random.default_rng(0).normal(0, 1, (5, LAYOUT.size)).astype("f4"))
     v = nets.values(obs)
     assert v.shape == (5,) and torch.isfinite(v).all()
     torch.testing.assert_close(v, nets.value(obs, torch.zeros(5)))
+    # the critic's shapes, so the policy file's critic slot holds it
+    shapes = {k: tuple(w.shape[1:]) for k, w in nets.value.state_dict().items() if "weight" in k}
+    assert shapes == {f"{k}.weight": v for k, v in set_shapes(8, critic=True).items()}
 
 
 def test_a_tiny_ppo_run_trains_validates_resumes_and_exports(tmp_path):
@@ -109,8 +99,7 @@ def test_a_tiny_ppo_run_trains_validates_resumes_and_exports(tmp_path):
     from sim.scenarios import load_scenario
     from sim.swarm import SwarmSim
 
-    suite = tmp_path / "tiny.toml"
-    suite.write_text(TINY_SUITE)
+    suite = tiny_suite(tmp_path)
     cfg = GeneralistConfig(
         suites=(str(suite),),
         learner="ppo",
@@ -130,6 +119,19 @@ def test_a_tiny_ppo_run_trains_validates_resumes_and_exports(tmp_path):
     seen: list[dict[str, float]] = []
     summary = train_generalist(cfg, out, progress=seen.append)
     assert summary["learner"] == "ppo" and summary["iterations"] == 3
+    # it learned: the actor and the log std moved away from their seeded start
+    from policies.train import load_checkpoint
+
+    torch.manual_seed(cfg.seed)
+    start = PPONets.create(LAYOUT, cfg, "cpu")
+    trained = PPONets.create(LAYOUT, cfg, "cpu")
+    load_checkpoint(out / "last.safetensors", trained)
+    assert not torch.equal(trained.log_std.value, start.log_std.value)
+    moved = [
+        not torch.equal(a, b)
+        for a, b in zip(start.actor.parameters(), trained.actor.parameters(), strict=True)
+    ]
+    assert any(moved)
     assert summary["updates"] > 0 and summary["transitions"] > 0
     assert seen and "losses/policy" in seen[-1] and "charts/log_std" in seen[-1]
     evals = [json.loads(line) for line in (out / "evals.jsonl").read_text().splitlines()]

@@ -220,3 +220,10 @@ def test_versus_draws_an_episode_the_first_method_fails_and_the_second_flies(tmp
     # the other way round no episode differs: nothing drawn, and said so
     none = draw_versus(suite, "crossing-3u", specs[::-1], tmp_path / "none.png", episodes=6)
     assert none["episode"] is None and not (tmp_path / "none.png").exists()
+
+
+@pytest.mark.parametrize("label", ["orca", "zoo", "policy:generalist", "policy:runs/x.safetensors"])
+def test_a_method_label_reads_back_as_its_spec(label):
+    from remarl_fc.offline.suite import MethodSpec
+
+    assert MethodSpec.from_label(label).label == label
