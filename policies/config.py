@@ -4,6 +4,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+SWARM_FIELDS = ("all", "formation")
+"""`GeneralistConfig.swarm_field`: the worlds whose reward holds the swarm's peak Φ_s."""
+
 
 def check(ok: bool, name: str, message: str) -> None:
     """Raise ``ValueError("name: message")`` unless ``ok``: the checks of every training config."""
@@ -183,6 +186,12 @@ class GeneralistConfig:
     grad_clip: float = 1.0
     """Max gradient norm per network."""
 
+    swarm_field: str = "all"
+    """Which worlds' reward holds the swarm's peak Φ_s around the virtual centre p*: "all" (the
+    paper's one swarm, everywhere) or "formation" (only the families that fly one formation:
+    the paper's scenarios and the "formation" encounters; two crossing swarms, converging,
+    diverging and random paths train without it, `sim.config.FieldConfig.swarm_peak`)."""
+
     separation_weight: float = 0.5
     """w_sep: reward lost per step at a UAV–UAV closest approach of d_col, falling linearly to
     0 at ``separation_factor``·d_col (the evidence: without it, UAVs of one swarm learn to
@@ -273,6 +282,7 @@ class GeneralistConfig:
         check(0 < self.gamma < 1, "gamma", "must be in (0, 1)")
         check(0.0 <= self.real_share <= 1.0, "real_share", "must be in [0, 1]")
         check(self.learner in ("td3", "ppo"), "learner", 'must be "td3" or "ppo"')
+        check(self.swarm_field in SWARM_FIELDS, "swarm_field", f"must be one of {SWARM_FIELDS}")
         check(
             self.teacher == "none" or self.learner == "td3",
             "teacher",

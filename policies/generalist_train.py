@@ -142,6 +142,19 @@ def family_weight(cfg: GeneralistConfig, name: str) -> float:
     return next((w for p, w in cfg.family_weights if fnmatch.fnmatchcase(name, p)), 1.0)
 
 
+def swarm_peak(cfg: GeneralistConfig, family: Family) -> bool:
+    """Whether the family's reward holds the swarm's peak Φ_s (``swarm_field``).
+
+    A scenario's own spawn (the paper's scenarios) and "formation" encounters fly one
+    formation; "swarms", "converging", "diverging" and "random" paths do not.
+    """
+    return (
+        cfg.swarm_field == "all"
+        or family.encounter is None
+        or family.encounter.paths == "formation"
+    )
+
+
 def make_worlds(
     cfg: GeneralistConfig, layout: ObservationLayout, rng: np.random.Generator
 ) -> list[World]:
@@ -153,6 +166,9 @@ def make_worlds(
         if real:
             family = dataclasses.replace(family, overrides={**family.overrides, **REAL_WORLD})
         scenario = with_layout(family_scenario(family), layout)
+        if not swarm_peak(cfg, family):
+            field = dataclasses.replace(scenario.field, swarm_peak=False)
+            scenario = dataclasses.replace(scenario, field=field)
         n = scenario.uav.count
         envs = max(1, math.ceil(family_weight(cfg, family.name) * cfg.agents_per_family / n))
         sim = SwarmSim(scenario)

@@ -90,6 +90,11 @@ class FieldConfig:
     """Distance of the virtual centre p* ahead of the swarm's foremost UAV, metres (p* lies on
     the line through the centroid along the swarm velocity)."""
 
+    swarm_peak: bool = True
+    """Whether Φ holds the swarm's peak Φ_s at all. False: Φ = Σ Φ_o, for UAVs that fly no
+    common formation (two swarms crossing, random paths: one virtual centre p* between them
+    would pull every UAV onto one point; see docs/MODEL.md §20)."""
+
     continuous: bool = True
     """Shift each source's field down by its value at its range (I/R²), so Φ is continuous and
     reaches 0 at R instead of jumping there; ∇Φ is unchanged. False: the paper's literal cut."""

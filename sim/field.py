@@ -123,6 +123,11 @@ def obstacle_terms(
     return phi, coef[..., None] * diff
 
 
+def swarm_intensity(src: FieldSources, cfg: FieldConfig) -> float:
+    """The intensity v_s of the swarm's peak Φ_s; 0 where the field has none (``swarm_peak``)."""
+    return src.swarm_speed_m_s if cfg.swarm_peak else 0.0
+
+
 def swarm_term(
     points_m: FloatArray, src: FieldSources, cfg: FieldConfig
 ) -> tuple[FloatArray, FloatArray]:
@@ -130,7 +135,7 @@ def swarm_term(
     diff = points_m - _expand(src.centre_m, points_m.ndim - 1)  # (B, *P, 2)
     d2 = np.einsum("...i,...i->...", diff, diff)
     phi, coef = _inverse_square(
-        d2, src.swarm_speed_m_s, cfg.swarm_floor_m, cfg.swarm_range_m, cfg.continuous
+        d2, swarm_intensity(src, cfg), cfg.swarm_floor_m, cfg.swarm_range_m, cfg.continuous
     )
     assert coef is not None
     return phi, coef[..., None] * diff
@@ -165,7 +170,12 @@ def _field_xy(
     d2 = dx * dx
     d2 += dy * dy
     phi, coef = _inverse_square(
-        d2, src.swarm_speed_m_s, cfg.swarm_floor_m, cfg.swarm_range_m, cfg.continuous, gradient
+        d2,
+        swarm_intensity(src, cfg),
+        cfg.swarm_floor_m,
+        cfg.swarm_range_m,
+        cfg.continuous,
+        gradient,
     )
     grad = None
     if coef is not None:

@@ -18,6 +18,7 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
+from policies.config import GeneralistConfig
 from policies.generalist_train import export_generalist_run
 from remarl_fc.offline.suite import MethodSpec, evaluate_suite
 from remarl_fc.policy_io import zoo_dir
@@ -96,9 +97,18 @@ def main() -> None:
         "suite_version": suite.version,
         "seed": suite.seed,
         "checkpoint": args.checkpoint,
-        "training": {
-            k: config.get(k)
-            for k in ("learner", "suites", "minutes", "seed", "teacher", "hidden", "family_weights")
+        "training": {  # a key a run's config.json predates: that run had the default
+            k: config.get(k, getattr(GeneralistConfig(), k))
+            for k in (
+                "learner",
+                "suites",
+                "minutes",
+                "seed",
+                "teacher",
+                "hidden",
+                "family_weights",
+                "swarm_field",
+            )
         },
         **metrics,
         "families": families,

@@ -76,6 +76,13 @@ def add_train(sub: Any) -> None:
     )
     add_choice(
         p,
+        "--swarm-field",
+        ["all", "formation"],
+        help="generalist: worlds whose reward holds the swarm's peak around the virtual centre: "
+        "all (the paper, default) or formation (only families that fly one formation)",
+    )
+    add_choice(
+        p,
         "--learner",
         ["ppo", "td3"],
         help="generalist: the learner (default ppo, by the side-by-side of docs/MODEL.md §20)",
@@ -245,6 +252,7 @@ def cmd_train_generalist(args: argparse.Namespace) -> int:
         seed=args.seed,
         device=args.device or defaults.device,
         learner=args.learner or defaults.learner,
+        swarm_field=args.swarm_field or defaults.swarm_field,
         family_weights=tuple(family_weight_arg(text) for text in args.family_weight),
     )
     out = Path(args.out or f"runs/generalist-s{cfg.seed}")

@@ -304,6 +304,29 @@ def test_family_weights_scale_a_familys_environments():
         GeneralistConfig(family_weights=(("swarms-*", 0.0),))
 
 
+def test_swarm_field_formation_drops_the_peak_where_no_one_formation_flies():
+    from policies.generalist_train import make_worlds
+
+    def peaks(swarm_field):
+        cfg = GeneralistConfig(suites=("standard",), swarm_field=swarm_field)
+        worlds = make_worlds(cfg, LAYOUT, np.random.default_rng(0))
+        return {w.family.name: w.cfg.field.swarm_peak for w in worlds}
+
+    assert all(peaks("all").values())  # the paper's reward everywhere
+    formation = peaks("formation")
+    no_peak = {name for name, peak in formation.items() if not peak}
+    assert no_peak == {
+        "swarms-2x3",
+        "swarms-2x5",
+        "converging-5u",
+        "diverging-5u",
+        "random-paths-7u",
+    }
+    assert formation["paper-3u2o"] and formation["random-formation-5u"]
+    with pytest.raises(ValueError, match="swarm_field"):
+        GeneralistConfig(swarm_field="none")
+
+
 @pytest.mark.parametrize("text", ["swarms-*", "=3", "swarms-*=x", "swarms-*=-1", "a=nan"])
 def test_a_bad_family_weight_flag_says_what_to_write(text):
     from remarl_fc.cli.learn import family_weight_arg
@@ -312,3 +335,23 @@ def test_a_bad_family_weight_flag_says_what_to_write(text):
     with pytest.raises(ConfigError, match="PATTERN=W"):
         family_weight_arg(text)
     assert family_weight_arg("swarms-*=2.5") == ("swarms-*", 2.5)
+
+
+def test_train_generalist_flags_reach_the_config(tmp_path, monkeypatch):
+    import policies.generalist_train as generalist_train
+    from remarl_fc.cli import main
+
+    seen = []
+
+    def fake_train(cfg, out, resume=False, progress=None):
+        seen.append((cfg, out, resume))
+        return {"transitions": 0, "elapsed_s": 0.0, "best_success": 0.0}
+
+    monkeypatch.setattr(generalist_train, "train_generalist", fake_train)
+    argv = ["train", "--generalist", "--json", "--minutes", "2", "--seed", "4"]
+    argv += ["--swarm-field", "formation", "--family-weight", "swarms-*=2"]
+    assert main([*argv, "--out", str(tmp_path / "run")]) == 0
+    ((cfg, out, resume),) = seen
+    assert cfg.swarm_field == "formation" and cfg.family_weights == (("swarms-*", 2.0),)
+    assert cfg.minutes == 2 and cfg.seed == 4 and out == tmp_path / "run" and not resume
+    assert GeneralistConfig().swarm_field == "all"  # the paper's reward unless asked

@@ -133,6 +133,22 @@ def test_superposition(pts, obs):
     np.testing.assert_allclose(grad, total_grad, rtol=1e-12, atol=1e-18)
 
 
+@given(
+    pts=st.lists(st.tuples(coord, coord), min_size=1, max_size=6),
+    obs=st.lists(st.tuples(coord, coord, st.floats(0, 20)), min_size=1, max_size=4),
+)
+def test_a_field_without_the_swarm_peak_is_the_obstacles_alone(pts, obs):
+    p = np.array([pts], dtype=float)
+    src = sources([o[:2] for o in obs], [o[2] for o in obs], centre=(5.0, -3.0))
+    no_peak = FieldConfig(swarm_peak=False)
+    phi, grad = potential_and_gradient(p, src, no_peak)
+    phi_o, grad_o = obstacle_terms(p, src, CFG)
+    np.testing.assert_allclose(phi, phi_o.sum(axis=-1), rtol=1e-12)
+    np.testing.assert_allclose(grad, grad_o.sum(axis=-2), rtol=1e-12, atol=1e-18)
+    phi_s, grad_s = swarm_term(p, src, no_peak)
+    assert not phi_s.any() and not grad_s.any()
+
+
 def test_masked_obstacles_contribute_nothing():
     p = np.array([[[40.0, 0.0]]])
     with_mask = potential(
