@@ -198,26 +198,7 @@ def build_observations(
     Returns:
         `Observations` (rows, mask, sensed).
     """
-    if layout.version == 2:
-        return _build_v2(
-            layout,
-            own_pos_m,
-            own_heading_rad,
-            own_vel_m_s,
-            target_m,
-            centre_m,
-            obstacle_pos_m,
-            obstacle_vel_m_s,
-            obstacle_valid,
-            heading_cos_sin,
-            uav_valid,
-            commanded_heading_rad,
-            heading_known,
-        )
-    b, n, _ = own_pos_m.shape
-    # One flat float32 array holds every observation; rows and mask are views of it.
-    storage = np.zeros((b, n, layout.size), dtype=np.float32)
-    sensed = _build_v1(
+    common = (
         layout,
         own_pos_m,
         own_heading_rad,
@@ -228,8 +209,13 @@ def build_observations(
         obstacle_vel_m_s,
         obstacle_valid,
         heading_cos_sin,
-        storage,
     )
+    if layout.version == 2:
+        return _build_v2(*common, uav_valid, commanded_heading_rad, heading_known)
+    b, n, _ = own_pos_m.shape
+    # One flat float32 array holds every observation; rows and mask are views of it.
+    storage = np.zeros((b, n, layout.size), dtype=np.float32)
+    sensed = _build_v1(*common, storage)
     rows = storage[..., : layout.rows * COLUMNS].reshape(b, n, layout.rows, COLUMNS)
     mask = storage[..., layout.rows * COLUMNS :]
     return Observations(rows, mask, sensed, storage)
