@@ -186,6 +186,12 @@ class GeneralistConfig:
     grad_clip: float = 1.0
     """Max gradient norm per network."""
 
+    separation_horizon_s: float = 0.0
+    """0: the separation term reads each UAV's closest approach to another UAV during the step.
+    > 0: the smaller of that and the closest approach predicted within this horizon, seconds,
+    at constant velocities, to every other UAV and every intruder in view: a conflict is
+    charged while it can still be turned away from, as a velocity obstacle sees it."""
+
     swarm_field: str = "all"
     """Which worlds' reward holds the swarm's peak Φ_s around the virtual centre p*: "all" (the
     paper's one swarm, everywhere) or "formation" (only the families that fly one formation:
@@ -296,6 +302,7 @@ class GeneralistConfig:
         check(0 < self.ppo_clip < 1 and 0 <= self.ppo_lambda <= 1, "ppo_clip", "out of range")
         check(self.ppo_lr > 0 and self.ppo_entropy >= 0, "ppo_lr", "must be > 0")
         check(self.separation_weight >= 0, "separation_weight", "must be >= 0")
+        check(self.separation_horizon_s >= 0, "separation_horizon_s", "must be >= 0")
         check(self.minutes >= 0 and self.eval_minutes > 0, "minutes", "must be >= 0")
         check_at_least(
             self,

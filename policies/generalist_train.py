@@ -12,8 +12,10 @@ restart at once with new episodes of its family, drawn from the run's own seed: 
 evaluation episodes are never drawn in training.
 
 Reward: the reMARL reward (contour + Swarming, as every policy of the zoo) minus a separation
-term between UAVs of the swarm (`separation_penalty`). Terminal values as in `policies.train`:
-an arrival is the absorbing goal, a collision ends with 0.
+term between UAVs of the swarm (`separation_penalty`), with ``separation_horizon_s`` also on
+the closest approach predicted to every other vehicle (`predicted_closest_approach`).
+Terminal values as in `policies.train`: an arrival is the absorbing goal, a collision ends
+with 0.
 
 Run folder (``out``)::
 
@@ -102,6 +104,30 @@ def separation_penalty(
     start = factor * d_col_m
     closeness = np.clip((start - min_u2u_m) / max(start - d_col_m, 1e-9), 0.0, 1.0)
     out: FloatArray = weight * closeness
+    return out
+
+
+def predicted_closest_approach(
+    state: SwarmState, present: BoolArray, horizon_s: float
+) -> FloatArray:
+    """(B, N) each UAV's closest approach to another vehicle within ``horizon_s``, metres.
+
+    Both flying on at their present velocities, to every other UAV still ``present`` and every
+    intruder already in view (its appear step passed; a pop-up is not yet there to avoid):
+    the relative track's distance at t* = clip(−r·w/|w|², 0, horizon). +inf with no one else.
+    """
+    n = state.pos_m.shape[1]
+    pos = np.concatenate([state.pos_m, state.obstacle_pos_m], axis=1)  # (B, N + M, 2)
+    vel = np.concatenate([state.vel_m_s, state.obstacle_vel_m_s], axis=1)
+    seen = state.obstacle_appear_step <= state.steps[:, None]
+    other = np.concatenate([present, seen], axis=1)[:, None, :].repeat(n, axis=1)
+    other[:, np.arange(n), np.arange(n)] = False  # not oneself
+    r = pos[:, None, :, :] - state.pos_m[:, :, None, :]  # (B, N, N + M, 2)
+    w = vel[:, None, :, :] - state.vel_m_s[:, :, None, :]
+    ww = np.einsum("bnkd,bnkd->bnk", w, w)
+    t = np.clip(-np.einsum("bnkd,bnkd->bnk", r, w) / np.maximum(ww, 1e-12), 0.0, horizon_s)
+    miss = np.hypot(*np.moveaxis(r + w * t[..., None], -1, 0))
+    out: FloatArray = np.where(other, miss, np.inf).min(axis=-1, initial=np.inf)
     return out
 
 
@@ -228,8 +254,13 @@ def advance_world(
     sim, c = world.sim, world.cfg
     state, result = sim.step(world.state, actions, rng)
     acted: BoolArray = result.acted
+    closest = result.min_u2u_m
+    if cfg.separation_horizon_s > 0:
+        present = state.active | state.hovering(c.arrival)
+        ahead = predicted_closest_approach(state, present, cfg.separation_horizon_s)
+        closest = np.minimum(closest, ahead)
     reward = result.reward.total - separation_penalty(
-        result.min_u2u_m, c.d_col_m, cfg.separation_weight, cfg.separation_factor
+        closest, c.d_col_m, cfg.separation_weight, cfg.separation_factor
     )
     next_obs = result.obs.flat()
     done = result.terminated | result.truncated

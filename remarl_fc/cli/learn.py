@@ -74,6 +74,13 @@ def add_train(sub: Any) -> None:
         help="generalist: families matching PATTERN (shell-style) run W times their share of "
         "UAVs (repeatable; e.g. 'swarms-*=3')",
     )
+    p.add_argument(
+        "--separation-horizon",
+        type=float,
+        metavar="S",
+        help="generalist: the separation term also charges the closest approach predicted "
+        "within S seconds to every other UAV and intruder (default 0: the step's own)",
+    )
     add_choice(
         p,
         "--swarm-field",
@@ -253,6 +260,11 @@ def cmd_train_generalist(args: argparse.Namespace) -> int:
         device=args.device or defaults.device,
         learner=args.learner or defaults.learner,
         swarm_field=args.swarm_field or defaults.swarm_field,
+        separation_horizon_s=(
+            defaults.separation_horizon_s
+            if args.separation_horizon is None
+            else args.separation_horizon
+        ),
         family_weights=tuple(family_weight_arg(text) for text in args.family_weight),
     )
     out = Path(args.out or f"runs/generalist-s{cfg.seed}")

@@ -134,6 +134,91 @@ def test_separation_penalty_is_bounded_and_monotone(d, weight, factor):
     assert closer >= p - 1e-12
 
 
+TWO_FAMILIES = """
+name = "two"
+version = 1
+episodes = 4
+seed = 1
+
+[[family]]
+name = "paper-3u2o"
+distribution = "scenario"
+scenario = "3u2o"
+
+[[family]]
+name = "swarms-2x3"
+distribution = "swarms"
+uavs = 6
+formation = "wedge"
+"""
+
+
+def two_worlds(tmp_path, **changes):
+    from policies.generalist_train import make_worlds
+
+    suite = tmp_path / "two.toml"
+    suite.write_text(TWO_FAMILIES)
+    cfg = GeneralistConfig(suites=(str(suite),), **changes)
+    worlds = {w.family.name: w for w in make_worlds(cfg, LAYOUT, np.random.default_rng(0))}
+    return cfg, worlds
+
+
+def test_predicted_closest_approach_is_the_sampled_minimum_over_the_horizon(tmp_path):
+    from policies.generalist_train import predicted_closest_approach
+
+    world = two_worlds(tmp_path)[1]["paper-3u2o"]
+    b, n, m = world.envs, world.state.pos_m.shape[1], world.state.obstacle_pos_m.shape[1]
+
+    @settings(max_examples=30, deadline=None)
+    @given(seed=st.integers(0, 2**31 - 1), horizon=st.floats(0.0, 8.0))
+    def check(seed, horizon):
+        rng = np.random.default_rng(seed)
+        state = world.state.evolve(
+            pos_m=rng.uniform(-100, 100, (b, n, 2)),
+            vel_m_s=rng.uniform(-10, 10, (b, n, 2)),
+            obstacle_pos_m=rng.uniform(-100, 100, (b, m, 2)),
+            obstacle_vel_m_s=rng.uniform(-15, 15, (b, m, 2)),
+            obstacle_appear_step=rng.integers(0, 3, (b, m)),
+            steps=rng.integers(0, 3, b),
+        )
+        present = rng.random((b, n)) < 0.7
+        got = predicted_closest_approach(state, present, horizon)
+        t = np.linspace(0.0, horizon, 2001)[:, None, None, None]  # (T, 1, 1, 1)
+        uav = state.pos_m[None] + t * state.vel_m_s[None]  # (T, B, N, 2)
+        obs = state.obstacle_pos_m[None] + t * state.obstacle_vel_m_s[None]  # (T, B, M, 2)
+        seen = state.obstacle_appear_step <= state.steps[:, None]
+        for i in range(n):
+            own = uav[:, :, i : i + 1]
+            d_uav = np.hypot(*np.moveaxis(uav - own, -1, 0)).min(axis=0)  # (B, N)
+            d_obs = np.hypot(*np.moveaxis(obs - own, -1, 0)).min(axis=0)  # (B, M)
+            others = present.copy()
+            others[:, i] = False
+            want = np.minimum(
+                np.where(others, d_uav, np.inf).min(axis=1),
+                np.where(seen, d_obs, np.inf).min(axis=1),
+            )
+            np.testing.assert_allclose(got[:, i], want, atol=0.05)
+
+    check()
+
+
+def test_the_separation_horizon_charges_a_conflict_before_it_is_close(tmp_path):
+    from policies.generalist_train import advance_world
+
+    def rewards(horizon):
+        cfg, worlds = two_worlds(tmp_path, separation_horizon_s=horizon)
+        world, rng = worlds["swarms-2x3"], np.random.default_rng(1)
+        out = []
+        for _ in range(3):  # straight ahead, still far apart: the routes cross later
+            straight = np.zeros(world.state.active.shape, np.float32)
+            step, _ = advance_world(world, straight, cfg, 1.0, rng)
+            out.append(step.reward[step.acted].sum())
+        return np.array(out)
+
+    now, ahead = rewards(0.0), rewards(60.0)
+    assert (ahead <= now + 1e-5).all() and ahead.sum() < now.sum() - 0.5
+
+
 def test_td3_update_lowers_the_critic_loss_on_a_fixed_batch():
     torch.manual_seed(0)
     rng = np.random.default_rng(0)
