@@ -108,6 +108,7 @@ def main() -> None:
                 "hidden",
                 "family_weights",
                 "swarm_field",
+                "separation_horizon_s",
             )
         },
         **metrics,
