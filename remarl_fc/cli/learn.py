@@ -81,6 +81,13 @@ def add_train(sub: Any) -> None:
         help="generalist: the separation term also charges the closest approach predicted "
         "within S seconds to every other UAV and intruder (default 0: the step's own)",
     )
+    p.add_argument(
+        "--separation-weight",
+        type=float,
+        metavar="W",
+        help="generalist: reward lost per step at a UAV-UAV closest approach of d_col "
+        "(default 0.5; 0: the reMARL reward alone)",
+    )
     add_choice(
         p,
         "--swarm-field",
@@ -264,6 +271,9 @@ def cmd_train_generalist(args: argparse.Namespace) -> int:
             defaults.separation_horizon_s
             if args.separation_horizon is None
             else args.separation_horizon
+        ),
+        separation_weight=(
+            defaults.separation_weight if args.separation_weight is None else args.separation_weight
         ),
         family_weights=tuple(family_weight_arg(text) for text in args.family_weight),
     )
