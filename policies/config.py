@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from sim.setnet import POOLINGS
+
 SWARM_FIELDS = ("all", "formation")
 """`GeneralistConfig.swarm_field`: the worlds whose reward holds the swarm's peak Φ_s."""
 
@@ -143,6 +145,10 @@ class GeneralistConfig:
 
     hidden: int = 64
     """Units of every hidden layer of the set networks (`sim.setnet`)."""
+
+    pooling: str = "max-mean"
+    """How the set networks pool the neighbour and intruder rows (`sim.setnet.POOLINGS`):
+    "max-mean" (deep sets) or "max-attention" (a query from the self block, 4 heads)."""
 
     actor_lr: float = 3e-4
     """Adam learning rate of the actor."""
@@ -288,6 +294,12 @@ class GeneralistConfig:
         check(0 < self.gamma < 1, "gamma", "must be in (0, 1)")
         check(0.0 <= self.real_share <= 1.0, "real_share", "must be in [0, 1]")
         check(self.learner in ("td3", "ppo"), "learner", 'must be "td3" or "ppo"')
+        check(self.pooling in POOLINGS, "pooling", f"must be one of {POOLINGS}")
+        check(
+            self.pooling == "max-mean" or self.hidden % 4 == 0,
+            "hidden",
+            "must be divisible by 4 for attention pooling (its heads)",
+        )
         check(self.swarm_field in SWARM_FIELDS, "swarm_field", f"must be one of {SWARM_FIELDS}")
         check(
             self.teacher == "none" or self.learner == "td3",

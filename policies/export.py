@@ -125,19 +125,21 @@ def export_generalist(
     reward: str,
     training: Mapping[str, Any],
     metrics: Mapping[str, Any] | None = None,
+    pooling: str = "max-mean",
 ) -> dict[str, Any]:
     """Write a signed generalist file ``out`` (atomically); returns the metadata written.
 
     Args:
         actor_state, critic_state: ``state_dict()`` of `policies.generalist.SetNet` (torch
             tensors) or numpy arrays: ``<layer>.weight`` (1, in, out), ``<layer>.bias``
-            (1, 1, out) for each of `sim.setnet.SET_LAYERS`; no critic: None.
+            (1, 1, out) for each of `sim.setnet.set_layers` of ``pooling``; no critic: None.
         base_cfg: the scenario it was trained (or is published) with; its ``sensing`` is the
             version-2 observation the policy reads (``observation = 2``, ``max_neighbours``),
             its ``uav.count`` inside ``uav_range``.
         hidden: units of every hidden layer. uav_range: (fewest, most) UAVs it flies.
         reward: the reward it was trained on. training: ``steps`` and ``seed`` (and
             ``commit``: this checkout's where absent). metrics: evaluation figures.
+        pooling: the set networks' pooling (`sim.setnet.POOLINGS`).
 
     Raises:
         PolicyFileError: the metadata or tensors are not a valid generalist (nothing written),
@@ -155,6 +157,7 @@ def export_generalist(
         metrics=_finite_or_null(metrics or {}),
         network="set",
         uavs=uav_range,
+        pooling=pooling,
     )
     return write_policy(out, tensors, meta)
 

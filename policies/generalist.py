@@ -25,21 +25,23 @@ from torch import Tensor, nn
 from policies.config import GeneralistConfig
 from policies.ddpg import FINAL_INIT, EnsembleLinear, soft_update
 from sim.observation import INTRUDER_COLUMNS, NEIGHBOUR_COLUMNS, ObservationLayout
-from sim.setnet import set_shapes
+from sim.setnet import ATTENTION_HEADS, set_shapes
 
 
 class SetNet(nn.Module):
     """Actor (``critic`` False: obs → action in [−1, 1]) or critic (obs, action → Q).
 
     Every layer is an `EnsembleLinear` of one member: ``<layer>.weight`` (1, in, out),
-    ``<layer>.bias`` (1, 1, out), `sim.setnet.SET_LAYERS`.
+    ``<layer>.bias`` (1, 1, out), `sim.setnet.set_layers` of its ``pooling``.
     """
 
-    def __init__(self, layout: ObservationLayout, hidden: int, critic: bool) -> None:
+    def __init__(
+        self, layout: ObservationLayout, hidden: int, critic: bool, pooling: str = "max-mean"
+    ) -> None:
         super().__init__()
-        self.layout, self.critic = layout, critic
+        self.layout, self.critic, self.pooling = layout, critic, pooling
         self.blocks = layout.blocks()
-        for name, (fan_in, fan_out) in set_shapes(hidden, critic).items():
+        for name, (fan_in, fan_out) in set_shapes(hidden, critic, pooling).items():
             init = FINAL_INIT if name == "out" else None
             self.add_module(name, EnsembleLinear(1, fan_in, fan_out, init=init))
 
@@ -49,13 +51,32 @@ class SetNet(nn.Module):
         y = layer(x.reshape(1, -1, x.shape[-1])).reshape(*lead, layer.weight.shape[-1])
         return torch.relu(y) if relu else y
 
-    def _pool(self, rows: Tensor, mask: Tensor, first: str, second: str) -> list[Tensor]:
+    def _pool(
+        self, rows: Tensor, mask: Tensor, first: str, second: str, query: Tensor | None
+    ) -> list[Tensor]:
         e = self._layer(second, self._layer(first, rows)) * mask[..., None]  # (B, R, h) ≥ 0
         if e.shape[-2] == 0:
             zero = e.new_zeros(*e.shape[:-2], e.shape[-1])
             return [zero, zero]
+        if query is not None:
+            return [e.max(dim=-2).values, self._attend(e, mask, query)]
         count = mask.sum(dim=-1, keepdim=True).clamp_min(1.0)
         return [e.max(dim=-2).values, e.sort(dim=-2).values.sum(dim=-2) / count]
+
+    @staticmethod
+    def _attend(e: Tensor, mask: Tensor, query: Tensor) -> Tensor:
+        """`sim.setnet.attend` (plain sums: training needs no exact order-freedom)."""
+        b, rows, h = e.shape
+        d = h // ATTENTION_HEADS
+        heads = e.reshape(b, rows, ATTENTION_HEADS, d)
+        score = (heads * query.reshape(b, 1, ATTENTION_HEADS, d)).sum(-1) / d**0.5  # (B, R, H)
+        keep = mask[..., None] > 0
+        score = score.masked_fill(~keep, float("-inf"))
+        top = score.max(dim=-2, keepdim=True).values
+        top = torch.where(torch.isfinite(top), top, torch.zeros_like(top)).detach()
+        weight = torch.exp(score - top) * keep
+        weight = weight / weight.sum(dim=-2, keepdim=True).clamp_min(1e-30)
+        return (heads * weight[..., None]).sum(dim=-3).reshape(b, h)
 
     def encode(self, obs: Tensor) -> Tensor:
         """(B, 5h) pooled features of flat version-2 observations (B, D)."""
@@ -63,10 +84,14 @@ class SetNet(nn.Module):
         bl = self.blocks
         nb = obs[:, bl["neighbours"]].reshape(b, k, NEIGHBOUR_COLUMNS)
         it = obs[:, bl["intruders"]].reshape(b, m, INTRUDER_COLUMNS)
+        own = self._layer("self", obs[:, bl["self"]])
+        attention = self.pooling == "max-attention"
+        nb_q = self._layer("nbq", own, relu=False) if attention else None
+        it_q = self._layer("inq", own, relu=False) if attention else None
         parts = [
-            self._layer("self", obs[:, bl["self"]]),
-            *self._pool(nb, obs[:, bl["neighbour_mask"]], "nb1", "nb2"),
-            *self._pool(it, obs[:, bl["intruder_mask"]], "in1", "in2"),
+            own,
+            *self._pool(nb, obs[:, bl["neighbour_mask"]], "nb1", "nb2", nb_q),
+            *self._pool(it, obs[:, bl["intruder_mask"]], "in1", "in2", it_q),
         ]
         return torch.cat(parts, dim=-1)
 
@@ -101,8 +126,10 @@ class TD3Nets:
     @classmethod
     def create(cls, layout: ObservationLayout, cfg: GeneralistConfig, device: str) -> TD3Nets:
         """Fresh networks on ``device`` (targets start as copies)."""
-        actor = SetNet(layout, cfg.hidden, critic=False).to(device)
-        critics = nn.ModuleList([SetNet(layout, cfg.hidden, critic=True) for _ in range(2)])
+        actor = SetNet(layout, cfg.hidden, critic=False, pooling=cfg.pooling).to(device)
+        critics = nn.ModuleList(
+            [SetNet(layout, cfg.hidden, critic=True, pooling=cfg.pooling) for _ in range(2)]
+        )
         critics = critics.to(device)
         actor_t, critics_t = copy.deepcopy(actor), copy.deepcopy(critics)
         for p in (*actor_t.parameters(), *critics_t.parameters()):

@@ -54,8 +54,8 @@ class PPONets:
     @classmethod
     def create(cls, layout: ObservationLayout, cfg: GeneralistConfig, device: str) -> PPONets:
         """Fresh networks on ``device``."""
-        actor = SetNet(layout, cfg.hidden, critic=False).to(device)
-        value = SetNet(layout, cfg.hidden, critic=True).to(device)
+        actor = SetNet(layout, cfg.hidden, critic=False, pooling=cfg.pooling).to(device)
+        value = SetNet(layout, cfg.hidden, critic=True, pooling=cfg.pooling).to(device)
         log_std = LogStd(cfg.ppo_log_std).to(device)
         params = [*actor.parameters(), *value.parameters(), *log_std.parameters()]
         return cls(actor, value, log_std, torch.optim.Adam(params, lr=cfg.ppo_lr))

@@ -735,6 +735,7 @@ def export_generalist_run(
         hidden=cfg.hidden,
         uav_range=(1, cfg.max_uavs),
         reward="remarl-separation",
+        pooling=cfg.pooling,
         training={
             "steps": int(meta["updates"]),
             "seed": cfg.seed,

@@ -10,7 +10,8 @@ leading agent dimension (1 when parameters are shared), and one JSON string unde
 ``remarl_policy`` (`METADATA_KEY`): the metadata of `metadata_problems`. The metadata's
 ``network`` says which layers there are: "mlp" (`ACTOR_LAYERS`, `CRITIC_LAYERS`; what a
 schema-1 file implies) or "set" (`sim.setnet.SET_LAYERS` for both, shapes from
-`sim.setnet.set_shapes`, leading dimension 1: one network for any number of UAVs). Its ``checksum``
+`sim.setnet.set_shapes`, leading dimension 1: one network for any number of UAVs; with the
+query layers where its ``pooling`` is "max-attention"). Its ``checksum``
 (`CHECKSUM_KEY`) is ``"sha256:"`` and the hex digest of `policy_checksum`: SHA-256 over every
 tensor (name, dtype, shape, raw bytes, in sorted name order) and over the canonical JSON of the
 metadata without the checksum, so any change to a weight or a metadata value shows.
@@ -65,12 +66,13 @@ from sim.policy_metadata import (
     network_of,
     observation_layout,
     parse_metadata,
+    pooling_of,
     scenario_config,
     scenario_hash,
     uav_range,
 )
 from sim.policy_problems import PolicyFileError, Problem
-from sim.setnet import SET_LAYERS, set_shapes
+from sim.setnet import SET_LAYERS, set_layers, set_shapes
 
 WEIGHT_BOUND = 1e4
 """Largest |weight| a policy file may hold.
@@ -111,7 +113,8 @@ class PolicyWeightsError(PolicyTensorError):
 def network_layers(meta: Mapping[str, Any]) -> tuple[tuple[str, ...], tuple[str, ...]]:
     """(actor layers, critic layers) of valid metadata's ``network``."""
     if network_of(meta) == "set":
-        return SET_LAYERS, SET_LAYERS
+        layers = set_layers(pooling_of(meta))
+        return layers, layers
     return ACTOR_LAYERS, CRITIC_LAYERS
 
 
@@ -120,8 +123,9 @@ def expected_shapes(meta: Mapping[str, Any]) -> dict[str, tuple[int, ...]]:
     h = int(meta["hidden"])
     if network_of(meta) == "set":
         a = 1
-        layers = {f"actor.{k}": v for k, v in set_shapes(h, critic=False).items()}
-        layers |= {f"critic.{k}": v for k, v in set_shapes(h, critic=True).items()}
+        pooling = pooling_of(meta)
+        layers = {f"actor.{k}": v for k, v in set_shapes(h, False, pooling).items()}
+        layers |= {f"critic.{k}": v for k, v in set_shapes(h, True, pooling).items()}
     else:
         a = 1 if meta["shared"] else int(meta["agents"])
         d = int(meta["observation"]["size"])
@@ -291,6 +295,7 @@ __all__ = [
     "observation_layout",
     "parse_metadata",
     "policy_checksum",
+    "pooling_of",
     "read_policy_file",
     "scenario_config",
     "scenario_hash",

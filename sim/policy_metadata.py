@@ -36,6 +36,7 @@ from sim.observation import (
 )
 from sim.policy_checksum import CHECKSUM_KEY, CHECKSUM_PREFIX
 from sim.policy_problems import Checker, PolicyFileError, Problem, show
+from sim.setnet import ATTENTION_HEADS, POOLINGS
 
 POLICY_SCHEMA = 2
 """Newest version of the policy file layout (the metadata's ``schema``).
@@ -80,6 +81,10 @@ name looks like)."""
 
 SCHEMA_2_KEYS = ("network", "uavs")
 """Top-level keys schema 2 adds (required there, unknown in schema 1)."""
+
+SCHEMA_2_OPTIONAL_KEYS = ("pooling",)
+"""Top-level keys schema 2 may hold: ``pooling`` (a set network's, `sim.setnet.POOLINGS`;
+absent: "max-mean", what every set network before it was)."""
 
 OBSERVATION_KEYS = (
     "max_obstacles",
@@ -336,6 +341,7 @@ def build_metadata(
     metrics: Mapping[str, Any],
     network: str = "mlp",
     uavs: tuple[int, int] | None = None,
+    pooling: str = "max-mean",
 ) -> dict[str, Any]:
     """The unsigned metadata of a policy trained on ``cfg`` (its keys: `metadata_problems`).
 
@@ -349,6 +355,8 @@ def build_metadata(
         network: "mlp" or "set" (`NETWORKS`); the observation is the scenario's
             (``[sensing] observation``: a set network needs version 2).
         uavs: (fewest, most) UAVs the policy flies (None: exactly ``cfg.uav.count``).
+        pooling: a set network's pooling (`sim.setnet.POOLINGS`); written only when it is not
+            the default "max-mean", so files of the default stay as they were.
     """
     layout = ObservationLayout.from_scenario(cfg)
     schema = 1 if network == "mlp" and layout.version == 1 else 2
@@ -364,6 +372,8 @@ def build_metadata(
         low, high = uavs if uavs is not None else (cfg.uav.count, cfg.uav.count)
         meta["network"] = network
         meta["uavs"] = [int(low), int(high)]
+        if pooling != "max-mean":
+            meta["pooling"] = pooling
     return {
         **meta,
         "shared": shared,
@@ -377,6 +387,11 @@ def build_metadata(
         "training": dict(training),
         "metrics": dict(metrics),
     }
+
+
+def pooling_of(meta: Mapping[str, Any]) -> str:
+    """The ``pooling`` of valid metadata of a set network ("max-mean" where absent)."""
+    return str(meta.get("pooling", "max-mean"))
 
 
 def network_of(meta: Mapping[str, Any]) -> str:
@@ -504,6 +519,9 @@ def metadata_problems(meta: object) -> list[Problem]:
     - ``uavs`` (schema 2 only; schema 1 implies [agents, agents]): [fewest, most], integers
       with 1 <= fewest <= most: the numbers of UAVs the policy flies; [agents, agents] for an
       MLP, a range holding ``agents`` for a set network.
+    - ``pooling`` (schema 2, optional, set networks only): one of `sim.setnet.POOLINGS`
+      (absent: "max-mean"); "max-attention" needs ``hidden`` divisible by
+      `sim.setnet.ATTENTION_HEADS`.
     - ``observation``, version 1: ``max_obstacles`` integer >= 1, ``range_m`` > 0,
       ``aperture_rad`` in (0, 2π], ``speed_m_s`` > 0 (all equal to the scenario's),
       ``rows`` = 2 + max_obstacles, ``columns`` = `COLUMNS`, ``size`` = rows·columns +
@@ -531,7 +549,8 @@ def metadata_problems(meta: object) -> list[Problem]:
     schema = _schema(meta, check)
     if schema is None:
         return check.problems
-    check.known(meta, (*REQUIRED_KEYS, *(SCHEMA_2_KEYS if schema >= 2 else ()), CHECKSUM_KEY))
+    later = (*SCHEMA_2_KEYS, *SCHEMA_2_OPTIONAL_KEYS) if schema >= 2 else ()
+    check.known(meta, (*REQUIRED_KEYS, *later, CHECKSUM_KEY))
     name = check.string(meta, "scenario")
     if name is not None and not _SCENARIO_NAME.fullmatch(name):
         check.add("scenario", f"must be a scenario name (no '/'), got {show(name)}")
@@ -566,6 +585,13 @@ def metadata_problems(meta: object) -> list[Problem]:
                 f"a {network} network reads observation version {2 if network == 'set' else 1}, "
                 f"the observation is version {version} (the scenario's [sensing] observation)",
             )
+        if "pooling" in meta:
+            pooling = check.choice(meta, "pooling", POOLINGS)
+            if pooling is not None and network is not None and network != "set":
+                check.add("pooling", f"only a set network pools, this is a {network} network")
+            hidden = meta.get("hidden")
+            if pooling == "max-attention" and isinstance(hidden, int) and hidden % ATTENTION_HEADS:
+                check.add("hidden", f"must be divisible by {ATTENTION_HEADS} (attention heads)")
         if network == "set" and shared is False:
             check.add("shared", "must be true for a set network (one network for every UAV)")
         if network is not None and uavs is not None and agents is not None:

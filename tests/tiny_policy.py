@@ -58,6 +58,7 @@ def tiny_generalist_meta(
     k: int = 6,
     m: int = 8,
     uavs: tuple[int, int] = (1, 50),
+    pooling: str = "max-mean",
 ) -> dict[str, Any]:
     """Unsigned metadata of a ``hidden``-unit generalist (schema 2, network "set")."""
     return build_metadata(
@@ -69,6 +70,7 @@ def tiny_generalist_meta(
         metrics=METRICS,
         network="set",
         uavs=uavs,
+        pooling=pooling,
     )
 
 

@@ -5,6 +5,7 @@
 and p99 of a decision and of each part, in milliseconds.
 
     OMP_NUM_THREADS=1 python tools/bench_decide.py [--scenario 50u8o] [--samples 2000] [--json]
+        [--pooling max-attention]
 """
 
 from __future__ import annotations
@@ -31,6 +32,12 @@ def main() -> None:
     parser.add_argument(
         "--policy", default=None, help="a generalist (zoo name or file) instead of random weights"
     )
+    parser.add_argument(
+        "--pooling",
+        default="max-mean",
+        choices=("max-mean", "max-attention"),
+        help="the random generalist's pooling (a --policy file says its own)",
+    )
     parser.add_argument("--json", action="store_true", help="print the result as JSON")
     args = parser.parse_args()
     result = bench_decide(
@@ -40,13 +47,15 @@ def main() -> None:
         neighbours=args.neighbours,
         intruders=args.intruders,
         policy_name=args.policy,
+        pooling=args.pooling,
     )
     if args.json:
         print(json.dumps(result, indent=2))
         return
     print(
         f"{result['scenario']}: {result['uavs']} UAVs, {result['intruders']} intruders; "
-        f"generalist hidden {result['hidden']}, k = {result['max_neighbours']}, "
+        f"generalist hidden {result['hidden']} ({result['pooling']} pooling), "
+        f"k = {result['max_neighbours']}, "
         f"m = {result['max_obstacles']} (observation {result['observation_size']} entries); "
         f"{result['samples']} decisions over {result['states']} states"
     )

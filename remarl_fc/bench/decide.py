@@ -22,7 +22,7 @@ from numpy.typing import NDArray
 
 from remarl_fc.policy_io import Policy, load_policy
 from sim.config import ScenarioConfig
-from sim.policy_file import build_metadata, expected_shapes, network_layers
+from sim.policy_file import build_metadata, expected_shapes, network_layers, pooling_of
 from sim.scenarios import load_scenario
 from sim.shield import ShieldConfig, shield_state, vehicle_of
 from sim.state import SwarmState
@@ -48,8 +48,9 @@ def random_generalist(
     neighbours: int = SHIPPED_NEIGHBOURS,
     intruders: int = SHIPPED_INTRUDERS,
     seed: int = 0,
+    pooling: str = "max-mean",
 ) -> Policy:
-    """A generalist (actor only, weights N(0, 0.1²)) of this size for ``cfg``'s UAVs."""
+    """A generalist (actor only, weights N(0, 0.1²)) of this size and pooling for ``cfg``."""
     sensing = dataclasses.replace(
         cfg.sensing, observation=2, max_neighbours=neighbours, max_obstacles=intruders
     )
@@ -64,6 +65,7 @@ def random_generalist(
         metrics={},
         network="set",
         uavs=uavs,
+        pooling=pooling,
     )
     rng = np.random.default_rng(seed)
     shapes = expected_shapes(meta)
@@ -117,12 +119,13 @@ def bench_decide(
     intruders: int = SHIPPED_INTRUDERS,
     seed: int = 0,
     policy_name: str | None = None,
+    pooling: str = "max-mean",
 ) -> dict[str, Any]:
     """Median and p99 (ms) of one decision (observations + actor) for one swarm.
 
     ``policy_name``: a generalist file (zoo name or path) instead of random weights of the
-    given size — the actor's time depends on the size only, the shield's on the proposals (a
-    trained policy's need fewer interventions than random ones).
+    given size and ``pooling`` — the actor's time depends on the size and pooling only, the
+    shield's on the proposals (a trained policy's need fewer interventions than random ones).
 
     Also each part alone: ``observe_*`` (the version-2 observations of every UAV), ``act_*``
     (the actor on them), ``shield_*`` (the safety shield on the actor's proposals, mode on,
@@ -136,7 +139,12 @@ def bench_decide(
         neighbours, intruders = policy.layout.max_neighbours, policy.layout.max_obstacles
     else:
         policy = random_generalist(
-            cfg, hidden=hidden, neighbours=neighbours, intruders=intruders, seed=seed
+            cfg,
+            hidden=hidden,
+            neighbours=neighbours,
+            intruders=intruders,
+            seed=seed,
+            pooling=pooling,
         )
     layout = policy.layout
     sim, flown = episode_states(cfg, seed)
@@ -165,6 +173,7 @@ def bench_decide(
         "uavs": cfg.uav.count,
         "intruders": cfg.obstacles.count,
         "hidden": hidden,
+        "pooling": pooling_of(policy.meta),
         "max_neighbours": neighbours,
         "max_obstacles": intruders,
         "observation_size": layout.size,

@@ -97,6 +97,13 @@ def add_train(sub: Any) -> None:
     )
     add_choice(
         p,
+        "--pooling",
+        ["max-mean", "max-attention"],
+        help="generalist: how the set networks pool the neighbour and intruder rows: max and "
+        "mean (deep sets, default) or max and attention (a query from the UAV's own state)",
+    )
+    add_choice(
+        p,
         "--learner",
         ["ppo", "td3"],
         help="generalist: the learner (default ppo, by the side-by-side of docs/MODEL.md §20)",
@@ -267,6 +274,7 @@ def cmd_train_generalist(args: argparse.Namespace) -> int:
         device=args.device or defaults.device,
         learner=args.learner or defaults.learner,
         swarm_field=args.swarm_field or defaults.swarm_field,
+        pooling=args.pooling or defaults.pooling,
         separation_horizon_s=(
             defaults.separation_horizon_s
             if args.separation_horizon is None

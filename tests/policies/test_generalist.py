@@ -16,7 +16,7 @@ from policies.config import GeneralistConfig
 from policies.generalist import AgentReplay, SetNet, TD3Nets, td3_update
 from policies.generalist_train import separation_penalty, train_generalist
 from sim.observation import INTRUDER_COLUMNS, NEIGHBOUR_COLUMNS, ObservationLayout
-from sim.setnet import SET_LAYERS, set_actor, set_critic
+from sim.setnet import POOLINGS, set_actor, set_critic, set_layers
 
 LAYOUT = ObservationLayout(8, 100.0, np.radians(270), 5.0, max_neighbours=6, version=2)
 
@@ -38,7 +38,9 @@ def random_obs(rng: np.random.Generator, count: int, layout: ObservationLayout =
 
 def numpy_params(net: SetNet):
     state = net.numpy_state()
-    return {name: (state[f"{name}.weight"], state[f"{name}.bias"]) for name in SET_LAYERS}
+    return {
+        name: (state[f"{name}.weight"], state[f"{name}.bias"]) for name in set_layers(net.pooling)
+    }
 
 
 def permuted(obs: np.ndarray, rng: np.random.Generator, layout: ObservationLayout = LAYOUT):
@@ -56,11 +58,13 @@ def permuted(obs: np.ndarray, rng: np.random.Generator, layout: ObservationLayou
     return out
 
 
-def test_torch_and_numpy_networks_agree():
+@pytest.mark.parametrize("pooling", POOLINGS)
+def test_torch_and_numpy_networks_agree(pooling):
     torch.manual_seed(0)
     rng = np.random.default_rng(0)
     obs = random_obs(rng, 64)
-    actor, critic = SetNet(LAYOUT, 32, critic=False), SetNet(LAYOUT, 32, critic=True)
+    actor = SetNet(LAYOUT, 32, critic=False, pooling=pooling)
+    critic = SetNet(LAYOUT, 32, critic=True, pooling=pooling)
     for p in (*actor.parameters(), *critic.parameters()):  # beyond the near-zero output init
         torch.nn.init.normal_(p, 0.0, 0.3)
     action = rng.uniform(-1, 1, 64).astype(np.float32)
@@ -73,11 +77,11 @@ def test_torch_and_numpy_networks_agree():
 
 
 @settings(max_examples=50, deadline=None)
-@given(seed=st.integers(0, 2**31 - 1))
-def test_action_does_not_depend_on_the_order_of_rows(seed):
+@given(seed=st.integers(0, 2**31 - 1), pooling=st.sampled_from(POOLINGS))
+def test_action_does_not_depend_on_the_order_of_rows(seed, pooling):
     rng = np.random.default_rng(seed)
     torch.manual_seed(seed % 1000)
-    net = SetNet(LAYOUT, 16, critic=False)
+    net = SetNet(LAYOUT, 16, critic=False, pooling=pooling)
     for p in net.parameters():
         torch.nn.init.normal_(p, 0.0, 0.5)
     params = numpy_params(net)
@@ -92,9 +96,10 @@ def test_action_does_not_depend_on_the_order_of_rows(seed):
     np.testing.assert_allclose(a, b, atol=1e-5)  # float32 products: rounding by position
 
 
-def test_empty_sets_and_masked_rows_count_for_nothing():
+@pytest.mark.parametrize("pooling", POOLINGS)
+def test_empty_sets_and_masked_rows_count_for_nothing(pooling):
     rng = np.random.default_rng(3)
-    net = SetNet(LAYOUT, 16, critic=False)
+    net = SetNet(LAYOUT, 16, critic=False, pooling=pooling)
     for p in net.parameters():
         torch.nn.init.normal_(p, 0.0, 0.5)
     params = numpy_params(net)
@@ -108,9 +113,10 @@ def test_empty_sets_and_masked_rows_count_for_nothing():
     np.testing.assert_allclose(set_actor(params, junk, LAYOUT), set_actor(params, obs, LAYOUT))
 
 
-def test_no_neighbour_rows_at_all():
+@pytest.mark.parametrize("pooling", POOLINGS)
+def test_no_neighbour_rows_at_all(pooling):
     layout = ObservationLayout(2, 100.0, np.radians(270), 5.0, max_neighbours=0, version=2)
-    net = SetNet(layout, 8, critic=False)
+    net = SetNet(layout, 8, critic=False, pooling=pooling)
     obs = random_obs(np.random.default_rng(0), 5, layout)
     with torch.no_grad():
         a = net(torch.from_numpy(obs)).numpy()
@@ -436,9 +442,11 @@ def test_train_generalist_flags_reach_the_config(tmp_path, monkeypatch):
     argv = ["train", "--generalist", "--json", "--minutes", "2", "--seed", "4"]
     argv += ["--swarm-field", "formation", "--family-weight", "swarms-*=2"]
     argv += ["--separation-horizon", "8", "--separation-weight", "0"]
+    argv += ["--pooling", "max-attention"]
     assert main([*argv, "--out", str(tmp_path / "run")]) == 0
     ((cfg, out, resume),) = seen
     assert cfg.swarm_field == "formation" and cfg.family_weights == (("swarms-*", 2.0),)
     assert cfg.separation_horizon_s == 8.0 and cfg.separation_weight == 0.0
+    assert cfg.pooling == "max-attention"
     assert cfg.minutes == 2 and cfg.seed == 4 and out == tmp_path / "run" and not resume
     assert GeneralistConfig().swarm_field == "all"  # the paper's reward unless asked

@@ -93,7 +93,8 @@ def test_the_value_network_is_the_critic_read_at_action_0():
     assert shapes == {f"{k}.weight": v for k, v in set_shapes(8, critic=True).items()}
 
 
-def test_a_tiny_ppo_run_trains_validates_resumes_and_exports(tmp_path):
+@pytest.mark.parametrize("pooling", ["max-mean", "max-attention"])
+def test_a_tiny_ppo_run_trains_validates_resumes_and_exports(tmp_path, pooling):
     from policies.generalist_train import export_generalist_run
     from remarl_fc.policy_io import load_policy
     from sim.scenarios import load_scenario
@@ -114,6 +115,7 @@ def test_a_tiny_ppo_run_trains_validates_resumes_and_exports(tmp_path):
         eval_episodes=2,
         real_share=0.5,
         device="cpu",
+        pooling=pooling,
     )
     out = tmp_path / "run"
     seen: list[dict[str, float]] = []
@@ -143,8 +145,13 @@ def test_a_tiny_ppo_run_trains_validates_resumes_and_exports(tmp_path):
 
     policy_file = tmp_path / "generalist.safetensors"
     meta = export_generalist_run(out, policy_file, checkpoint="last")
-    assert meta["network"] == "set"
+    assert meta["network"] == "set" and meta.get("pooling", "max-mean") == pooling
     policy = load_policy(str(policy_file))
+    load_checkpoint(out / "last.safetensors", trained)  # the resumed run's last weights
+    obs = np.random.default_rng(1).normal(size=(5, LAYOUT.size)).astype(np.float32)
+    with torch.no_grad():
+        expected = trained.actor(torch.from_numpy(obs)).numpy()
+    np.testing.assert_allclose(policy.act(obs), expected, atol=1e-5)
     scen = load_scenario("3u2o")
     sim = SwarmSim(scen, scored=False)
     state = sim.initial_state(np.random.default_rng(0), 2)

@@ -39,7 +39,7 @@ from sim.policy_file import (
 from sim.policy_metadata import OBSERVATION_KEYS, OBSERVATION_V2_KEYS
 from sim.policy_problems import PolicyFileError
 from sim.scenarios import load_scenario
-from sim.setnet import set_shapes
+from sim.setnet import QUERY_LAYERS, set_shapes
 
 
 def problem_keys(meta: Any) -> list[str]:
@@ -85,6 +85,37 @@ def test_a_set_networks_tensors_are_setnets_shapes_with_one_member():
             assert shapes[f"{net}.{layer}.weight"] == (1, n_in, n_out)
             assert shapes[f"{net}.{layer}.bias"] == (1, 1, n_out)
     assert len(shapes) == 4 * len(SET_LAYERS)
+
+
+def test_an_attention_generalist_says_so_and_holds_the_query_layers():
+    meta = json.loads(json.dumps(tiny_generalist_meta(hidden=8, pooling="max-attention")))
+    assert metadata_problems(meta) == [] and meta["pooling"] == "max-attention"
+    layers = (*SET_LAYERS, *QUERY_LAYERS)
+    assert network_layers(meta) == (layers, layers)
+    shapes = expected_shapes(meta)
+    assert shapes["actor.nbq.weight"] == shapes["critic.inq.weight"] == (1, 8, 8)
+    assert tensor_problems(tiny_generalist_tensors(meta), meta) == []
+    plain = tiny_generalist_meta(hidden=8)
+    assert "pooling" not in plain  # the default is not written: older files read as before
+    missing = {p.key for p in tensor_problems(tiny_generalist_tensors(plain), meta)}
+    assert "actor.nbq.weight" in missing and "critic.inq.bias" in missing
+
+
+@pytest.mark.parametrize(
+    ("path", "value", "key"),
+    [("pooling", "mean", "pooling"), ("pooling", 2, "pooling"), ("hidden", 6, "hidden")],
+)
+def test_bad_pooling_metadata_names_the_key(path, value, key):
+    meta = json.loads(json.dumps(tiny_generalist_meta(hidden=8, pooling="max-attention")))
+    assert key in problem_keys(mutate(meta, path, value))
+
+
+def test_only_a_set_network_of_schema_2_pools():
+    mlp = json.loads(json.dumps(tiny_meta()))
+    assert "pooling" in problem_keys(mutate(mlp, "pooling", "max-mean"))  # schema 1
+    mlp["schema"], mlp["network"], mlp["uavs"] = 2, "mlp", [2, 2]
+    mlp["observation"]["version"] = 1
+    assert problem_keys(mutate(mlp, "pooling", "max-attention")) == ["pooling"]
 
 
 def test_every_zoo_file_reads_as_before():
