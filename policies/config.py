@@ -4,10 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from sim.config import SWARM_FIELDS
 from sim.setnet import POOLINGS
-
-SWARM_FIELDS = ("all", "formation")
-"""`GeneralistConfig.swarm_field`: the worlds whose reward holds the swarm's peak Φ_s."""
 
 
 def check(ok: bool, name: str, message: str) -> None:

@@ -20,6 +20,10 @@ from typing import Literal
 ExternalTerm = Literal["gradient", "level-edge"]
 Formation = Literal["line", "wedge", "grid"]
 TargetLayout = Literal["line", "formation"]
+
+SWARM_FIELDS = ("all", "formation")
+"""Which worlds of a mixture keep the swarm's peak (`FieldConfig.swarm_peak`): "all", or only
+"formation" (the families that fly one formation)."""
 SensorModel = Literal["exact", "adsb"]
 Arrival = Literal["hover", "leave"]
 

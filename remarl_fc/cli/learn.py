@@ -28,7 +28,9 @@ from remarl_fc.cli.common import (
 )
 from remarl_fc.cli.suite import add_eval_suite_flags, cmd_eval_suite
 from remarl_fc.errors import ConfigError
+from sim.config import SWARM_FIELDS
 from sim.evaluation import evaluation_seed
+from sim.setnet import POOLINGS
 
 DEFAULT_EVAL_EPISODES = 1000
 """Episodes of ``eval --policy`` on one scenario."""
@@ -91,14 +93,14 @@ def add_train(sub: Any) -> None:
     add_choice(
         p,
         "--swarm-field",
-        ["all", "formation"],
+        list(SWARM_FIELDS),
         help="generalist: worlds whose reward holds the swarm's peak around the virtual centre: "
         "all (the paper, default) or formation (only families that fly one formation)",
     )
     add_choice(
         p,
         "--pooling",
-        ["max-mean", "max-attention"],
+        list(POOLINGS),
         help="generalist: how the set networks pool the neighbour and intruder rows: max and "
         "mean (deep sets, default) or max and attention (a query from the UAV's own state)",
     )
