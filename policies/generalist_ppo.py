@@ -130,6 +130,9 @@ def ppo_update(
     params = [p for group in nets.opt.param_groups for p in group["params"]]
     nn.utils.clip_grad_norm_(params, cfg.grad_clip)
     nets.opt.step()
+    if cfg.ppo_min_std > 0:  # projected back onto the floor
+        with torch.no_grad():
+            nets.log_std.value.clamp_(min=math.log(cfg.ppo_min_std))
     return {
         "losses/policy": float(policy_loss.detach()),
         "losses/value": float(value_loss.detach()),

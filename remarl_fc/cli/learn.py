@@ -97,6 +97,13 @@ def add_train(sub: Any) -> None:
         help="generalist: worlds whose reward holds the swarm's peak around the virtual centre: "
         "all (the paper, default) or formation (only families that fly one formation)",
     )
+    p.add_argument(
+        "--ppo-min-std",
+        type=float,
+        metavar="S",
+        help="generalist, PPO: floor of the policy's std on the normalised action (default 0: "
+        "none; it falls to 0.05 within an hour)",
+    )
     add_choice(
         p,
         "--pooling",
@@ -277,6 +284,7 @@ def cmd_train_generalist(args: argparse.Namespace) -> int:
         learner=args.learner or defaults.learner,
         swarm_field=args.swarm_field or defaults.swarm_field,
         pooling=args.pooling or defaults.pooling,
+        ppo_min_std=defaults.ppo_min_std if args.ppo_min_std is None else args.ppo_min_std,
         separation_horizon_s=(
             defaults.separation_horizon_s
             if args.separation_horizon is None

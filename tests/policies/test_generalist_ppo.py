@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 from tiny_policy import tiny_suite
 
 from policies.config import GeneralistConfig
-from policies.generalist_ppo import LOG_2PI, PPONets, advantages, log_prob
+from policies.generalist_ppo import LOG_2PI, PPONets, advantages, log_prob, ppo_update
 from policies.generalist_train import train_generalist
 from sim.observation import ObservationLayout
 
@@ -91,6 +91,26 @@ def test_the_value_network_is_the_critic_read_at_action_0():
     # the critic's shapes, so the policy file's critic slot holds it
     shapes = {k: tuple(w.shape[1:]) for k, w in nets.value.state_dict().items() if "weight" in k}
     assert shapes == {f"{k}.weight": v for k, v in set_shapes(8, critic=True).items()}
+
+
+@pytest.mark.parametrize("floor", [0.0, 0.2])
+def test_the_std_floor_holds_where_the_update_pushes_sigma_down(floor):
+    cfg = GeneralistConfig(hidden=8, ppo_log_std=np.log(0.21), ppo_lr=0.05, ppo_min_std=floor)
+    torch.manual_seed(0)
+    nets = PPONets.create(LAYOUT, cfg, "cpu")
+    obs = torch.from_numpy(np.random.default_rng(0).normal(0, 1, (64, LAYOUT.size)).astype("f4"))
+    with torch.no_grad():
+        mean = nets.actor(obs)
+    # samples right at the mean with a positive advantage: the likelihood rises as σ falls
+    sample, adv = mean.clone(), torch.ones(64)
+    old = log_prob(mean, nets.log_std.value.detach(), sample)
+    for _ in range(20):
+        ppo_update(nets, obs, sample, old, adv, torch.zeros(64), cfg)
+    sigma = float(torch.exp(nets.log_std.value.detach()))
+    if floor:
+        assert sigma == pytest.approx(floor, rel=1e-6)
+    else:
+        assert sigma < 0.2
 
 
 @pytest.mark.parametrize("pooling", ["max-mean", "max-attention"])
