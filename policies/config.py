@@ -212,13 +212,14 @@ class GeneralistConfig:
     targets keep)."""
 
     teacher: str = "none"
-    """A teacher to start from: "none" (TD3 from scratch) or "orca-shield" (ORCA's actions
-    through the safety shield, heading changes only: the strongest hand-written method of the
-    suite, 87 % mean solvable success). With a teacher the run first collects
-    ``teacher_transitions`` of its flights, clones it (``bc_updates`` supervised steps, the
-    critics learning its values meanwhile), then fine-tunes with TD3 plus a behaviour-cloning
-    term on the teacher's transitions (TD3+BC), its weight falling from ``bc_weight`` to 0
-    over the first half of the run."""
+    """A teacher to learn from: "none" (from scratch) or "orca-shield" (ORCA's actions through
+    the safety shield, heading changes only: the strongest hand-written method of the suite,
+    87 % mean solvable success). With TD3 the run first collects ``teacher_transitions`` of
+    the teacher's flights, clones it (``bc_updates`` supervised steps, the critics learning its
+    values meanwhile), then fine-tunes with TD3 plus a behaviour-cloning term on the teacher's
+    transitions (TD3+BC). With PPO the teacher labels every state the student's own rollouts
+    visit (DAgger's on-policy labels, Ross et al. 2011) and the PPO loss gains α·(π − a_teacher)²
+    on them. Either way α falls from ``bc_weight`` to 0 over the run's first ``bc_fraction``."""
 
     teacher_transitions: int = 400_000
     """UAV transitions flown by the teacher before learning (its replay share)."""
@@ -228,7 +229,11 @@ class GeneralistConfig:
 
     bc_weight: float = 2.5
     """α of TD3+BC at the start of fine-tuning: the actor's loss is −Q/mean|Q| + α·(π − a_teacher)²
-    on the teacher's transitions (Fujimoto & Gu 2021's normalisation)."""
+    on the teacher's transitions (Fujimoto & Gu 2021's normalisation); with PPO, the weight of
+    (π − a_teacher)² next to the clipped surrogate (on normalised advantages)."""
+
+    bc_fraction: float = 0.5
+    """Share of the run's budget over which α falls linearly from ``bc_weight`` to 0."""
 
     learner: str = "ppo"
     """"ppo" (on-policy: clipped surrogate over rollouts of every world, GAE,
@@ -305,11 +310,6 @@ class GeneralistConfig:
         )
         check(self.swarm_field in SWARM_FIELDS, "swarm_field", f"must be one of {SWARM_FIELDS}")
         check(
-            self.teacher == "none" or self.learner == "td3",
-            "teacher",
-            'a teacher needs learner = "td3" (TD3+BC)',
-        )
-        check(
             all(len(p) == 2 and p[1] > 0 for p in self.family_weights),
             "family_weights",
             "must be (pattern, weight > 0) pairs",
@@ -342,4 +342,5 @@ class GeneralistConfig:
         check(self.device in ("cpu", "cuda", "auto"), "device", 'must be "cpu", "cuda" or "auto"')
         check(self.teacher in ("none", "orca-shield"), "teacher", 'must be "none" or "orca-shield"')
         check(self.bc_weight >= 0, "bc_weight", "must be >= 0")
+        check(0 < self.bc_fraction <= 1, "bc_fraction", "must be in (0, 1]")
         check_at_least(self, 0, "teacher_transitions", "bc_updates")

@@ -115,8 +115,14 @@ def ppo_update(
     adv: Tensor,
     target: Tensor,
     cfg: GeneralistConfig,
+    teacher: Tensor | None = None,
+    bc: float = 0.0,
 ) -> dict[str, float]:
-    """One clipped-surrogate step on a minibatch of UAV transitions."""
+    """One clipped-surrogate step on a minibatch of UAV transitions.
+
+    ``teacher`` (B,): the teacher's action at each observation (NaN: none); with ``bc`` > 0
+    the loss gains bc·(mean − teacher)² over the transitions a teacher labelled.
+    """
     mean = nets.actor(obs)
     new_log_prob = log_prob(mean, nets.log_std.value, sample)
     ratio = torch.exp(new_log_prob - old_log_prob)
@@ -125,6 +131,12 @@ def ppo_update(
     value_loss = 0.5 * ((nets.values(obs) - target) ** 2).mean()
     entropy = nets.log_std.value + 0.5 * (LOG_2PI + 1.0)
     loss = policy_loss + cfg.ppo_value_weight * value_loss - cfg.ppo_entropy * entropy
+    clone = torch.zeros(())
+    if teacher is not None and bc > 0:
+        has = ~torch.isnan(teacher)
+        if bool(has.any()):
+            clone = ((mean[has] - teacher[has]) ** 2).mean()
+            loss = loss + bc * clone
     nets.opt.zero_grad(set_to_none=True)
     loss.backward()
     params = [p for group in nets.opt.param_groups for p in group["params"]]
@@ -136,6 +148,7 @@ def ppo_update(
     return {
         "losses/policy": float(policy_loss.detach()),
         "losses/value": float(value_loss.detach()),
+        "losses/clone": float(clone.detach()),
         "charts/log_std": float(nets.log_std.value.detach()),
         "charts/clip_fraction": float(((ratio - 1.0).abs() > cfg.ppo_clip).float().mean()),
     }
@@ -153,8 +166,10 @@ def train_generalist_ppo(
         RunBook,
         actor_actions,
         advance_world,
+        bc_weight,
         joint_obs,
         per_world,
+        teacher_actions,
     )
 
     book = RunBook.open(cfg, out_dir, PPONets.create, resume=resume)
@@ -168,6 +183,7 @@ def train_generalist_ppo(
             # ---- fly every world ppo_rollout steps with the Gaussian policy
             std = float(torch.exp(nets.log_std.value.detach()))
             log_std = float(nets.log_std.value.detach())
+            bc = bc_weight(cfg, book.fraction_done())
             flown: list[list[Any]] = [[] for _ in worlds]
             for _ in range(cfg.ppo_rollout):
                 mean = actor_actions(nets.actor, joint_obs(worlds, layout.size), device)
@@ -185,8 +201,10 @@ def train_generalist_ppo(
                         strict=True,
                     )
                 ):
+                    # DAgger: the teacher labels the state the student flies from
+                    taught = teacher_actions(world) if bc > 0 else None
                     step, ended = advance_world(world, a, cfg, book.goal_value, rng)
-                    flown[k].append((step, u, lp))
+                    flown[k].append((step, u, lp, taught))
                     book.transitions += int(step.acted.sum())
                     recent += [{"family": world.family.name, **row} for row in ended]
             recent = recent[-2000:]
@@ -214,6 +232,8 @@ def train_generalist_ppo(
                         batch["adv"],
                         batch["target"],
                         cfg,
+                        batch["teacher"],
+                        bc,
                     )
                     book.updates += 1
             learn_s += time.perf_counter() - t1
@@ -222,6 +242,7 @@ def train_generalist_ppo(
                 recent,
                 {
                     "charts/noise": std,
+                    "charts/bc_weight": bc,
                     "perf/simulator_share": env_s / max(env_s + learn_s, 1e-9),
                     **losses,
                 },
@@ -242,36 +263,40 @@ def _rollout_columns(
     size: int,
     device: str,
 ) -> dict[str, NDArray[np.float32]]:
-    """The UAV transitions of a rollout (obs, sample, log_prob, adv, target) as flat columns.
+    """A rollout's UAV transitions as flat columns: obs, sample, log_prob, adv, target, teacher.
 
-    ``flown``: per world, per step, (`WorldStep`, sample, log density of the sample).
+    ``flown``: per world, per step, (`WorldStep`, sample, log density of the sample, the
+    teacher's actions or None); ``teacher`` is NaN where no teacher labelled.
     """
     out: dict[str, list[NDArray[np.float32]]] = {
-        k: [] for k in ("obs", "sample", "log_prob", "adv", "target")
+        k: [] for k in ("obs", "sample", "log_prob", "adv", "target", "teacher")
     }
-    for steps in flown:
-        obs = np.stack([s.obs for s, _, _ in steps])  # (T, B, N, D)
-        nxt = np.stack([s.next_obs for s, _, _ in steps])
+    for rows in flown:
+        steps = [row[0] for row in rows]
+        obs = np.stack([s.obs for s in steps])  # (T, B, N, D)
+        nxt = np.stack([s.next_obs for s in steps])
         lead = obs.shape[:-1]
         with torch.no_grad():
             both = torch.from_numpy(np.concatenate([obs, nxt]).reshape(-1, size)).to(device)
             values = nets.values(both).cpu().numpy().reshape(2, *lead)
-        acted = np.stack([s.acted for s, _, _ in steps])
-        cut = np.stack([np.broadcast_to(s.done[:, None], lead[1:]) for s, _, _ in steps])
+        acted = np.stack([s.acted for s in steps])
+        cut = np.stack([np.broadcast_to(s.done[:, None], lead[1:]) for s in steps])
         cut[-1] = True  # the rollout ends: bootstrap from the value
         adv, target = advantages(
-            np.stack([s.reward for s, _, _ in steps]),
+            np.stack([s.reward for s in steps]),
             values[0],
             values[1],
-            np.stack([s.terminal for s, _, _ in steps]),
-            np.stack([s.terminal_value for s, _, _ in steps]),
+            np.stack([s.terminal for s in steps]),
+            np.stack([s.terminal_value for s in steps]),
             cut,
             cfg.gamma,
             cfg.ppo_lambda,
         )
+        nan = np.full(lead[1:], np.nan, np.float32)
         out["obs"].append(obs[acted])
-        out["sample"].append(np.stack([u for _, u, _ in steps])[acted])
-        out["log_prob"].append(np.stack([lp for _, _, lp in steps])[acted])
+        out["sample"].append(np.stack([row[1] for row in rows])[acted])
+        out["log_prob"].append(np.stack([row[2] for row in rows])[acted])
         out["adv"].append(adv[acted])
         out["target"].append(target[acted])
+        out["teacher"].append(np.stack([nan if row[3] is None else row[3] for row in rows])[acted])
     return {k: np.concatenate(v).astype(np.float32) for k, v in out.items()}

@@ -324,6 +324,13 @@ def teacher_actions(world: World) -> NDArray[np.float32]:
     return shield_state(ShieldConfig(mode="on"), world.cfg, world.state, proposed, vehicle).action
 
 
+def bc_weight(cfg: GeneralistConfig, frac: float) -> float:
+    """α of the behaviour-cloning term at the run's fraction ``frac`` done (0 without teacher)."""
+    if cfg.teacher == "none":
+        return 0.0
+    return cfg.bc_weight * max(0.0, 1.0 - frac / cfg.bc_fraction)
+
+
 def learn_from_teacher(
     nets: TD3Nets,
     worlds: list[World],
@@ -603,6 +610,7 @@ class RunBook:
         self.summary.update(
             {
                 "learner": self.cfg.learner,
+                "teacher": self.cfg.teacher,
                 "iterations": self.iteration,
                 "updates": self.updates,
                 "transitions": self.transitions,
@@ -675,7 +683,7 @@ def train_generalist(
             losses: dict[str, float] = {}
             if warm <= 0 and buffer.size >= cfg.batch_size:
                 t1 = time.perf_counter()
-                bc = cfg.bc_weight * max(0.0, 1.0 - 2.0 * frac) if cfg.teacher != "none" else 0.0
+                bc = bc_weight(cfg, frac)
                 for _ in range(cfg.updates_per_iteration):
                     book.updates += 1
                     batch = buffer.sample(cfg.batch_size, rng, device)

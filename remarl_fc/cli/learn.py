@@ -106,6 +106,26 @@ def add_train(sub: Any) -> None:
     )
     add_choice(
         p,
+        "--teacher",
+        ["none", "orca-shield"],
+        help="generalist: learn from ORCA through the shield as well (PPO: the teacher labels "
+        "the states the policy's own rollouts visit; TD3: clone, then TD3+BC)",
+    )
+    p.add_argument(
+        "--bc-weight",
+        type=float,
+        metavar="A",
+        help="generalist with a teacher: the cloning term's weight at the start (default 2.5)",
+    )
+    p.add_argument(
+        "--bc-fraction",
+        type=float,
+        metavar="F",
+        help="generalist with a teacher: the share of the run over which the cloning weight "
+        "falls to 0 (default 0.5)",
+    )
+    add_choice(
+        p,
         "--pooling",
         list(POOLINGS),
         help="generalist: how the set networks pool the neighbour and intruder rows: max and "
@@ -285,6 +305,9 @@ def cmd_train_generalist(args: argparse.Namespace) -> int:
         swarm_field=args.swarm_field or defaults.swarm_field,
         pooling=args.pooling or defaults.pooling,
         ppo_min_std=defaults.ppo_min_std if args.ppo_min_std is None else args.ppo_min_std,
+        teacher=args.teacher or defaults.teacher,
+        bc_weight=defaults.bc_weight if args.bc_weight is None else args.bc_weight,
+        bc_fraction=defaults.bc_fraction if args.bc_fraction is None else args.bc_fraction,
         separation_horizon_s=(
             defaults.separation_horizon_s
             if args.separation_horizon is None

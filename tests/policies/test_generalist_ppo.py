@@ -115,6 +115,17 @@ def test_the_std_floor_holds_where_the_update_pushes_sigma_down(floor):
 
 @pytest.mark.parametrize("pooling", ["max-mean", "max-attention"])
 def test_a_tiny_ppo_run_trains_validates_resumes_and_exports(tmp_path, pooling):
+    tiny_ppo_run(tmp_path, pooling=pooling)
+
+
+def test_a_tiny_ppo_run_with_a_teacher_clones_it_on_its_own_states(tmp_path):
+    summary, seen = tiny_ppo_run(tmp_path, teacher="orca-shield", bc_fraction=1.0)
+    assert seen[0]["charts/bc_weight"] == pytest.approx(2.5) and seen[0]["losses/clone"] > 0
+    assert summary["teacher"] == "orca-shield"
+
+
+def tiny_ppo_run(tmp_path, **changes):
+    """A 3-iteration PPO run, resumed to 5, exported; its summary and progress rows."""
     from policies.generalist_train import export_generalist_run
     from remarl_fc.policy_io import load_policy
     from sim.scenarios import load_scenario
@@ -135,7 +146,7 @@ def test_a_tiny_ppo_run_trains_validates_resumes_and_exports(tmp_path, pooling):
         eval_episodes=2,
         real_share=0.5,
         device="cpu",
-        pooling=pooling,
+        **changes,
     )
     out = tmp_path / "run"
     seen: list[dict[str, float]] = []
@@ -165,7 +176,7 @@ def test_a_tiny_ppo_run_trains_validates_resumes_and_exports(tmp_path, pooling):
 
     policy_file = tmp_path / "generalist.safetensors"
     meta = export_generalist_run(out, policy_file, checkpoint="last")
-    assert meta["network"] == "set" and meta.get("pooling", "max-mean") == pooling
+    assert meta["network"] == "set" and meta.get("pooling", "max-mean") == cfg.pooling
     policy = load_policy(str(policy_file))
     load_checkpoint(out / "last.safetensors", trained)  # the resumed run's last weights
     obs = np.random.default_rng(1).normal(size=(5, LAYOUT.size)).astype(np.float32)
@@ -177,6 +188,7 @@ def test_a_tiny_ppo_run_trains_validates_resumes_and_exports(tmp_path, pooling):
     state = sim.initial_state(np.random.default_rng(0), 2)
     actions = policy.act(sim.observe(state, layout=policy.layout).flat())
     assert actions.shape == (2, 3) and np.isfinite(actions).all()
+    return summary, seen
 
 
 def test_an_unknown_learner_is_refused():
@@ -184,8 +196,36 @@ def test_an_unknown_learner_is_refused():
         GeneralistConfig(learner="sac")
 
 
-def test_ppo_is_the_default_and_a_teacher_needs_td3():
-    assert GeneralistConfig().learner == "ppo"
+def test_ppo_is_the_default_and_learns_from_scratch_unless_given_a_teacher():
+    assert GeneralistConfig().learner == "ppo" and GeneralistConfig().teacher == "none"
     with pytest.raises(ValueError, match="teacher"):
-        GeneralistConfig(teacher="orca-shield")
-    assert GeneralistConfig(teacher="orca-shield", learner="td3").teacher == "orca-shield"
+        GeneralistConfig(teacher="orca")
+    with pytest.raises(ValueError, match="bc_fraction"):
+        GeneralistConfig(teacher="orca-shield", bc_fraction=0.0)
+
+
+def test_the_cloning_weight_falls_to_zero_over_its_share_of_the_run():
+    from policies.generalist_train import bc_weight
+
+    cfg = GeneralistConfig(teacher="orca-shield", bc_weight=2.0, bc_fraction=0.5)
+    assert [bc_weight(cfg, f) for f in (0.0, 0.25, 0.5, 0.9)] == [2.0, 1.0, 0.0, 0.0]
+    assert bc_weight(GeneralistConfig(bc_weight=2.0), 0.0) == 0.0  # no teacher, no term
+
+
+def test_the_cloning_term_pulls_the_mean_to_the_teacher_where_it_labelled():
+    cfg = GeneralistConfig(hidden=8, ppo_lr=0.01)
+    torch.manual_seed(0)
+    nets = PPONets.create(LAYOUT, cfg, "cpu")
+    obs = torch.from_numpy(np.random.default_rng(0).normal(0, 1, (64, LAYOUT.size)).astype("f4"))
+    teacher = torch.full((64,), 0.5)
+    teacher[32:] = float("nan")  # unlabelled: no pull
+    zero = torch.zeros(64)
+    with torch.no_grad():
+        start = nets.actor(obs)
+    old = log_prob(start, nets.log_std.value.detach(), start)
+    for _ in range(100):
+        out = ppo_update(nets, obs, start, old, zero, zero, cfg, teacher, bc=5.0)
+    with torch.no_grad():
+        end = nets.actor(obs)
+    assert out["losses/clone"] < 0.01
+    assert float((end[:32] - 0.5).abs().max()) < 0.15 < float((start[:32] - 0.5).abs().min())
