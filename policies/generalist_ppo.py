@@ -276,16 +276,14 @@ def _rollout_columns(
         obs = np.stack([s.obs for s in steps])  # (T, B, N, D)
         nxt = np.stack([s.next_obs for s in steps])
         lead = obs.shape[:-1]
-        with torch.no_grad():
-            both = torch.from_numpy(np.concatenate([obs, nxt]).reshape(-1, size)).to(device)
-            values = nets.values(both).cpu().numpy().reshape(2, *lead)
+        value, next_value = _values(nets, obs, nxt, np.stack([s.done for s in steps]), device)
         acted = np.stack([s.acted for s in steps])
         cut = np.stack([np.broadcast_to(s.done[:, None], lead[1:]) for s in steps])
         cut[-1] = True  # the rollout ends: bootstrap from the value
         adv, target = advantages(
             np.stack([s.reward for s in steps]),
-            values[0],
-            values[1],
+            value,
+            next_value,
             np.stack([s.terminal for s in steps]),
             np.stack([s.terminal_value for s in steps]),
             cut,
@@ -300,3 +298,31 @@ def _rollout_columns(
         out["target"].append(target[acted])
         out["teacher"].append(np.stack([nan if row[3] is None else row[3] for row in rows])[acted])
     return {k: np.concatenate(v).astype(np.float32) for k, v in out.items()}
+
+
+def _values(
+    nets: PPONets,
+    obs: NDArray[np.float32],
+    nxt: NDArray[np.float32],
+    done: BoolArray,
+    device: str,
+) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
+    """V of the observations (T, B, N, D) acted on and of those after each step.
+
+    The observation after step t is the one acted on at t + 1 unless the environment's
+    episode ended at t (``done`` (T, B)): the network reads each observation once, plus the
+    last step's next observations and the ended episodes' final ones.
+    """
+    t, b, n, size = obs.shape
+    ended = nxt[:-1][done[:-1]]  # (E, N, D): final observations of the episodes that ended
+    rows = np.concatenate(
+        [obs.reshape(-1, size), nxt[-1].reshape(-1, size), ended.reshape(-1, size)]
+    )
+    with torch.no_grad():
+        v = nets.values(torch.from_numpy(rows).to(device)).cpu().numpy()
+    value = v[: t * b * n].reshape(t, b, n)
+    next_value = np.empty_like(value)
+    next_value[:-1] = value[1:]
+    next_value[-1] = v[t * b * n : (t + 1) * b * n].reshape(b, n)
+    next_value[:-1][done[:-1]] = v[(t + 1) * b * n :].reshape(-1, n)
+    return value, next_value

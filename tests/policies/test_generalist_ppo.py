@@ -191,6 +191,29 @@ def tiny_ppo_run(tmp_path, **changes):
     return summary, seen
 
 
+@settings(max_examples=20, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1))
+def test_each_observation_is_valued_once_and_the_next_values_are_the_naive_ones(seed):
+    from policies.generalist_ppo import _values
+
+    rng = np.random.default_rng(seed)
+    t, b, n = 5, 3, 2
+    obs = rng.normal(0, 1, (t, b, n, LAYOUT.size)).astype(np.float32)
+    done = rng.random((t, b)) < 0.3
+    nxt = np.empty_like(obs)
+    nxt[:-1] = obs[1:]  # the observation after a step is the next one acted on ...
+    fresh = rng.normal(0, 1, obs.shape).astype(np.float32)
+    nxt[done] = fresh[done]  # ... unless the episode ended: its final one
+    nxt[-1] = fresh[-1]
+    torch.manual_seed(seed % 1000)
+    nets = PPONets.create(LAYOUT, GeneralistConfig(hidden=8), "cpu")
+    value, next_value = _values(nets, obs, nxt, done, "cpu")
+    with torch.no_grad():
+        naive = [nets.values(torch.from_numpy(x.reshape(-1, LAYOUT.size))) for x in (obs, nxt)]
+    np.testing.assert_allclose(value, naive[0].numpy().reshape(t, b, n), atol=1e-6)
+    np.testing.assert_allclose(next_value, naive[1].numpy().reshape(t, b, n), atol=1e-6)
+
+
 def test_an_unknown_learner_is_refused():
     with pytest.raises(ValueError, match="learner"):
         GeneralistConfig(learner="sac")
