@@ -61,13 +61,13 @@ class SetNet(nn.Module):
         if query is not None:
             return [e.max(dim=-2).values, self._attend(e, mask, query)]
         count = mask.sum(dim=-1, keepdim=True).clamp_min(1.0)
-        # In the rows' order: training needs no order-exact sum (the numpy forward that flies
-        # sorts), and the sort cost a third of a forward and backward pass.
+        # In the rows' order, as the numpy forward (a sort before the sum cost a third of a
+        # forward and backward pass).
         return [e.max(dim=-2).values, e.sum(dim=-2) / count]
 
     @staticmethod
     def _attend(e: Tensor, mask: Tensor, query: Tensor) -> Tensor:
-        """`sim.setnet.attend` (plain sums: training needs no exact order-freedom)."""
+        """`sim.setnet.attend`."""
         b, rows, h = e.shape
         d = h // ATTENTION_HEADS
         heads = e.reshape(b, rows, ATTENTION_HEADS, d)
