@@ -268,7 +268,7 @@ class GeneralistConfig:
 
     ppo_min_std: float = 0.0
     """PPO: floor of the policy's σ on the normalised action (0: none). Without one σ falls
-    from 0.3 to 0.1 in 30 minutes and to 0.05 in 60 (the shipped run), where validation
+    from 0.3 to 0.1 in 30 minutes and to 0.05 in 60 (the PPO run from scratch), where validation
     stops rising: a floor keeps the exploration that finds a wider turn."""
 
     ppo_value_weight: float = 0.5

@@ -213,7 +213,7 @@ def train_generalist_ppo(
 
             # ---- advantages per world, then the clipped-surrogate epochs over every UAV
             t1 = time.perf_counter()
-            columns = _rollout_columns(nets, flown, cfg, layout.size, device)
+            columns = _rollout_columns(nets, flown, cfg, device)
             losses: dict[str, float] = {}
             count = len(columns["adv"])
             adv = columns["adv"]
@@ -260,7 +260,6 @@ def _rollout_columns(
     nets: PPONets,
     flown: list[list[Any]],
     cfg: GeneralistConfig,
-    size: int,
     device: str,
 ) -> dict[str, NDArray[np.float32]]:
     """A rollout's UAV transitions as flat columns: obs, sample, log_prob, adv, target, teacher.
