@@ -12,7 +12,7 @@ import json
 import math
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from remarl_fc.cli.common import (
     EXIT_INTERRUPTED,
@@ -31,6 +31,9 @@ from remarl_fc.errors import ConfigError
 from sim.config import SWARM_FIELDS
 from sim.evaluation import evaluation_seed
 from sim.setnet import POOLINGS
+
+if TYPE_CHECKING:
+    from policies.config import GeneralistConfig
 
 DEFAULT_EVAL_EPISODES = 1000
 """Episodes of ``eval --policy`` on one scenario."""
@@ -291,33 +294,49 @@ def family_weight_arg(text: str) -> tuple[str, float]:
     return pattern, value
 
 
-def cmd_train_generalist(args: argparse.Namespace) -> int:
-    """``train --generalist``: the mixture run of `policies.generalist_train`."""
+def generalist_config(args: argparse.Namespace) -> GeneralistConfig:
+    """The `policies.config.GeneralistConfig` of ``train --generalist``'s flags.
+
+    Raises:
+        ConfigError: a flag's value out of range, named with what the config's check says.
+    """
     from policies.config import GeneralistConfig
-    from policies.generalist_train import train_generalist
 
     defaults = GeneralistConfig()
-    cfg = GeneralistConfig(
-        minutes=args.minutes or defaults.minutes,
-        seed=args.seed,
-        device=args.device or defaults.device,
-        learner=args.learner or defaults.learner,
-        swarm_field=args.swarm_field or defaults.swarm_field,
-        pooling=args.pooling or defaults.pooling,
-        ppo_min_std=defaults.ppo_min_std if args.ppo_min_std is None else args.ppo_min_std,
-        teacher=args.teacher or defaults.teacher,
-        bc_weight=defaults.bc_weight if args.bc_weight is None else args.bc_weight,
-        bc_fraction=defaults.bc_fraction if args.bc_fraction is None else args.bc_fraction,
-        separation_horizon_s=(
-            defaults.separation_horizon_s
-            if args.separation_horizon is None
-            else args.separation_horizon
-        ),
-        separation_weight=(
-            defaults.separation_weight if args.separation_weight is None else args.separation_weight
-        ),
-        family_weights=tuple(family_weight_arg(text) for text in args.family_weight),
-    )
+    weights = tuple(family_weight_arg(text) for text in args.family_weight)
+    try:
+        return GeneralistConfig(
+            minutes=args.minutes or defaults.minutes,
+            seed=args.seed,
+            device=args.device or defaults.device,
+            learner=args.learner or defaults.learner,
+            swarm_field=args.swarm_field or defaults.swarm_field,
+            pooling=args.pooling or defaults.pooling,
+            ppo_min_std=defaults.ppo_min_std if args.ppo_min_std is None else args.ppo_min_std,
+            teacher=args.teacher or defaults.teacher,
+            bc_weight=defaults.bc_weight if args.bc_weight is None else args.bc_weight,
+            bc_fraction=defaults.bc_fraction if args.bc_fraction is None else args.bc_fraction,
+            separation_horizon_s=(
+                defaults.separation_horizon_s
+                if args.separation_horizon is None
+                else args.separation_horizon
+            ),
+            separation_weight=(
+                defaults.separation_weight
+                if args.separation_weight is None
+                else args.separation_weight
+            ),
+            family_weights=weights,
+        )
+    except ValueError as exc:  # the config's own range checks: say so, not a traceback
+        raise ConfigError(f"train --generalist: {exc}") from exc
+
+
+def cmd_train_generalist(args: argparse.Namespace) -> int:
+    """``train --generalist``: the mixture run of `policies.generalist_train`."""
+    from policies.generalist_train import train_generalist
+
+    cfg = generalist_config(args)
     out = Path(args.out or f"runs/generalist-s{cfg.seed}")
     with progress_bar(enabled=not args.json) as progress:
         task = progress.add_task("train", total=cfg.minutes)

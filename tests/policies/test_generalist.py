@@ -428,6 +428,24 @@ def test_a_bad_family_weight_flag_says_what_to_write(text):
     assert family_weight_arg("swarms-*=2.5") == ("swarms-*", 2.5)
 
 
+@pytest.mark.parametrize(
+    ("flag", "value", "setting"),
+    [
+        ("--bc-fraction", "0", "bc_fraction"),
+        ("--ppo-min-std", "2", "ppo_min_std"),
+        ("--separation-weight", "-1", "separation_weight"),
+    ],
+)
+def test_a_generalist_flag_out_of_range_is_a_clear_error(tmp_path, capsys, flag, value, setting):
+    from remarl_fc.cli import main
+
+    argv = ["train", "--generalist", flag, value, "--out", str(tmp_path / "run")]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert f"train --generalist: {setting}" in err and "Traceback" not in err
+    assert not (tmp_path / "run").exists()  # nothing started, nothing written
+
+
 def test_train_generalist_flags_reach_the_config(tmp_path, monkeypatch):
     import policies.generalist_train as generalist_train
     from remarl_fc.cli import main
