@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from sim.config import SWARM_FIELDS
-from sim.setnet import POOLINGS
+from sim.setnet import ATTENTION_HEADS, POOLINGS
 
 
 def check(ok: bool, name: str, message: str) -> None:
@@ -304,9 +304,9 @@ class GeneralistConfig:
         check(self.learner in ("td3", "ppo"), "learner", 'must be "td3" or "ppo"')
         check(self.pooling in POOLINGS, "pooling", f"must be one of {POOLINGS}")
         check(
-            self.pooling == "max-mean" or self.hidden % 4 == 0,
+            self.pooling == "max-mean" or self.hidden % ATTENTION_HEADS == 0,
             "hidden",
-            "must be divisible by 4 for attention pooling (its heads)",
+            f"must be divisible by {ATTENTION_HEADS} for attention pooling (its heads)",
         )
         check(self.swarm_field in SWARM_FIELDS, "swarm_field", f"must be one of {SWARM_FIELDS}")
         check(

@@ -302,31 +302,25 @@ def generalist_config(args: argparse.Namespace) -> GeneralistConfig:
     """
     from policies.config import GeneralistConfig
 
-    defaults = GeneralistConfig()
     weights = tuple(family_weight_arg(text) for text in args.family_weight)
+    given = {  # a flag left out (None; --minutes 0) keeps the config's default
+        "minutes": args.minutes or None,
+        "device": args.device,
+        "learner": args.learner,
+        "swarm_field": args.swarm_field,
+        "pooling": args.pooling,
+        "ppo_min_std": args.ppo_min_std,
+        "teacher": args.teacher,
+        "bc_weight": args.bc_weight,
+        "bc_fraction": args.bc_fraction,
+        "separation_horizon_s": args.separation_horizon,
+        "separation_weight": args.separation_weight,
+    }
     try:
         return GeneralistConfig(
-            minutes=args.minutes or defaults.minutes,
             seed=args.seed,
-            device=args.device or defaults.device,
-            learner=args.learner or defaults.learner,
-            swarm_field=args.swarm_field or defaults.swarm_field,
-            pooling=args.pooling or defaults.pooling,
-            ppo_min_std=defaults.ppo_min_std if args.ppo_min_std is None else args.ppo_min_std,
-            teacher=args.teacher or defaults.teacher,
-            bc_weight=defaults.bc_weight if args.bc_weight is None else args.bc_weight,
-            bc_fraction=defaults.bc_fraction if args.bc_fraction is None else args.bc_fraction,
-            separation_horizon_s=(
-                defaults.separation_horizon_s
-                if args.separation_horizon is None
-                else args.separation_horizon
-            ),
-            separation_weight=(
-                defaults.separation_weight
-                if args.separation_weight is None
-                else args.separation_weight
-            ),
             family_weights=weights,
+            **{name: value for name, value in given.items() if value is not None},
         )
     except ValueError as exc:  # the config's own range checks: say so, not a traceback
         raise ConfigError(f"train --generalist: {exc}") from exc
