@@ -470,3 +470,6 @@ def test_train_generalist_flags_reach_the_config(tmp_path, monkeypatch):
     assert (cfg.teacher, cfg.bc_weight, cfg.bc_fraction) == ("orca-shield", 1.5, 0.8)
     assert cfg.minutes == 2 and cfg.seed == 4 and out == tmp_path / "run" and not resume
     assert GeneralistConfig().swarm_field == "all"  # the paper's reward unless asked
+    seen.clear()
+    assert main(["train", "--generalist", "--json", "--out", str(tmp_path / "plain")]) == 0
+    assert seen[0][0] == GeneralistConfig(seed=seen[0][0].seed)  # no flag: every default
