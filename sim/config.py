@@ -95,9 +95,9 @@ class FieldConfig:
     the line through the centroid along the swarm velocity)."""
 
     swarm_peak: bool = True
-    """Whether Φ holds the swarm's peak Φ_s at all. False: Φ = Σ Φ_o, for UAVs that fly no
-    common formation (two swarms crossing, random paths: one virtual centre p* between them
-    would pull every UAV onto one point; see docs/MODEL.md §20)."""
+    """Whether Φ holds the swarms' peaks Φ_s at all. False: Φ = Σ Φ_o, a training choice for
+    UAVs that fly no common formation (`GeneralistConfig.swarm_field`). Several swarms
+    (`UAVConfig.groups`) each have their own peak at their own p*; see docs/MODEL.md §20–21."""
 
     continuous: bool = True
     """Shift each source's field down by its value at its range (I/R²), so Φ is continuous and
@@ -241,8 +241,26 @@ class UAVConfig:
     so that its centre lies at ``target_x_m``; the targets are then as far apart as the spawn
     slots, which arrival as hovering needs when slots share a y, as rows of a grid do)."""
 
+    groups: tuple[int, ...] = ()
+    """The swarm each UAV flies with, 0…G−1, one per UAV; empty: one swarm (the paper's).
+    Each swarm has its own virtual centre p* (from its own starts and targets) and its own peak
+    in Φ: two swarms that cross, or UAVs on unrelated routes, each keep their own formation
+    reference instead of one p* between them (docs/MODEL.md §21)."""
+
     def __post_init__(self) -> None:
         _integer(self, "count")
+        if self.groups:
+            _require(
+                len(self.groups) == self.count,
+                "groups",
+                f"must hold one swarm index per UAV ({self.count}), got {len(self.groups)}",
+            )
+            _require(
+                all(isinstance(g, int) and not isinstance(g, bool) for g in self.groups)
+                and sorted(set(self.groups)) == list(range(max(self.groups) + 1)),
+                "groups",
+                f"must number the swarms 0, 1, … without gaps, got {list(self.groups)}",
+            )
         for name in ("starts_m", "targets_m"):
             points = getattr(self, name)
             _require(

@@ -37,6 +37,7 @@ from sim.spawn import (
     appear_step,
     encounter_tracks,
     formation_offsets,
+    group_index,
     spawn_episodes,
 )
 
@@ -235,7 +236,12 @@ def family_scenario(family: Family) -> ScenarioConfig:
         name=family.name,
         description=family.description,
         uav=dataclasses.replace(
-            base.uav, count=family.uavs, spacing_m=enc.spacing_m, starts_m=(), targets_m=()
+            base.uav,
+            count=family.uavs,
+            spacing_m=enc.spacing_m,
+            starts_m=(),
+            targets_m=(),
+            groups=swarm_groups(enc.paths, family.uavs),
         ),
         obstacles=ObstacleConfig(count=enc.intruders),
         intruders=(),
@@ -246,6 +252,20 @@ def family_scenario(family: Family) -> ScenarioConfig:
         longest = max(longest, float(np.hypot(*(target - start).T).max()))
     steps = max(PAPER_STEP_LIMIT, math.ceil(STEP_LIMIT_FACTOR * longest / cfg.step_length_m))
     return dataclasses.replace(cfg, max_steps=steps)
+
+
+def swarm_groups(paths: Paths, n: int) -> tuple[int, ...]:
+    """The swarm of each of N UAVs on ``paths`` (`UAVConfig.groups`).
+
+    "swarms": the first ⌈N/2⌉ UAVs form one swarm and the others the second; "random": every
+    UAV flies alone (its own virtual centre, ahead of it on its route); the other paths: one
+    swarm (one formation, or a fan whose routes share a direction).
+    """
+    if paths == "swarms":
+        return (0,) * ((n + 1) // 2) + (1,) * (n // 2) if n > 1 else ()
+    if paths == "random":
+        return tuple(range(n)) if n > 1 else ()
+    return ()
 
 
 def episode_rng(seed: int, family: str, episode: int) -> np.random.Generator:
@@ -302,6 +322,7 @@ def _episode(family: Family, cfg: ScenarioConfig, rng: np.random.Generator) -> E
         appear_step(appear, cfg.dt_s)[None],
         v,
         cfg.field.swarm_lead_m,
+        group_index(cfg.uav),
     )
 
 

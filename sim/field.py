@@ -2,7 +2,8 @@
 
 Paper Eq. obstaclefield, swarmfield and environmentfield.
 
-Obstacles and the swarm's virtual centre p* are peaks::
+Obstacles and the swarm's virtual centre p* are peaks (one p* per swarm where a scenario flies
+several, `UAVConfig.groups`: Φ_s is then the sum of their peaks)::
 
     Φ_o(q) = I_o / d_safe²   for |q − p_o| ≤ d_safe         I_o = max(v_o, v_s)
            = I_o / |q − p_o|²  for d_safe < |q − p_o| ≤ R_o
@@ -39,7 +40,7 @@ class FieldSources:
     Attributes:
         obstacle_pos_m: (B, M, 2) obstacle positions.
         obstacle_speed_m_s: (B, M) obstacle speeds v_o (0 for static obstacles).
-        centre_m: (B, 2) the swarm's virtual centre p*.
+        centre_m: (B, G, 2) each swarm's virtual centre p* (G = 1 but for `UAVConfig.groups`).
         swarm_speed_m_s: v_s, the swarm's speed.
         obstacle_mask: (B, M) True where an obstacle exists (None: all exist).
     """
@@ -131,14 +132,19 @@ def swarm_intensity(src: FieldSources, cfg: FieldConfig) -> float:
 def swarm_term(
     points_m: FloatArray, src: FieldSources, cfg: FieldConfig
 ) -> tuple[FloatArray, FloatArray]:
-    """The swarm's Φ_s and ∇Φ_s at the points: (phi (B, *P), grad (B, *P, 2))."""
-    diff = points_m - _expand(src.centre_m, points_m.ndim - 1)  # (B, *P, 2)
-    d2 = np.einsum("...i,...i->...", diff, diff)
-    phi, coef = _inverse_square(
-        d2, swarm_intensity(src, cfg), cfg.swarm_floor_m, cfg.swarm_range_m, cfg.continuous
-    )
-    assert coef is not None
-    return phi, coef[..., None] * diff
+    """The swarms' Φ_s and ∇Φ_s at the points: (phi (B, *P), grad (B, *P, 2))."""
+    nd = points_m.ndim - 1
+    phi_sum, grad_sum = np.zeros(points_m.shape[:-1]), np.zeros(points_m.shape)
+    for g in range(src.centre_m.shape[1]):
+        diff = points_m - _expand(src.centre_m[:, g], nd)  # (B, *P, 2)
+        d2 = np.einsum("...i,...i->...", diff, diff)
+        phi, coef = _inverse_square(
+            d2, swarm_intensity(src, cfg), cfg.swarm_floor_m, cfg.swarm_range_m, cfg.continuous
+        )
+        assert coef is not None
+        phi_sum += phi
+        grad_sum += coef[..., None] * diff
+    return phi_sum, grad_sum
 
 
 def potential_and_gradient_xy(
@@ -164,24 +170,33 @@ def _field_xy(
     for fewer than 8 obstacles, so the sums are the same as over an obstacle axis.
     """
     nd, dt = x_m.ndim, x_m.dtype
-    centre = src.centre_m.astype(dt, copy=False)
-    dx = x_m - _expand(centre[:, 0], nd)
-    dy = y_m - _expand(centre[:, 1], nd)
-    d2 = dx * dx
-    d2 += dy * dy
-    phi, coef = _inverse_square(
-        d2,
-        swarm_intensity(src, cfg),
-        cfg.swarm_floor_m,
-        cfg.swarm_range_m,
-        cfg.continuous,
-        gradient,
-    )
-    grad = None
-    if coef is not None:
-        dx *= coef
-        dy *= coef
-        grad = (dx, dy)
+    centres = src.centre_m.astype(dt, copy=False)
+    for g in range(centres.shape[1]):  # one swarm but for `UAVConfig.groups`
+        dx = x_m - _expand(centres[:, g, 0], nd)
+        dy = y_m - _expand(centres[:, g, 1], nd)
+        d2 = dx * dx
+        d2 += dy * dy
+        phi_g, coef = _inverse_square(
+            d2,
+            swarm_intensity(src, cfg),
+            cfg.swarm_floor_m,
+            cfg.swarm_range_m,
+            cfg.continuous,
+            gradient,
+        )
+        grad_g = None
+        if coef is not None:
+            dx *= coef
+            dy *= coef
+            grad_g = (dx, dy)
+        if g == 0:
+            phi, grad = phi_g, grad_g
+            continue
+        phi += phi_g
+        if grad is not None and grad_g is not None:
+            gx, gy = grad
+            gx += grad_g[0]
+            gy += grad_g[1]
     num_obstacles = src.obstacle_pos_m.shape[1]
     if not num_obstacles:
         return phi, grad

@@ -13,7 +13,8 @@ a policy trained flying east works flying north over any origin:
 Obstacle rows hold the m nearest obstacles inside the sensing range and aperture, nearest first;
 rows beyond those are zero and their mask entry is 0. Entries are clipped to ±`CLIP`. Units:
 positions are divided by the sensing range (m / m), velocities by the UAV speed (m/s / m/s), so
-every entry is dimensionless.
+every entry is dimensionless. p* is the UAV's own swarm's virtual centre (one swarm in the
+paper; `UAVConfig.groups` gives several, each with its own).
 
 Version 2 (``[sensing] observation = 2``, the generalist policies) adds the swarm's other UAVs
 and describes every other vehicle by what a set encoder needs, one row each, so a policy can
@@ -184,7 +185,8 @@ def build_observations(
         layout: rows and scales.
         own_pos_m: (B, N, 2) positions; own_heading_rad: (B, N); own_vel_m_s: (B, N, 2).
         target_m: (B, N, 2) each UAV's target.
-        centre_m: (B, 2) the virtual centre p*.
+        centre_m: (B, N, 2) each UAV's virtual centre p*, its swarm's (the one p* of the swarm
+            in the paper; `UAVConfig.groups` gives several).
         obstacle_pos_m, obstacle_vel_m_s: (B, M, 2).
         obstacle_valid: (B, M) False for obstacle slots that hold nothing.
         heading_cos_sin: cos and sin of ``own_heading_rad``, where the caller has them (None:
@@ -254,7 +256,7 @@ def _build_v1(
     for w, k in ((wx, 0), (wy, 1)):
         np.subtract(target_m[..., k], own_pos_m[..., k], out=w[ROW_SELF, 0])  # to the target
         w[ROW_SELF, 1] = own_vel_m_s[..., k]
-        np.subtract(centre_m[:, None, k], own_pos_m[..., k], out=w[ROW_SWARM, 0])  # to p*
+        np.subtract(centre_m[..., k], own_pos_m[..., k], out=w[ROW_SWARM, 0])  # to p*
     tx, ty = wx[ROW_SELF, 0], wy[ROW_SELF, 0]
     dist_t = tx * tx
     dist_t += ty * ty

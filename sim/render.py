@@ -148,9 +148,11 @@ def draw_velocities(
 def draw_centre(
     ax: Any, centre_m: FloatArray, *, colour: str, size: float, lw: float, **style: Any
 ) -> None:
-    """The virtual centre p* (2,) as an open circle."""
+    """The virtual centres p*, (2,) or one per swarm (G, 2), as open circles."""
+    centres = np.reshape(centre_m, (-1, 2))
     ax.scatter(
-        *centre_m,
+        centres[:, 0],
+        centres[:, 1],
         marker="o",
         facecolors="none",
         edgecolors=colour,

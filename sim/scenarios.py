@@ -50,6 +50,7 @@ from sim.dynamics import longest_delay_s
 from sim.errors import ConfigError, ScenarioError
 from sim.spawn import (
     SPAWN_SPACING_FACTOR,
+    group_index,
     min_pairwise_distance,
     swarm_layout,
     target_spacing_problem,
@@ -314,10 +315,11 @@ def _check_geometry(cfg: ScenarioConfig, source: str) -> None:
             source=source,
             key="uav.center_m",
         )
-    reach = float(np.hypot(*(layout.positions_m - layout.centre_m).T).max())
+    own_centre = layout.centre_m[group_index(cfg.uav)]  # (N, 2): each UAV's swarm's p*
+    reach = float(np.hypot(*(layout.positions_m - own_centre).T).max())
     if reach >= cfg.field.swarm_range_m:
         raise ScenarioError(
-            f"a UAV spawns {reach:.0f} m from the virtual centre, outside the swarm field "
+            f"a UAV spawns {reach:.0f} m from its virtual centre, outside the swarm field "
             f"(R_s = {cfg.field.swarm_range_m:.0f} m), so it has no contour; raise "
             "field.swarm_range_m",
             source=source,

@@ -42,9 +42,10 @@ class SwarmLayout:
         positions_m: (N, 2) spawn positions.
         headings_rad: (N,) initial headings, toward each UAV's target.
         targets_m: (N, 2) targets, on each UAV's straight pre-planned line.
-        velocity_m_s: (2,) the swarm's initial (pre-planned) velocity, v_s along the mean heading.
-        centre_m: (2,) initial virtual centre p*: on the line through the centroid along the
-            swarm velocity, `FieldConfig.swarm_lead_m` ahead of the foremost UAV.
+        velocity_m_s: (G, 2) each swarm's initial (pre-planned) velocity, v_s along its mean
+            heading (G = 1 but for `UAVConfig.groups`).
+        centre_m: (G, 2) each swarm's initial virtual centre p*: on the line through its
+            centroid along its velocity, `FieldConfig.swarm_lead_m` ahead of its foremost UAV.
     """
 
     positions_m: FloatArray
@@ -108,38 +109,54 @@ def swarm_layout(cfg: ScenarioConfig) -> SwarmLayout:
     delta = targets - positions
     headings = np.arctan2(delta[:, 1], delta[:, 0])
     velocity, virtual_centre = virtual_centre_and_velocity(
-        positions, targets, cfg.uav.speed_m_s, cfg.field.swarm_lead_m
+        positions, targets, cfg.uav.speed_m_s, cfg.field.swarm_lead_m, group_index(cfg.uav)
     )
     return SwarmLayout(positions, headings, targets, velocity, virtual_centre)
 
 
 def virtual_centre_and_velocity(
-    positions_m: FloatArray, targets_m: FloatArray, speed_m_s: float, lead_m: float
+    positions_m: FloatArray,
+    targets_m: FloatArray,
+    speed_m_s: float,
+    lead_m: float,
+    groups: IntArray | None = None,
 ) -> tuple[FloatArray, FloatArray]:
-    """The swarm's pre-planned velocity v_s and virtual centre p* for UAVs at ``positions_m``.
+    """Each swarm's pre-planned velocity v_s and virtual centre p* for UAVs at ``positions_m``.
 
-    v_s has the UAV speed along the mean of the directions to the targets; p* lies on the line
-    through the centroid along v_s, ``lead_m`` ahead of the foremost UAV. Where the directions
-    cancel (UAVs flying apart or toward each other), v_s points from the centroid of the starts
-    to the centroid of the targets, and along +x if those coincide too.
+    A swarm's v_s has the UAV speed along the mean of its UAVs' directions to their targets; its
+    p* lies on the line through its centroid along v_s, ``lead_m`` ahead of its foremost UAV.
+    Where the directions cancel (UAVs flying apart or toward each other), v_s points from the
+    centroid of the starts to the centroid of the targets, and along +x if those coincide too.
 
     Args:
         positions_m, targets_m: (..., N, 2), any batch dimensions first.
+        groups: (N,) the swarm of each UAV, 0…G−1 (`UAVConfig.groups`); None: one swarm.
 
     Returns:
-        (velocity (..., 2), centre (..., 2)).
+        (velocity (..., G, 2), centre (..., G, 2)).
 
     >>> v, c = virtual_centre_and_velocity(np.array([[0.0, 0.0], [0.0, 10.0]]),
     ...                                    np.array([[100.0, 0.0], [100.0, 10.0]]), 10.0, 50.0)
     >>> v.tolist(), c.tolist()
-    ([10.0, 0.0], [50.0, 5.0])
+    ([[10.0, 0.0]], [[50.0, 5.0]])
     """
+    n = positions_m.shape[-2]
+    index = np.zeros(n, dtype=np.int64) if groups is None else np.asarray(groups)
+    member = (index[None, :] == np.arange(int(index.max()) + 1)[:, None]).astype(np.float64)
+    size = member.sum(axis=-1)  # (G,)
+
+    def group_mean(values: FloatArray) -> FloatArray:  # (..., N) → (..., G)
+        mean: FloatArray = values @ member.T / size
+        return mean
+
     delta = targets_m - positions_m
     headings = np.arctan2(delta[..., 1], delta[..., 0])
-    mean_dir = np.stack([np.cos(headings).mean(axis=-1), np.sin(headings).mean(axis=-1)], axis=-1)
+    mean_dir = np.stack([group_mean(np.cos(headings)), group_mean(np.sin(headings))], axis=-1)
     norm = np.linalg.norm(mean_dir, axis=-1, keepdims=True)
+    start = np.stack([group_mean(positions_m[..., 0]), group_mean(positions_m[..., 1])], -1)
     if (norm < DEGENERATE_DIRECTION).any():
-        overall = targets_m.mean(axis=-2) - positions_m.mean(axis=-2)
+        end = np.stack([group_mean(targets_m[..., 0]), group_mean(targets_m[..., 1])], -1)
+        overall = end - start
         fallback = np.where(
             np.linalg.norm(overall, axis=-1, keepdims=True) > DEGENERATE_DIRECTION,
             overall,
@@ -147,11 +164,17 @@ def virtual_centre_and_velocity(
         )
         mean_dir = np.where(norm < DEGENERATE_DIRECTION, fallback, mean_dir)
         norm = np.linalg.norm(mean_dir, axis=-1, keepdims=True)
-    mean_dir = mean_dir / norm
-    centroid = positions_m.mean(axis=-2)
-    # The foremost UAV, along v.
-    front = np.einsum("...ni,...i->...n", positions_m - centroid[..., None, :], mean_dir).max(-1)
-    return speed_m_s * mean_dir, centroid + (front[..., None] + lead_m) * mean_dir
+    mean_dir = mean_dir / norm  # (..., G, 2)
+    # The foremost UAV of each swarm, along its v: (..., G, N) projections, others at −∞.
+    ahead = np.einsum("...ni,...gi->...gn", positions_m, mean_dir)
+    ahead -= np.einsum("...gi,...gi->...g", start, mean_dir)[..., None]
+    front = np.where(member > 0, ahead, -np.inf).max(axis=-1)
+    return speed_m_s * mean_dir, start + (front[..., None] + lead_m) * mean_dir
+
+
+def group_index(uav: UAVConfig) -> IntArray:
+    """(N,) the swarm of each UAV (`UAVConfig.groups`; all 0 for one swarm)."""
+    return np.asarray(uav.groups or (0,) * uav.count, dtype=np.int64)
 
 
 def min_pairwise_distance(points_m: FloatArray) -> float:
@@ -214,7 +237,8 @@ class EpisodeStart:
 
     Attributes:
         start_m, target_m: (B, N, 2) spawn positions and targets.
-        centre_m, swarm_vel_m_s: (B, 2) the virtual centre p* and its constant velocity.
+        centre_m, swarm_vel_m_s: (B, G, 2) each swarm's virtual centre p* and its constant
+            velocity (G = 1 but for `UAVConfig.groups`).
         obstacle_pos_m, obstacle_vel_m_s: (B, M, 2) obstacle positions and velocities.
         obstacle_appear_step: (B, M) the decision step from which each obstacle can be sensed
             (0: from the start).
@@ -285,9 +309,13 @@ class EpisodeStart:
         obstacle_appear_step: IntArray,
         speed_m_s: float,
         lead_m: float,
+        groups: IntArray | None = None,
     ) -> EpisodeStart:
-        """Episodes whose virtual centre and swarm velocity follow from starts and targets."""
-        vel, centre = virtual_centre_and_velocity(start_m, target_m, speed_m_s, lead_m)
+        """Episodes whose virtual centres and swarm velocities follow from starts and targets.
+
+        ``groups``: the swarm of each UAV (`virtual_centre_and_velocity`).
+        """
+        vel, centre = virtual_centre_and_velocity(start_m, target_m, speed_m_s, lead_m, groups)
         return cls(
             start_m,
             target_m,
@@ -363,8 +391,8 @@ def spawn_episodes(
     return EpisodeStart(
         start_m=np.broadcast_to(layout.positions_m, (b, n, 2)).copy(),
         target_m=np.broadcast_to(layout.targets_m, (b, n, 2)).copy(),
-        centre_m=np.broadcast_to(layout.centre_m, (b, 2)).copy(),
-        swarm_vel_m_s=np.broadcast_to(layout.velocity_m_s, (b, 2)).copy(),
+        centre_m=np.broadcast_to(layout.centre_m, (b, *layout.centre_m.shape)).copy(),
+        swarm_vel_m_s=np.broadcast_to(layout.velocity_m_s, (b, *layout.velocity_m_s.shape)).copy(),
         obstacle_pos_m=obs_pos,
         obstacle_vel_m_s=obs_vel,
         obstacle_appear_step=obs_appear,

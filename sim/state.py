@@ -71,7 +71,8 @@ class SwarmState:
         obstacle_pos_m, obstacle_vel_m_s: (B, M, 2).  obstacle_speed_m_s: (B, M).
         obstacle_appear_step: (B, M) the decision step from which each obstacle can be sensed
             (a late pop-up is hidden before it, though it is there and collides).
-        centre_m: (B, 2) virtual centre p*.  swarm_vel_m_s: (B, 2) its constant velocity.
+        centre_m: (B, G, 2) each swarm's virtual centre p* (G = 1 but for `UAVConfig.groups`).
+        swarm_vel_m_s: (B, G, 2) their constant velocities.
         levels: (B, N) contour levels φ_i.
         avoiding: (B,) whether avoidance has begun (levels were reassigned for it).
         window: the contour windows (B, N, K).

@@ -41,7 +41,7 @@ from sim.observation import ObservationLayout, Observations, build_observations
 from sim.reward import RewardTerms, assign_contour_levels
 from sim.sensors import AdsbTracks, gps_error, picture
 from sim.sensors import update as sensor_update
-from sim.spawn import EpisodeStart, obstacle_speeds, spawn_episodes, swarm_layout
+from sim.spawn import EpisodeStart, group_index, obstacle_speeds, spawn_episodes, swarm_layout
 from sim.state import EpisodeStats, StepResult, SwarmState, merge_where
 from sim.transition import (
     accumulate,
@@ -85,6 +85,7 @@ class SwarmSim:
         self.cfg = cfg
         self.scored = scored
         self.layout = swarm_layout(cfg)
+        self.groups = group_index(cfg.uav)
         self.obs_layout = ObservationLayout.from_scenario(cfg)
         self.fractions = substep_fractions(cfg.substeps)
         self.pairs = np.triu_indices(cfg.uav.count, k=1)
@@ -234,7 +235,7 @@ class SwarmSim:
             heading,
             velocity,
             state.target_m[sel],
-            state.centre_m[sel],
+            state.centre_m[sel][:, self.groups],  # each UAV's swarm's p*
             obstacle_pos,
             obstacle_vel,
             seen,

@@ -182,6 +182,8 @@ class SwarmController:
         spec: speed, dt, turn bound, virtual-centre lead, arrival distance.
         targets_ne_m: (N, 2) targets, north/east metres in the mission frame.
         shield: the safety shield behind the policy (default: `ShieldConfig`'s, off).
+        groups: (N,) the swarm each vehicle flies with, 0…G−1 (each swarm has its own virtual
+            centre, as `UAVConfig.groups` in the simulator); None: one swarm.
     """
 
     def __init__(
@@ -191,6 +193,7 @@ class SwarmController:
         targets_ne_m: FloatArray,
         *,
         shield: ShieldConfig | None = None,
+        groups: Sequence[int] | None = None,
     ) -> None:
         self.policy, self.spec = policy, spec
         self.shield = shield if shield is not None else ShieldConfig()
@@ -198,24 +201,25 @@ class SwarmController:
         self.targets_xy = ne_to_sim(np.asarray(targets_ne_m, dtype=np.float64))
         n = len(self.targets_xy)
         self.n = n
+        self.groups = np.zeros(n, dtype=np.int64) if groups is None else np.asarray(groups)
         self.h0 = np.zeros(n)
         self.turn = np.zeros(n)
         self.t0 = np.zeros(n)
         self.speed_m_s = np.full(n, spec.speed_m_s)
-        self.centre0 = np.zeros(2)
-        self.swarm_vel = np.zeros(2)
+        self.centre0 = np.zeros((int(self.groups.max(initial=0)) + 1, 2))
+        self.swarm_vel = np.zeros_like(self.centre0)
         self.t_start = 0.0
         self.started = False
 
     def start(self, positions_ne_m: FloatArray, now: float) -> None:
-        """Fix the swarm's virtual centre and velocity, and head each vehicle to its target."""
+        """Fix each swarm's virtual centre and velocity, and head each vehicle to its target."""
         pos = ne_to_sim(np.asarray(positions_ne_m, dtype=np.float64))
         delta = self.targets_xy - pos
         self.h0 = np.arctan2(delta[:, 1], delta[:, 0])
         self.turn[:] = 0.0
         self.t0[:] = now
         self.swarm_vel, self.centre0 = virtual_centre_and_velocity(
-            pos, self.targets_xy, self.spec.speed_m_s, self.spec.lead_m
+            pos, self.targets_xy, self.spec.speed_m_s, self.spec.lead_m, self.groups
         )
         self.t_start = now
         self.started = True
@@ -227,8 +231,8 @@ class SwarmController:
         return heading
 
     def centre_at(self, now: float) -> FloatArray:
-        """(2,) the virtual centre p*, moving with the swarm's pre-planned velocity."""
-        out: FloatArray = self.centre0 + self.swarm_vel * (now - self.t_start)
+        """(N, 2) each vehicle's virtual centre p* (its swarm's), moving with the swarm."""
+        out: FloatArray = (self.centre0 + self.swarm_vel * (now - self.t_start))[self.groups]
         return out
 
     def decide(

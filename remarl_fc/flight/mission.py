@@ -22,6 +22,11 @@ A mission is a TOML file::
     slot = 0                  # the policy agent that flies it
     target = { north_m = 150.0, east_m = 270.0 }   # or { lat_deg = ..., lon_deg = ... }
     alt_m = 20.0              # cruise height above the origin
+    group = 0                 # optional: the swarm it flies with (0, 1, …; default 0)
+
+Vehicles of one ``group`` share a virtual centre p*, ahead of them on their common course; a
+mission of two swarms whose routes cross, or of vehicles on unrelated routes, gives each its own
+group (`sim.config.UAVConfig.groups`). Groups are numbered 0, 1, … without gaps.
 
 Every error names the file and the key and says what is expected. A mission must be
 consistent with itself: every target inside its own geofence, every ``alt_m`` under its ceiling.
@@ -41,7 +46,7 @@ from numpy.typing import NDArray
 from remarl_fc.errors import ConfigError, PolicyError, PolicySpecMismatch
 from remarl_fc.frames import GeoPoint, geodetic_to_ned, heading_to_yaw, sim_to_ne
 from sim.config import ScenarioConfig
-from sim.spawn import EpisodeStart, swarm_layout, target_spacing_problem
+from sim.spawn import EpisodeStart, group_index, swarm_layout, target_spacing_problem
 
 FloatArray = NDArray[np.float64]
 
@@ -104,12 +109,14 @@ class VehiclePlan:
         system_id: its MAVLink system id. slot: the policy agent index that flies it.
         target_ne_m: (2,) target, north/east metres from the origin.
         alt_m: cruise height above the origin.
+        group: the swarm it flies with (its virtual centre is its swarm's).
     """
 
     system_id: int
     slot: int
     target_ne_m: tuple[float, float]
     alt_m: float
+    group: int = 0
 
 
 @dataclass(frozen=True)
@@ -157,6 +164,10 @@ class Mission:
     def targets_ne_m(self) -> FloatArray:
         """(N, 2) targets in slot order."""
         return np.array([v.target_ne_m for v in self.by_slot()], dtype=np.float64)
+
+    def groups(self) -> tuple[int, ...]:
+        """(N,) the swarm of each vehicle, in slot order."""
+        return tuple(v.group for v in self.by_slot())
 
     def check_policy(
         self, uavs: int | tuple[int, int], speed_m_s: float, dt_s: float, d_col_m: float
@@ -214,7 +225,8 @@ class Mission:
         targets_m = swarm_layout(cfg).targets_m if episode is None else episode.target_m[0]
         targets = sim_to_ne(targets_m)
         plans = tuple(
-            VehiclePlan(i + 1, i, (float(t[0]), float(t[1])), alt_m) for i, t in enumerate(targets)
+            VehiclePlan(i + 1, i, (float(t[0]), float(t[1])), alt_m, int(g))
+            for i, (t, g) in enumerate(zip(targets, group_index(cfg.uav), strict=True))
         )
         return cls(origin, cfg.uav.speed_m_s, plans, cfg.dt_s, None, f"scenario {cfg.name}")
 
@@ -323,6 +335,13 @@ def mission_from_dict(data: dict[str, Any], *, source: str) -> Mission:
     ids = [p.system_id for p in plans]
     if len(set(ids)) != len(ids):
         raise MissionError(f"system ids repeat: {ids}", source=source, key="vehicle.system_id")
+    groups = sorted({p.group for p in plans})
+    if groups != list(range(len(groups))):
+        raise MissionError(
+            f"groups are {groups}; number the swarms 0, 1, … without gaps",
+            source=source,
+            key="vehicle.group",
+        )
     fence = _geofence(data["geofence"], source) if "geofence" in data else None
     if fence is not None:
         for k, plan in enumerate(plans):
@@ -369,9 +388,12 @@ def _vehicle(v: Any, k: int, origin: GeoPoint, src: str) -> VehiclePlan:
     prefix = f"vehicle[{k}]."
     if not isinstance(v, dict):
         raise MissionError("must be a table", source=src, key=f"vehicle[{k}]")
-    _only(v, {"system_id", "slot", "target", "alt_m"}, src, prefix)
+    _only(v, {"system_id", "slot", "target", "alt_m", "group"}, src, prefix)
     sysid = _number(v, "system_id", src, prefix)
     slot = _number(v, "slot", src, prefix)
+    group = _number(v, "group", src, prefix) if "group" in v else 0.0
+    if group != int(group) or group < 0:
+        raise MissionError(f"must be an integer ≥ 0, got {group}", source=src, key=prefix + "group")
     if sysid != int(sysid) or not 1 <= sysid <= 255:
         raise MissionError(
             f"must be an integer 1..255, got {sysid}", source=src, key=prefix + "system_id"
@@ -407,7 +429,7 @@ def _vehicle(v: Any, k: int, origin: GeoPoint, src: str) -> VehiclePlan:
         n, e, _ = geodetic_to_ned(lat, lon, origin.alt_m, origin)
         ne = (float(n), float(e))
     alt = _number(v, "alt_m", src, prefix, positive=True) if "alt_m" in v else DEFAULT_ALT_M
-    return VehiclePlan(int(sysid), int(slot), ne, alt)
+    return VehiclePlan(int(sysid), int(slot), ne, alt, int(group))
 
 
 def _geofence(g: Any, src: str) -> Geofence:

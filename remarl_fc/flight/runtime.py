@@ -119,7 +119,9 @@ class SwarmRuntime(StackOwner):
             self.bus, self.members, self.traffic, self.clock, cfg.peer_timeout_s,
             lambda m: self.vehicles[m.system_id].status.value,
         )  # fmt: skip
-        self.controller = SwarmController(policy, spec, mission.targets_ne_m(), shield=cfg.shield)
+        self.controller = SwarmController(
+            policy, spec, mission.targets_ne_m(), shield=cfg.shield, groups=mission.groups()
+        )
         self.shield = ShieldTally(cfg.shield.mode)
         """What the safety shield did (`remarl_fc.flight.shielding`)."""
         self.vehicles: dict[int, Vehicle] = {

@@ -41,7 +41,7 @@ class FieldSnapshot:
         xs_m, ys_m: raster axes; phi and grad_norm are (len(ys), len(xs)).
         uav_m: (N, 2) UAV positions; adjusted_m: the PSO-adjusted positions (N, 2).
         levels: (N,) contour levels φ_i; headings_rad: (N,); targets_m: (N, 2).
-        obstacle_m, obstacle_vel_m_s: (M, 2); centre_m: (2,) virtual centre p*.
+        obstacle_m, obstacle_vel_m_s: (M, 2); centre_m: (G, 2) each swarm's virtual centre p*.
     """
 
     xs_m: FloatArray

@@ -22,7 +22,7 @@ def sources(obstacles, speeds, centre=(0.0, 0.0), vs=VS, mask=None):
     return FieldSources(
         obstacle_pos_m=obs,
         obstacle_speed_m_s=np.asarray(speeds, dtype=float).reshape(1, -1),
-        centre_m=np.asarray(centre, dtype=float).reshape(1, 2),
+        centre_m=np.asarray(centre, dtype=float).reshape(1, -1, 2),
         swarm_speed_m_s=vs,
         obstacle_mask=None if mask is None else np.asarray(mask).reshape(1, -1),
     )
@@ -161,7 +161,7 @@ def test_masked_obstacles_contribute_nothing():
 def test_batch_environments_are_independent_and_any_point_shape_works():
     rng = np.random.default_rng(3)
     obs = rng.uniform(-100, 100, (4, 3, 2))
-    cen = rng.uniform(-100, 100, (4, 2))
+    cen = rng.uniform(-100, 100, (4, 2, 2))  # two swarms
     src = FieldSources(obs, np.full((4, 3), 2.5), cen, VS)
     pts = rng.uniform(-150, 150, (4, 5, 7, 2))
     phi, grad = potential_and_gradient(pts, src, CFG)

@@ -26,7 +26,7 @@ def world(rng, b=2, n=4, m=5):
         "own_heading_rad": rng.uniform(-np.pi, np.pi, (b, n)),
         "own_vel_m_s": rng.uniform(-10, 10, (b, n, 2)),
         "target_m": rng.uniform(0, 200, (b, n, 2)),
-        "centre_m": rng.uniform(0, 200, (b, 2)),
+        "centre_m": rng.uniform(0, 200, (b, n, 2)),
         "obstacle_pos_m": rng.uniform(0, 200, (b, m, 2)),
         "obstacle_vel_m_s": rng.uniform(-3, 3, (b, m, 2)),
     }
@@ -223,7 +223,7 @@ def test_v2_invalid_uavs_and_unknown_headings():
         "own_heading_rad": heading,
         "own_vel_m_s": np.zeros((1, 3, 2)),
         "target_m": np.full((1, 3, 2), 300.0),
-        "centre_m": np.zeros((1, 2)),
+        "centre_m": np.zeros((1, 3, 2)),
         "obstacle_pos_m": np.zeros((1, 0, 2)),
         "obstacle_vel_m_s": np.zeros((1, 0, 2)),
     }
@@ -260,7 +260,7 @@ def test_v2_rotating_the_world_and_reordering_the_uavs_leaves_each_observation_u
         "own_heading_rad": (w["own_heading_rad"] + angle)[:, order],
         "own_vel_m_s": (w["own_vel_m_s"] @ rot.T)[:, order],
         "target_m": (w["target_m"] @ rot.T)[:, order],
-        "centre_m": w["centre_m"] @ rot.T,
+        "centre_m": (w["centre_m"] @ rot.T)[:, order],
         "obstacle_pos_m": w["obstacle_pos_m"] @ rot.T,
         "obstacle_vel_m_s": w["obstacle_vel_m_s"] @ rot.T,
     }

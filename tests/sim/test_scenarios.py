@@ -34,10 +34,11 @@ def test_scenario_counts_match_name_and_spawn_is_safe(name):
     assert (layout.targets_m[:, 0] > layout.positions_m[:, 0]).all()
     np.testing.assert_allclose(layout.headings_rad, 0.0, atol=1e-12)
     # Every UAV starts inside the swarm field, so it has a contour.
-    dist = np.hypot(*(layout.positions_m - layout.centre_m).T)
+    assert layout.centre_m.shape == (1, 2)  # one swarm
+    dist = np.hypot(*(layout.positions_m - layout.centre_m[0]).T)
     assert (dist < cfg.field.swarm_range_m).all()
     # The virtual centre is ahead of the swarm.
-    assert layout.centre_m[0] > layout.positions_m[:, 0].mean()
+    assert layout.centre_m[0, 0] > layout.positions_m[:, 0].mean()
 
 
 @pytest.mark.parametrize("name", scenario_names())

@@ -14,6 +14,7 @@ from remarl_fc.flight.status import Status
 from remarl_fc.flight.tracking import VehicleTrack
 from remarl_fc.frames import GeoPoint, heading_to_yaw, ne_to_sim, sim_to_ne
 from remarl_fc.policy_io import load_policy
+from sim.encounters import Family, sample_family
 from sim.observation import NEIGHBOUR_COLUMNS, ObservationLayout, build_observations
 from sim.scenarios import load_scenario
 from sim.spawn import virtual_centre_and_velocity
@@ -108,11 +109,11 @@ def test_start_fixes_the_virtual_centre_like_the_simulator():
     )
     np.testing.assert_allclose(c.swarm_vel, vel)
     np.testing.assert_allclose(c.centre0, centre)
-    np.testing.assert_allclose(c.centre_at(3.0), centre)
-    np.testing.assert_allclose(c.centre_at(7.5), centre + 4.5 * vel)
-    # flying east at 10 m/s, 40 m ahead of the foremost (x = 60 m) vehicle
-    np.testing.assert_allclose(vel, [10.0, 0.0], atol=1e-12)
-    assert c.centre0[0] == pytest.approx(100.0)
+    np.testing.assert_allclose(c.centre_at(3.0), np.repeat(centre, 3, axis=0))
+    np.testing.assert_allclose(c.centre_at(7.5), np.repeat(centre + 4.5 * vel, 3, axis=0))
+    # one swarm flying east at 10 m/s, 40 m ahead of the foremost (x = 60 m) vehicle
+    np.testing.assert_allclose(vel, [[10.0, 0.0]], atol=1e-12)
+    assert c.centre0[0, 0] == pytest.approx(100.0)
 
 
 # -- decide: arcs ---------------------------------------------------------------------------
@@ -249,7 +250,7 @@ def test_observation_is_the_shared_builder():
         heading[None],
         vel_xy[None],
         ne_to_sim(targets)[None],
-        (centre + swarm_vel * (now - 100.0))[None],
+        np.repeat(centre + swarm_vel * (now - 100.0), 3, axis=0)[None],
         ne_to_sim(obstacles)[None],
         ne_to_sim(obstacle_vel)[None],
     ).flat()
@@ -501,3 +502,23 @@ def test_version_1_ignores_the_swarm_picture():
     b = given.decide(0.5, start, NO_OBSTACLES, NO_OBSTACLES, swarm=nobody)
     np.testing.assert_array_equal(a.obs, b.obs)
     assert a.obs.shape == (2, LAYOUT.size)
+
+
+def test_two_swarms_decide_as_in_the_simulator():
+    """A mission of two crossing swarms: each vehicle's virtual centre is its own swarm's, as
+    in the simulator, so the generalist's first decision is the simulator's."""
+    family = Family("two", "swarms", uavs=6)
+    cfg, episode = sample_family(family, 0, [0])
+    policy = load_policy("generalist")
+    sim = SwarmSim(cfg)
+    state = sim.start(episode, np.random.default_rng(0))
+    obs = sim.observe(state, layout=policy.layout).flat()
+    spec = ControlSpec.from_policy_meta(policy.meta)
+    c = SwarmController(policy, spec, sim_to_ne(state.target_m[0]), groups=cfg.uav.groups)
+    spawn = sim_to_ne(state.pos_m[0])
+    c.start(spawn, 0.0)
+    np.testing.assert_allclose(c.centre0, state.centre_m[0], atol=1e-9)
+    assert not np.allclose(c.centre0[0], c.centre0[1])  # two swarms, two centres
+    d = c.decide(0.0, spawn, np.zeros((0, 2)), np.zeros((0, 2)))
+    np.testing.assert_allclose(d.obs, obs[0], atol=1e-6)
+    np.testing.assert_allclose(d.action, policy.act(obs)[0], atol=1e-6)

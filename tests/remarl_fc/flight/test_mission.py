@@ -174,6 +174,9 @@ def test_initial_yaw_points_each_vehicle_at_its_target(tmp_path):
         ("slot = 1", "slot = -1", "vehicle[0].slot", "≥ 0"),
         ("slot = 1", "slot = 0.5", "vehicle[0].slot", "integer"),
         ("alt_m = 25.0", "alt_m = 0.0", "vehicle[0].alt_m", "> 0"),
+        ("alt_m = 25.0", "alt_m = 25.0\ngroup = -1", "vehicle[0].group", "≥ 0"),
+        ("alt_m = 25.0", "alt_m = 25.0\ngroup = 0.5", "vehicle[0].group", "integer"),
+        ("alt_m = 25.0", "alt_m = 25.0\ngroup = 2", "vehicle.group", "without gaps"),
         ("alt_m = 25.0", "alt = 25.0", "vehicle[0].alt", "unknown key"),
         ("target = { north_m = 150.0, east_m = 270.0 }\n", "", "vehicle[0].target", "missing"),
         ("target = { north_m = 150.0, east_m = 270.0 }", "target = 5", "vehicle[0].target", "give"),
@@ -436,6 +439,19 @@ def test_from_scenario_with_a_drawn_episode_flies_its_targets():
     assert [v.slot for v in m.by_slot()] == list(range(6))
     np.testing.assert_array_equal(m.targets_ne_m(), sim_to_ne(episode.target_m[0]))
     m.check_policy((1, 50), cfg.uav.speed_m_s, cfg.dt_s, cfg.d_col_m)
+
+
+def test_vehicles_fly_in_their_groups(tmp_path):
+    m = load_mission(write(tmp_path, replace("alt_m = 25.0", "alt_m = 25.0\ngroup = 1")))
+    assert m.by_slot()[1].group == 1 and m.by_slot()[0].group == 0  # the default
+    assert m.groups() == (0, 1)
+    assert load_mission(write(tmp_path, VALID)).groups() == (0, 0)
+
+
+def test_from_scenario_keeps_the_families_swarms():
+    cfg, episode = sample_family(Family("two", "swarms", uavs=5), 0, [0])
+    m = Mission.from_scenario(cfg, ORIGIN, episode=episode)
+    assert m.groups() == cfg.uav.groups == (0, 0, 0, 1, 1)
 
 
 def test_from_scenario_alt_and_initial_yaw():
