@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from sim.config import SWARM_FIELDS
+from sim.config import SWARM_FIELDS, TEACHERS
 from sim.setnet import ATTENTION_HEADS, POOLINGS
 
 
@@ -340,7 +340,7 @@ class GeneralistConfig:
         check_at_least(self, 0, "max_neighbours", "warmup_transitions")
         check(0 <= self.noise_end <= self.noise_start, "noise_end", "must be in [0, noise_start]")
         check(self.device in ("cpu", "cuda", "auto"), "device", 'must be "cpu", "cuda" or "auto"')
-        check(self.teacher in ("none", "orca-shield"), "teacher", 'must be "none" or "orca-shield"')
+        check(self.teacher in TEACHERS, "teacher", f"must be one of {TEACHERS}")
         check(self.bc_weight >= 0, "bc_weight", "must be >= 0")
         check(0 < self.bc_fraction <= 1, "bc_fraction", "must be in (0, 1]")
         check_at_least(self, 0, "teacher_transitions", "bc_updates")

@@ -51,6 +51,10 @@ class FieldSources:
     swarm_speed_m_s: float
     obstacle_mask: BoolArray | None = None
 
+    def __post_init__(self) -> None:
+        if self.centre_m.ndim != 3 or self.centre_m.shape[-1] != 2:
+            raise ValueError(f"centre_m is {self.centre_m.shape}: give (B, G, 2), a p* per swarm")
+
     @property
     def num_envs(self) -> int:
         """B, the batch size."""

@@ -200,6 +200,10 @@ def build_observations(
     Returns:
         `Observations` (rows, mask, sensed).
     """
+    if centre_m.shape != own_pos_m.shape:
+        raise ValueError(
+            f"centre_m is {centre_m.shape}: give each UAV's virtual centre, {own_pos_m.shape}"
+        )
     common = (
         layout,
         own_pos_m,

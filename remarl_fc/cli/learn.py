@@ -28,7 +28,7 @@ from remarl_fc.cli.common import (
 )
 from remarl_fc.cli.suite import add_eval_suite_flags, cmd_eval_suite
 from remarl_fc.errors import ConfigError
-from sim.config import SWARM_FIELDS
+from sim.config import SWARM_FIELDS, TEACHERS
 from sim.evaluation import evaluation_seed
 from sim.setnet import POOLINGS
 
@@ -110,7 +110,7 @@ def add_train(sub: Any) -> None:
     add_choice(
         p,
         "--teacher",
-        ["none", "orca-shield"],
+        list(TEACHERS),
         help="generalist: learn from ORCA through the shield as well (PPO: the teacher labels "
         "the states the policy's own rollouts visit; TD3: clone, then TD3+BC)",
     )

@@ -511,7 +511,7 @@ def v2_observations(policy, n: int, intruders: int, seed: int = 0, envs: int = 2
         rng.uniform(-np.pi, np.pi, (envs, n)),
         rng.normal(0, 10, (envs, n, 2)),
         pos + rng.uniform(-500, 500, (envs, n, 2)),
-        pos.mean(axis=1),
+        np.repeat(pos.mean(axis=1, keepdims=True), n, axis=1),  # one swarm's p*
         rng.uniform(-150, 150, (envs, intruders, 2)),
         rng.normal(0, 5, (envs, intruders, 2)),
     ).flat()

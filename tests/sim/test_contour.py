@@ -24,7 +24,7 @@ VS = 10.0
 def lone_obstacle(at=(0.0, 0.0)):
     """One obstacle, the swarm's virtual centre far away (no swarm field near the obstacle)."""
     return FieldSources(
-        np.array([[at]], dtype=float), np.array([[2.5]]), np.array([[5000.0, 5000.0]]), VS
+        np.array([[at]], dtype=float), np.array([[2.5]]), np.array([[[5000.0, 5000.0]]]), VS
     )
 
 

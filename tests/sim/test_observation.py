@@ -78,7 +78,7 @@ def test_rows_nearest_first_within_range_and_aperture():
         np.zeros((1, 1)),
         np.array([[[10.0, 0.0]]]),
         np.array([[[200.0, 0.0]]]),
-        np.array([[40.0, 0.0]]),
+        np.array([[[40.0, 0.0]]]),
         obstacles,
         vel,
     )
@@ -100,7 +100,7 @@ def test_unused_rows_are_zero_and_masked_and_flat_layout():
         np.zeros((1, 2)),
         np.zeros((1, 2, 2)),
         np.ones((1, 2, 2)),
-        np.zeros((1, 2)),
+        np.zeros((1, 2, 2)),
         np.array([[[50.0, 0.0]]]),
         np.zeros((1, 1, 2)),
     )
@@ -120,7 +120,7 @@ def test_heading_frame_puts_a_target_to_the_left_on_positive_y():
         np.full((1, 1), np.pi / 2),
         np.array([[[0.0, 10.0]]]),
         np.array([[[-100.0, 0.0]]]),
-        np.zeros((1, 2)),
+        np.zeros((1, 1, 2)),
         np.zeros((1, 0, 2)),
         np.zeros((1, 0, 2)),
     )
@@ -134,7 +134,7 @@ def test_far_targets_are_clipped():
         np.zeros((1, 1)),
         np.zeros((1, 1, 2)),
         np.array([[[1e6, 0.0]]]),
-        np.zeros((1, 2)),
+        np.zeros((1, 1, 2)),
         np.zeros((1, 0, 2)),
         np.zeros((1, 0, 2)),
     )
@@ -200,7 +200,7 @@ def test_v2_neighbours_nearest_first_in_range_and_sector_never_self():
         heading,
         vel,
         np.full((1, 5, 2), 300.0),
-        np.zeros((1, 2)),
+        np.zeros((1, 5, 2)),
         np.zeros((1, 0, 2)),
         np.zeros((1, 0, 2)),
         commanded_heading_rad=heading,

@@ -65,7 +65,7 @@ def test_arc_scores_batched_equal_per_environment(external):
     turn = rng.uniform(-A_MAX, A_MAX, (b, n))
     levels = rng.uniform(0, 0.01, (b, n))
     src = FieldSources(
-        rng.uniform(0, 300, (b, m, 2)), np.full((b, m), 2.5), rng.uniform(0, 300, (b, 2)), 10.0
+        rng.uniform(0, 300, (b, m, 2)), np.full((b, m), 2.5), rng.uniform(0, 300, (b, 1, 2)), 10.0
     )
     rcfg = RewardConfig(external=external)
     pts = arc_points(start, heading, turn, L, substep_fractions(8))
@@ -83,7 +83,7 @@ def test_arc_scores_batched_equal_per_environment(external):
 def test_reward_sees_the_arc_of_the_action_just_taken():
     """The newest arc is part of S: three different last actions give three Contour rewards."""
     src = FieldSources(
-        np.array([[[60.0, 45.0]]]), np.array([[2.5]]), np.array([[500.0, 0.0]]), 10.0
+        np.array([[[60.0, 45.0]]]), np.array([[2.5]]), np.array([[[500.0, 0.0]]]), 10.0
     )
     level = potential(np.array([[[60.0, 0.0]]]), src, FIELD)
     rewards = []
@@ -104,7 +104,7 @@ def test_reward_sees_the_arc_of_the_action_just_taken():
 
 
 def test_levels_are_the_field_at_the_pso_adjusted_positions():
-    src = FieldSources(np.zeros((1, 0, 2)), np.zeros((1, 0)), np.array([[0.0, 0.0]]), 10.0)
+    src = FieldSources(np.zeros((1, 0, 2)), np.zeros((1, 0)), np.zeros((1, 1, 2)), 10.0)
     positions = np.array([[[30.0, 0.0], [30.0, 10.0], [-40.0, 5.0]]])
     levels, result = assign_contour_levels(
         positions, src, FIELD, PSOConfig(threshold_m=30.0), np.random.default_rng(0)
