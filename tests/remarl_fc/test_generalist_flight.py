@@ -109,22 +109,35 @@ def neighbour_count(layout: ObservationLayout, obs: NDArray[np.floating[Any]]) -
     return np.asarray(obs)[..., layout.blocks()["neighbour_mask"]].sum(axis=-1)
 
 
-def expected_neighbours(layout: ObservationLayout, rows: list[dict[str, Any]]) -> list[int]:
-    """Per vehicle of one decision's log rows: the others in its range and aperture (≤ k)."""
+LOG_ROUNDING_M, LOG_ROUNDING_RAD = 0.05, 1e-3
+"""Slack for the decision log's rounding (positions to 1 cm, headings to 1e-4 rad): a vehicle
+that close to the edge of the range or the aperture may be seen either way."""
+
+
+def expected_neighbours(
+    layout: ObservationLayout, rows: list[dict[str, Any]]
+) -> list[tuple[int, int]]:
+    """Per vehicle of one decision's log rows: the fewest and most others it can see in its
+    range and aperture (≤ k), the most counting those on the edge within the log's rounding."""
     flown = [r for r in rows if r["status"] in ("controlled", "reached")]
     out = []
     for r in rows:
         heading = r["heading_rad"]
         ahead = np.array([math.cos(heading), math.sin(heading)])  # simulator frame
-        seen = 0
+        sure = maybe = 0
         for o in flown:
             if o is r:
                 continue
             d = sim_to_ne(np.array(o["ne_m"]) - np.array(r["ne_m"]))  # (east, north) = (x, y)
             dist = float(np.hypot(*d))
-            if dist <= layout.range_m and d @ ahead >= dist * math.cos(layout.aperture_rad / 2):
-                seen += 1
-        out.append(min(seen, layout.max_neighbours))
+            bearing = math.acos(max(-1.0, min(1.0, float(d @ ahead) / max(dist, 1e-9))))
+            half = layout.aperture_rad / 2
+            if dist <= layout.range_m - LOG_ROUNDING_M and bearing <= half - LOG_ROUNDING_RAD:
+                sure += 1
+            elif dist <= layout.range_m + LOG_ROUNDING_M and bearing <= half + LOG_ROUNDING_RAD:
+                maybe += 1
+        k = layout.max_neighbours
+        out.append((min(sure, k), min(sure + maybe, k)))
     return out
 
 
@@ -170,7 +183,8 @@ async def test_a_generalist_flies_any_number_of_vehicles_on_the_mock(n, tmp_path
     seen_any = 0
     for t, step in decisions.items():
         got = [int(neighbour_count(policy.layout, np.array(r["obs"]))) for r in step]
-        assert got == expected_neighbours(policy.layout, step), t
+        bounds = expected_neighbours(policy.layout, step)
+        assert all(lo <= g <= hi for g, (lo, hi) in zip(got, bounds, strict=True)), (t, got, bounds)
         seen_any += sum(got)
     assert (seen_any > 0) == (n > 1)
 
