@@ -101,7 +101,7 @@ class FieldConfig:
     swarm_peak: bool = True
     """Whether Φ holds the swarms' peaks Φ_s at all. False: Φ = Σ Φ_o, a training choice for
     UAVs that fly no common formation (`GeneralistConfig.swarm_field`). Several swarms
-    (`UAVConfig.groups`) each have their own peak at their own p*; see docs/MODEL.md §20–21."""
+    (`UAVConfig.groups`) each have their own peak at their own p*; see docs/MODEL.md §15, §20."""
 
     continuous: bool = True
     """Shift each source's field down by its value at its range (I/R²), so Φ is continuous and
@@ -249,7 +249,7 @@ class UAVConfig:
     """The swarm each UAV flies with, 0…G−1, one per UAV; empty: one swarm (the paper's).
     Each swarm has its own virtual centre p* (from its own starts and targets) and its own peak
     in Φ: two swarms that cross, or UAVs on unrelated routes, each keep their own formation
-    reference instead of one p* between them (docs/MODEL.md §21)."""
+    reference instead of one p* between them (docs/MODEL.md §15, §20)."""
 
     def __post_init__(self) -> None:
         _integer(self, "count")
