@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Literal
 
@@ -50,6 +51,20 @@ class FieldValueError(ValueError):
 def _require(ok: bool, field_name: str, message: str) -> None:
     if not ok:
         raise FieldValueError(field_name, message)
+
+
+def groups_problem(groups: Sequence[int], count: int) -> str | None:
+    """Why ``groups`` cannot give the swarm of each of ``count`` UAVs, or None.
+
+    One index per UAV, integers numbering the swarms 0, 1, … without gaps (`UAVConfig.groups`,
+    a mission's ``vehicle.group``).
+    """
+    if len(groups) != count:
+        return f"must hold one swarm index per UAV ({count}), got {len(groups)}"
+    integers = all(isinstance(g, int) and not isinstance(g, bool) for g in groups)
+    if not integers or sorted(set(groups)) != list(range(max(groups) + 1)):
+        return f"must number the swarms 0, 1, … without gaps, got {list(groups)}"
+    return None
 
 
 def _positive(obj: object, *names: str) -> None:
@@ -253,18 +268,8 @@ class UAVConfig:
 
     def __post_init__(self) -> None:
         _integer(self, "count")
-        if self.groups:
-            _require(
-                len(self.groups) == self.count,
-                "groups",
-                f"must hold one swarm index per UAV ({self.count}), got {len(self.groups)}",
-            )
-            _require(
-                all(isinstance(g, int) and not isinstance(g, bool) for g in self.groups)
-                and sorted(set(self.groups)) == list(range(max(self.groups) + 1)),
-                "groups",
-                f"must number the swarms 0, 1, … without gaps, got {list(self.groups)}",
-            )
+        problem = groups_problem(self.groups, self.count) if self.groups else None
+        _require(problem is None, "groups", str(problem))
         for name in ("starts_m", "targets_m"):
             points = getattr(self, name)
             _require(

@@ -385,13 +385,11 @@ def _swarm(
         start = _slots(family.formation, n, enc.spacing_m, gap, rng)
         return start, start + np.array([route, 0.0])
     if enc.paths == "swarms":
-        first, second = (n + 1) // 2, n // 2
+        sizes = np.bincount(group_index(cfg.uav))  # the swarms' sizes (`swarm_groups`)
         angle = math.radians(_uniform(rng, enc.swarm_crossing_deg)) * rng.choice([-1.0, 1.0])
         starts, targets = [], []
         lead = float(_uniform(rng, enc.swarm_offset_m))
-        groups = [
-            _slots(family.formation, k, enc.spacing_m, gap, rng) for k in (first, second) if k
-        ]
+        groups = [_slots(family.formation, int(k), enc.spacing_m, gap, rng) for k in sizes]
         # Each swarm starts clear of the other: half a route beyond both formations' reach.
         reach = max(float(np.hypot(*g.T).max()) for g in groups)
         half = max(0.5 * route, 2 * reach + gap + abs(lead))

@@ -148,11 +148,10 @@ def draw_velocities(
 def draw_centre(
     ax: Any, centre_m: FloatArray, *, colour: str, size: float, lw: float, **style: Any
 ) -> None:
-    """The virtual centres p*, (2,) or one per swarm (G, 2), as open circles."""
-    centres = np.reshape(centre_m, (-1, 2))
+    """The virtual centres p*, one per swarm (G, 2), as open circles."""
     ax.scatter(
-        centres[:, 0],
-        centres[:, 1],
+        centre_m[:, 0],
+        centre_m[:, 1],
         marker="o",
         facecolors="none",
         edgecolors=colour,

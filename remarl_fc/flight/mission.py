@@ -45,7 +45,7 @@ from numpy.typing import NDArray
 
 from remarl_fc.errors import ConfigError, PolicyError, PolicySpecMismatch
 from remarl_fc.frames import GeoPoint, geodetic_to_ned, heading_to_yaw, sim_to_ne
-from sim.config import ScenarioConfig
+from sim.config import ScenarioConfig, groups_problem
 from sim.spawn import EpisodeStart, group_index, swarm_layout, target_spacing_problem
 
 FloatArray = NDArray[np.float64]
@@ -335,13 +335,9 @@ def mission_from_dict(data: dict[str, Any], *, source: str) -> Mission:
     ids = [p.system_id for p in plans]
     if len(set(ids)) != len(ids):
         raise MissionError(f"system ids repeat: {ids}", source=source, key="vehicle.system_id")
-    groups = sorted({p.group for p in plans})
-    if groups != list(range(len(groups))):
-        raise MissionError(
-            f"groups are {groups}; number the swarms 0, 1, … without gaps",
-            source=source,
-            key="vehicle.group",
-        )
+    problem = groups_problem([p.group for p in plans], len(plans))
+    if problem is not None:
+        raise MissionError(problem, source=source, key="vehicle.group")
     fence = _geofence(data["geofence"], source) if "geofence" in data else None
     if fence is not None:
         for k, plan in enumerate(plans):
