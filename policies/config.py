@@ -235,6 +235,26 @@ class GeneralistConfig:
     bc_fraction: float = 0.5
     """Share of the run's budget over which α falls linearly from ``bc_weight`` to 0."""
 
+    dagger_fraction: float = 0.0
+    """PPO with a teacher: share of the run spent in DAgger before PPO (0: none). The student
+    flies (the teacher with probability β), the teacher labels every state flown, and the actor
+    takes supervised steps on all the labels so far; the value network learns the rollouts'
+    returns meanwhile (`policies.generalist_dagger`). PPO then goes on from the clone, with
+    the cloning term's α where ``bc_fraction`` has it."""
+
+    dagger_beta: float = 1.0
+    """DAgger: β at the start, the chance that a UAV flies the teacher's action rather than the
+    student's; it falls linearly to 0 over the first half of the DAgger phase."""
+
+    dagger_rows: int = 1_000_000
+    """DAgger: the aggregated labels kept (the oldest dropped first)."""
+
+    dagger_updates: int = 100
+    """DAgger: supervised steps of the actor per iteration."""
+
+    dagger_batch: int = 1024
+    """DAgger: labels per supervised step."""
+
     learner: str = "ppo"
     """"ppo" (on-policy: clipped surrogate over rollouts of every world, GAE,
     `policies.generalist_ppo`) or "td3" (off-policy: one replay buffer of every UAV's
@@ -343,4 +363,12 @@ class GeneralistConfig:
         check(self.teacher in TEACHERS, "teacher", f"must be one of {TEACHERS}")
         check(self.bc_weight >= 0, "bc_weight", "must be >= 0")
         check(0 < self.bc_fraction <= 1, "bc_fraction", "must be in (0, 1]")
-        check_at_least(self, 0, "teacher_transitions", "bc_updates")
+        check_at_least(self, 0, "teacher_transitions", "bc_updates", "dagger_updates")
+        check_at_least(self, 1, "dagger_rows", "dagger_batch")
+        check(0 <= self.dagger_fraction < 1, "dagger_fraction", "must be in [0, 1)")
+        check(0 <= self.dagger_beta <= 1, "dagger_beta", "must be in [0, 1]")
+        check(
+            self.dagger_fraction == 0 or (self.teacher != "none" and self.learner == "ppo"),
+            "dagger_fraction",
+            'needs a teacher (e.g. "orca-shield") and the "ppo" learner',
+        )

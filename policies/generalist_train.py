@@ -519,9 +519,9 @@ class RunBook:
         return bool(self.cfg.minutes) and self.elapsed() >= 60 * self.cfg.minutes
 
     def fraction_done(self) -> float:
-        """The run's fraction of its budget, in [0, 1] (0 without one)."""
+        """The run's fraction of its budget, in [0, 1] (of ``total_iterations`` without one)."""
         if not self.cfg.minutes:
-            return 0.0
+            return min(self.iteration / self.cfg.total_iterations, 1.0)
         return min(self.elapsed() / max(60 * self.cfg.minutes, 1e-9), 1.0)
 
     def checkpoint(self, path: Path) -> None:

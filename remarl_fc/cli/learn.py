@@ -127,6 +127,13 @@ def add_train(sub: Any) -> None:
         help="generalist with a teacher: the share of the run over which the cloning weight "
         "falls to 0 (default 0.5)",
     )
+    p.add_argument(
+        "--dagger-fraction",
+        type=float,
+        metavar="F",
+        help="generalist, PPO with a teacher: the share of the run spent in DAgger first (the "
+        "student flies, the teacher labels, supervised steps on every label; default 0: none)",
+    )
     add_choice(
         p,
         "--pooling",
@@ -313,6 +320,7 @@ def generalist_config(args: argparse.Namespace) -> GeneralistConfig:
         "teacher": args.teacher,
         "bc_weight": args.bc_weight,
         "bc_fraction": args.bc_fraction,
+        "dagger_fraction": args.dagger_fraction,
         "separation_horizon_s": args.separation_horizon,
         "separation_weight": args.separation_weight,
     }
