@@ -434,6 +434,7 @@ def test_a_bad_family_weight_flag_says_what_to_write(text):
         ("--bc-fraction", "0", "bc_fraction"),
         ("--ppo-min-std", "2", "ppo_min_std"),
         ("--separation-weight", "-1", "separation_weight"),
+        ("--dagger-fraction", "0.5", "dagger_fraction"),  # without a teacher
     ],
 )
 def test_a_generalist_flag_out_of_range_is_a_clear_error(tmp_path, capsys, flag, value, setting):
@@ -462,12 +463,14 @@ def test_train_generalist_flags_reach_the_config(tmp_path, monkeypatch):
     argv += ["--separation-horizon", "8", "--separation-weight", "0"]
     argv += ["--pooling", "max-attention", "--ppo-min-std", "0.1"]
     argv += ["--teacher", "orca-shield", "--bc-weight", "1.5", "--bc-fraction", "0.8"]
+    argv += ["--dagger-fraction", "0.25"]
     assert main([*argv, "--out", str(tmp_path / "run")]) == 0
     ((cfg, out, resume),) = seen
     assert cfg.swarm_field == "formation" and cfg.family_weights == (("swarms-*", 2.0),)
     assert cfg.separation_horizon_s == 8.0 and cfg.separation_weight == 0.0
     assert cfg.pooling == "max-attention" and cfg.ppo_min_std == 0.1
     assert (cfg.teacher, cfg.bc_weight, cfg.bc_fraction) == ("orca-shield", 1.5, 0.8)
+    assert cfg.dagger_fraction == 0.25
     assert cfg.minutes == 2 and cfg.seed == 4 and out == tmp_path / "run" and not resume
     assert GeneralistConfig().swarm_field == "all"  # the paper's reward unless asked
     seen.clear()
