@@ -240,7 +240,7 @@ class GeneralistConfig:
     flies (the teacher with probability β), the teacher labels every state flown, and the actor
     takes supervised steps on all the labels so far; the value network learns the rollouts'
     returns meanwhile (`policies.generalist_dagger`). PPO then goes on from the clone, with
-    the cloning term's α where ``bc_fraction`` has it."""
+    the cloning term's α where ``bc_fraction`` has it; 1: DAgger alone, the whole run."""
 
     dagger_beta: float = 1.0
     """DAgger: β at the start, the chance that a UAV flies the teacher's action rather than the
@@ -365,7 +365,7 @@ class GeneralistConfig:
         check(0 < self.bc_fraction <= 1, "bc_fraction", "must be in (0, 1]")
         check_at_least(self, 0, "teacher_transitions", "bc_updates", "dagger_updates")
         check_at_least(self, 1, "dagger_rows", "dagger_batch")
-        check(0 <= self.dagger_fraction < 1, "dagger_fraction", "must be in [0, 1)")
+        check(0 <= self.dagger_fraction <= 1, "dagger_fraction", "must be in [0, 1]")
         check(0 <= self.dagger_beta <= 1, "dagger_beta", "must be in [0, 1]")
         check(
             self.dagger_fraction == 0 or (self.teacher != "none" and self.learner == "ppo"),

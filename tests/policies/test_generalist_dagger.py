@@ -58,7 +58,7 @@ def test_beta_falls_from_its_start_to_zero_over_half_the_phase():
     [
         ({"dagger_fraction": 0.5}, "needs a teacher"),
         ({"dagger_fraction": 0.5, "teacher": "orca-shield", "learner": "td3"}, "needs a teacher"),
-        ({"dagger_fraction": 1.0, "teacher": "orca-shield"}, r"in \[0, 1\)"),
+        ({"dagger_fraction": 1.5, "teacher": "orca-shield"}, r"in \[0, 1\]"),
         ({"dagger_beta": 1.5}, r"in \[0, 1\]"),
         ({"dagger_batch": 0}, ">= 1"),
     ],
