@@ -249,8 +249,12 @@ class GeneralistConfig:
     dagger_rows: int = 1_000_000
     """DAgger: the aggregated labels kept (the oldest dropped first)."""
 
-    dagger_updates: int = 100
-    """DAgger: supervised steps of the actor per iteration."""
+    dagger_updates: int = 250
+    """DAgger: supervised steps of the actor per iteration (≈ the time of the iteration's
+    rollout on one core, when the teacher labels every state)."""
+
+    dagger_lr: float = 1e-3
+    """DAgger: Adam learning rate of the actor's supervised steps (its own optimiser)."""
 
     dagger_batch: int = 1024
     """DAgger: labels per supervised step."""
@@ -367,6 +371,7 @@ class GeneralistConfig:
         check_at_least(self, 1, "dagger_rows", "dagger_batch")
         check(0 <= self.dagger_fraction <= 1, "dagger_fraction", "must be in [0, 1]")
         check(0 <= self.dagger_beta <= 1, "dagger_beta", "must be in [0, 1]")
+        check(self.dagger_lr > 0, "dagger_lr", "must be > 0")
         check(
             self.dagger_fraction == 0 or (self.teacher != "none" and self.learner == "ppo"),
             "dagger_fraction",

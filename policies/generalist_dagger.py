@@ -8,8 +8,8 @@ half of the phase) and the student's deterministic action otherwise, both with N
 the aggregated data set of the states the student's own mixture visits). Then:
 
 - the labels join `Labels`, a ring of the last ``dagger_rows`` (observation, teacher action)
-  pairs, and the actor takes ``dagger_updates`` supervised steps (mean squared error) on
-  minibatches of ``dagger_batch`` drawn from all of it;
+  pairs, and the actor takes ``dagger_updates`` supervised steps (mean squared error, Adam of
+  its own at ``dagger_lr``) on minibatches of ``dagger_batch`` drawn from all of it;
 - the value network learns the rollout's GAE targets (``ppo_epochs`` passes, the value loss
   alone), so that PPO starts from a critic of the policy it inherits.
 
@@ -85,13 +85,33 @@ def dagger_beta(cfg: GeneralistConfig, frac: float) -> float:
     return cfg.dagger_beta * max(0.0, 1.0 - frac / half) if half > 0 else 0.0
 
 
-def clone_update(nets: PPONets, obs: torch.Tensor, teacher: torch.Tensor, clip: float) -> float:
-    """One supervised step of the actor toward the teacher's actions (mean squared error)."""
-    loss = ((nets.actor(obs) - teacher) ** 2).mean()
-    nets.opt.zero_grad(set_to_none=True)
+@dataclass
+class Dagger:
+    """The DAgger phase's state: the aggregated labels and the actor's own optimiser."""
+
+    labels: Labels
+    opt: torch.optim.Optimizer
+
+    @classmethod
+    def create(cls, cfg: GeneralistConfig, size: int, nets: PPONets) -> Dagger:
+        """Empty labels of observations of length ``size``; Adam over ``nets.actor``."""
+        opt = torch.optim.Adam(nets.actor.parameters(), lr=cfg.dagger_lr)
+        return cls(Labels.create(cfg.dagger_rows, size), opt)
+
+
+def clone_update(
+    actor: nn.Module,
+    opt: torch.optim.Optimizer,
+    obs: torch.Tensor,
+    teacher: torch.Tensor,
+    clip: float,
+) -> float:
+    """One supervised step of ``actor`` toward the teacher's actions (mean squared error)."""
+    loss = ((actor(obs) - teacher) ** 2).mean()
+    opt.zero_grad(set_to_none=True)
     loss.backward()
-    nn.utils.clip_grad_norm_(list(nets.actor.parameters()), clip)
-    nets.opt.step()
+    nn.utils.clip_grad_norm_(list(actor.parameters()), clip)
+    opt.step()
     return float(loss.detach())
 
 
@@ -106,7 +126,7 @@ def value_update(nets: PPONets, obs: torch.Tensor, target: torch.Tensor, clip: f
 
 
 def dagger_iteration(
-    book: RunBook, labels: Labels, recent: list[dict[str, Any]]
+    book: RunBook, dagger: Dagger, recent: list[dict[str, Any]]
 ) -> dict[str, float]:
     """Fly one rollout of every world with the β-mixture, aggregate its labels, learn.
 
@@ -123,6 +143,7 @@ def dagger_iteration(
     )
 
     cfg, nets, worlds, device, rng = book.cfg, book.nets, book.worlds, book.device, book.rng
+    labels = dagger.labels
     beta = dagger_beta(cfg, book.fraction_done())
     flown: list[list[Any]] = [[] for _ in worlds]
     for _ in range(cfg.ppo_rollout):
@@ -157,7 +178,8 @@ def dagger_iteration(
     for _ in range(cfg.dagger_updates):
         obs, taught = labels.sample(cfg.dagger_batch, rng)
         clone_loss = clone_update(
-            nets,
+            nets.actor,
+            dagger.opt,
             torch.from_numpy(obs).to(device),
             torch.from_numpy(taught).to(device),
             cfg.grad_clip,

@@ -27,7 +27,7 @@ from torch import Tensor, nn
 
 from policies.config import GeneralistConfig
 from policies.generalist import SetNet
-from policies.generalist_dagger import Labels, dagger_iteration
+from policies.generalist_dagger import Dagger, dagger_iteration
 from sim.arrays import BoolArray
 from sim.observation import ObservationLayout
 
@@ -178,16 +178,16 @@ def train_generalist_ppo(
     worlds, layout, device, rng = book.worlds, book.layout, book.device, book.rng
     recent: list[dict[str, Any]] = []
     env_s = learn_s = 0.0
-    labels = Labels.create(cfg.dagger_rows, layout.size) if cfg.dagger_fraction > 0 else None
+    dagger = Dagger.create(cfg, layout.size, nets) if cfg.dagger_fraction > 0 else None
     try:
         # ---- DAgger first, where asked (`policies.generalist_dagger`)
         while (
-            labels is not None
+            dagger is not None
             and book.fraction_done() < cfg.dagger_fraction
             and book.iteration < cfg.total_iterations
             and not book.out_of_time()
         ):
-            scalars = dagger_iteration(book, labels, recent)
+            scalars = dagger_iteration(book, dagger, recent)
             book.log(recent, scalars, progress, every=1)
             book.save_and_validate_if_due()
         while book.iteration < cfg.total_iterations and not book.out_of_time():

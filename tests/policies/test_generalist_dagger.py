@@ -61,6 +61,7 @@ def test_beta_falls_from_its_start_to_zero_over_half_the_phase():
         ({"dagger_fraction": 1.5, "teacher": "orca-shield"}, r"in \[0, 1\]"),
         ({"dagger_beta": 1.5}, r"in \[0, 1\]"),
         ({"dagger_batch": 0}, ">= 1"),
+        ({"dagger_lr": 0.0}, "> 0"),
     ],
 )
 def test_bad_dagger_settings_are_refused_by_name(changes, message):
@@ -76,9 +77,10 @@ def test_supervised_steps_fit_the_actor_to_the_labels():
     obs = torch.from_numpy(rng.normal(0, 1, (256, LAYOUT.size)).astype(np.float32))
     teacher = torch.tanh(obs[:, 0] - obs[:, 1])  # something the self block carries
     value_before = [p.detach().clone() for p in nets.value.parameters()]
-    first = clone_update(nets, obs, teacher, cfg.grad_clip)
+    opt = torch.optim.Adam(nets.actor.parameters(), lr=cfg.dagger_lr)
+    first = clone_update(nets.actor, opt, obs, teacher, cfg.grad_clip)
     for _ in range(300):
-        last = clone_update(nets, obs, teacher, cfg.grad_clip)
+        last = clone_update(nets.actor, opt, obs, teacher, cfg.grad_clip)
     assert last < 0.25 * first
     # only the actor learns from the labels
     for before, after in zip(value_before, nets.value.parameters(), strict=True):
