@@ -9,6 +9,8 @@ firmware's defaults, at a higher speed-up.
 
 from __future__ import annotations
 
+from typing import Any
+
 import pytest
 
 from remarl_fc.mavlink.consts import (
@@ -86,12 +88,26 @@ async def test_adsb_vehicle_streams_at_the_interval_asked_for(sitl, flavour):
     async with sitl(flavour=flavour, scenario=load_scenario("3u2o")) as (fleet, gcs):
         gcs.hello()
         await gcs.wait_for("ADSB_VEHICLE")  # the receiver's own rate until asked
+        # The rate is read off what the mock sends, stamped in its own simulated time: what the
+        # ground station has received by the end of a window lags by however far its receive
+        # loop is behind (under load, reports sent late in the window are still unread).
+        sent: list[float] = []
+        send = fleet.links.send
+
+        def spy(i: int, msg: Any, *, component: int | None = None) -> None:
+            if i == 0 and msg.get_type() == "ADSB_VEHICLE":
+                sent.append(fleet.now_s())
+            send(i, msg, component=component)
+
+        fleet.links.send = spy  # type: ignore[method-assign]
 
         async def count_for(seconds: float) -> float:
             """ADSB_VEHICLE reports per intruder per second over the next ``seconds``."""
             start = fleet.now_s() + 0.05
             await gcs.wait_sim(seconds + 0.05)
-            got = gcs.count("ADSB_VEHICLE", since_s=start)
+            got = sum(1 for t in sent if start <= t < start + seconds)
+            heard = gcs.count("ADSB_VEHICLE", since_s=start)
+            assert heard > 0 or not got  # what was sent reaches the ground station
             return got / fleet.traffic.count / seconds
 
         assert await count_for(4.0) == pytest.approx(fleet.cfg.adsb_hz, abs=0.3)
