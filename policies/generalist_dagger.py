@@ -132,7 +132,7 @@ def dagger_iteration(
 
     Returns the iteration's scalars (losses, β); finished episodes join ``recent``.
     """
-    from policies.generalist_ppo import _rollout_columns
+    from policies.generalist_ppo import rollout_columns
     from policies.generalist_train import (
         TEACHER_NOISE,
         actor_actions,
@@ -165,7 +165,7 @@ def dagger_iteration(
     del recent[:-2000]
     book.iteration += 1
 
-    columns = _rollout_columns(nets, flown, cfg, device)
+    columns = rollout_columns(nets, flown, cfg, device)
     obs_t = torch.from_numpy(columns["obs"]).to(device)
     target_t = torch.from_numpy(columns["target"]).to(device)
     value_loss = 0.0

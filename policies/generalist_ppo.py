@@ -225,7 +225,7 @@ def train_generalist_ppo(
 
             # ---- advantages per world, then the clipped-surrogate epochs over every UAV
             t1 = time.perf_counter()
-            columns = _rollout_columns(nets, flown, cfg, device)
+            columns = rollout_columns(nets, flown, cfg, device)
             losses: dict[str, float] = {}
             count = len(columns["adv"])
             adv = columns["adv"]
@@ -268,7 +268,7 @@ def train_generalist_ppo(
     return book.finish()
 
 
-def _rollout_columns(
+def rollout_columns(
     nets: PPONets,
     flown: list[list[Any]],
     cfg: GeneralistConfig,

@@ -10,9 +10,9 @@ every world, with the same N(0, 0.1²) noise on its actions as the TD3 teacher p
 every UAV's version-2 observation and the teacher's action there. The last fifth of the sweeps
 is held out; a fresh actor of the shipped shape (`policies.generalist.SetNet`) takes
 ``--steps`` Adam steps (minibatches of 1,024, learning rate 10⁻³ then 3·10⁻⁴ for the second
-half) of mean squared error on the rest. Prints the held-out error, the labels' variance (the
-error of an actor that says 0 everywhere) and, per family, the share of the variance explained
-(R²). With ``--out`` the clone is exported as a generalist policy file, to fly it:
+half, the gradient norm clipped to 1: the DAgger phase's own step) of mean squared error on
+the rest. Prints the held-out error, the labels' variance (the error of an actor that says 0
+everywhere) and, per family, the share of the variance explained (R²). With ``--out`` the clone is exported as a generalist policy file, to fly it:
 ``remarl-fc eval --suite standard --policy clone.safetensors --json``.
 
 It is what showed that the student's observation carries the teacher's avoidance of crossing
@@ -33,6 +33,7 @@ import torch
 from policies.config import GeneralistConfig
 from policies.export import export_generalist
 from policies.generalist import SetNet
+from policies.generalist_dagger import clone_update
 from policies.generalist_train import (
     TEACHER_NOISE,
     advance_world,
@@ -82,8 +83,12 @@ def collect(cfg: GeneralistConfig, sweeps: int) -> dict[str, Any]:
     }
 
 
-def fit(data: dict[str, Any], hidden: int, steps: int, seed: int) -> tuple[SetNet, np.ndarray]:
-    """Train a fresh actor on the kept sweeps; returns it and its squared errors held out."""
+def fit(
+    data: dict[str, Any], hidden: int, steps: int, seed: int, clip: float
+) -> tuple[SetNet, np.ndarray]:
+    """Train a fresh actor on the kept sweeps (the DAgger phase's supervised step,
+    `policies.generalist_dagger.clone_update`, its gradient norm clipped to ``clip``); returns
+    it and its squared errors held out."""
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
     held = data["sweep"] >= np.quantile(data["sweep"], 1.0 - HELD_OUT)
@@ -95,10 +100,7 @@ def fit(data: dict[str, Any], hidden: int, steps: int, seed: int) -> tuple[SetNe
             for group in opt.param_groups:
                 group["lr"] = 3e-4
         idx = torch.from_numpy(rng.integers(0, len(x_fit), BATCH))
-        loss = ((net(x_fit[idx]) - y_fit[idx]) ** 2).mean()
-        opt.zero_grad(set_to_none=True)
-        loss.backward()
-        opt.step()
+        clone_update(net, opt, x_fit[idx], y_fit[idx], clip)
     x_held = torch.from_numpy(data["obs"][held])
     with torch.no_grad():
         pred = torch.cat([net(x_held[i : i + 8192]) for i in range(0, len(x_held), 8192)])
@@ -119,7 +121,7 @@ def main() -> None:
     t0 = time.perf_counter()
     data = collect(cfg, args.sweeps)
     t1 = time.perf_counter()
-    net, err = fit(data, args.hidden, args.steps, args.seed)
+    net, err = fit(data, args.hidden, args.steps, args.seed, cfg.grad_clip)
     t2 = time.perf_counter()
     held = data["sweep"] >= np.quantile(data["sweep"], 1.0 - HELD_OUT)
     label, world = data["label"][held], data["world"][held]
