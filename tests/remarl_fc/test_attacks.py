@@ -42,7 +42,12 @@ def fly_on_mock(*args: Any, **kwargs: Any) -> Coroutine[Any, Any, MockFlight]:
 
 pytestmark = [pytest.mark.asyncio, pytest.mark.network, pytest.mark.timeout(180)]
 
-SPEEDUP = 4.0
+SPEEDUP = 2.0
+"""Simulated seconds per wall second. The attacker, the mock fleet and `fly` share one process
+and its event loop; the attacker's rounds run on the wall clock (80 a second), so under attack
+the flight needs 0.60 of a core at 4× and 0.47 at 2×. At 4× with two other busy processes on
+two cores, three flights in four went stale (`fly` saw no telemetry for 1 simulated second,
+0.25 s of wall time) and held every vehicle; at 2×, four in four flew clean."""
 VICTIM = 2
 
 
