@@ -12,7 +12,8 @@ is held out; a fresh actor of the shipped shape (`policies.generalist.SetNet`) t
 ``--steps`` Adam steps (minibatches of 1,024, learning rate 10⁻³ then 3·10⁻⁴ for the second
 half, the gradient norm clipped to 1: the DAgger phase's own step) of mean squared error on
 the rest. Prints the held-out error, the labels' variance (the error of an actor that says 0
-everywhere) and, per family, the share of the variance explained (R²). With ``--out`` the clone is exported as a generalist policy file, to fly it:
+everywhere) and, per family, the share of the variance explained (R²). With ``--out`` the
+clone is exported as a generalist policy file, to fly it:
 ``remarl-fc eval --suite standard --policy clone.safetensors --json``.
 
 It is what showed that the student's observation carries the teacher's avoidance of crossing

@@ -161,36 +161,47 @@ def _clip_norm(v: FloatArray, limit: FloatArray | float) -> FloatArray:
 
 
 def commanded_velocity(a: Airframes, cfg: VehicleModelConfig) -> FloatArray:
-    """(N, 3) velocity command of every vehicle from its guidance."""
+    """(N, 3) velocity command of every vehicle from its guidance.
+
+    Each guidance mode is computed only where some vehicle flies it: the mock steps this at its
+    physics rate, and most of a flight has every vehicle in one mode.
+    """
     g = a.guidance
+    present = set(g.tolist())
     cmd = np.zeros_like(a.vel_ned_m_s)
     gain = cfg.position_gain_1_s
 
-    hold = g == Guidance.HOLD
-    cmd[hold] = gain * (a.hold_ned_m[hold] - a.pos_ned_m[hold])
-    brake = hold & a.braking
-    cmd[brake, :2] = 0.0  # stop first; the hold point is where the vehicle stops
+    if Guidance.HOLD in present:
+        hold = g == Guidance.HOLD
+        cmd[hold] = gain * (a.hold_ned_m[hold] - a.pos_ned_m[hold])
+        brake = hold & a.braking
+        cmd[brake, :2] = 0.0  # stop first; the hold point is where the vehicle stops
 
-    vel = g == Guidance.VELOCITY
-    cmd[vel] = a.vel_target_m_s[vel]
+    if Guidance.VELOCITY in present:
+        vel = g == Guidance.VELOCITY
+        cmd[vel] = a.vel_target_m_s[vel]
 
-    pos = g == Guidance.POSITION
-    cmd[pos] = gain * (a.pos_target_ned_m[pos] - a.pos_ned_m[pos])
-    cmd[pos, :2] = _clip_norm(cmd[pos, :2], a.speed_limit_m_s[pos])
+    if Guidance.POSITION in present:
+        pos = g == Guidance.POSITION
+        cmd[pos] = gain * (a.pos_target_ned_m[pos] - a.pos_ned_m[pos])
+        cmd[pos, :2] = _clip_norm(cmd[pos, :2], a.speed_limit_m_s[pos])
 
-    climb = g == Guidance.CLIMB
-    cmd[climb, :2] = gain * (a.hold_ned_m[climb, :2] - a.pos_ned_m[climb, :2])
-    climb_err = a.pos_target_ned_m[climb, 2] - a.pos_ned_m[climb, 2]  # < 0 below the target
-    cmd[climb, 2] = np.maximum(-a.climb_m_s[climb], gain * climb_err)
+    if Guidance.CLIMB in present:
+        climb = g == Guidance.CLIMB
+        cmd[climb, :2] = gain * (a.hold_ned_m[climb, :2] - a.pos_ned_m[climb, :2])
+        climb_err = a.pos_target_ned_m[climb, 2] - a.pos_ned_m[climb, 2]  # < 0 below target
+        cmd[climb, 2] = np.maximum(-a.climb_m_s[climb], gain * climb_err)
 
-    land = g == Guidance.LAND
-    cmd[land, :2] = gain * (a.hold_ned_m[land, :2] - a.pos_ned_m[land, :2])
-    height = a.height_m()
-    slow = height < a.slow_below_m
-    cmd[land, 2] = np.where(slow[land], a.slow_descent_m_s[land], a.fast_descent_m_s[land])
+    if Guidance.LAND in present or Guidance.RETURN in present:
+        height = a.height_m()
+    if Guidance.LAND in present:
+        land = g == Guidance.LAND
+        cmd[land, :2] = gain * (a.hold_ned_m[land, :2] - a.pos_ned_m[land, :2])
+        slow = height < a.slow_below_m
+        cmd[land, 2] = np.where(slow[land], a.slow_descent_m_s[land], a.fast_descent_m_s[land])
 
-    ret = g == Guidance.RETURN
-    if ret.any():
+    if Guidance.RETURN in present:
+        ret = g == Guidance.RETURN
         to_home = a.home_ned_m[ret, :2] - a.pos_ned_m[ret, :2]
         low = height[ret] < a.return_alt_m[ret] - 0.5
         horiz = _clip_norm(gain * to_home, a.speed_limit_m_s[ret])
@@ -250,18 +261,20 @@ def step(
     a.landed &= cmd[:, 2] >= 0
 
     # yaw
+    modes = set(a.yaw_mode.tolist())
     rate = np.zeros_like(a.yaw_rad)
-    angle = a.yaw_mode == YawMode.ANGLE
-    hold = a.yaw_mode == YawMode.HOLD
-    track = angle | hold
-    rate[track] = wrap_angle(a.yaw_target_rad[track] - a.yaw_rad[track]) / profile.yaw_tau_s
-    ratem = a.yaw_mode == YawMode.RATE
-    rate[ratem] = a.yaw_rate_target_rad_s[ratem]
-    travel = a.yaw_mode == YawMode.TRAVEL
-    speed = np.hypot(a.vel_ned_m_s[:, 0], a.vel_ned_m_s[:, 1])
-    moving = travel & (speed > 0.5)
-    course = np.arctan2(a.vel_ned_m_s[:, 1], a.vel_ned_m_s[:, 0])
-    rate[moving] = wrap_angle(course[moving] - a.yaw_rad[moving]) / profile.yaw_tau_s
+    if YawMode.ANGLE in modes or YawMode.HOLD in modes:
+        track = (a.yaw_mode == YawMode.ANGLE) | (a.yaw_mode == YawMode.HOLD)
+        rate[track] = wrap_angle(a.yaw_target_rad[track] - a.yaw_rad[track]) / profile.yaw_tau_s
+    if YawMode.RATE in modes:
+        ratem = a.yaw_mode == YawMode.RATE
+        rate[ratem] = a.yaw_rate_target_rad_s[ratem]
+    if YawMode.TRAVEL in modes:
+        travel = a.yaw_mode == YawMode.TRAVEL
+        speed = np.hypot(a.vel_ned_m_s[:, 0], a.vel_ned_m_s[:, 1])
+        moving = travel & (speed > 0.5)
+        course = np.arctan2(a.vel_ned_m_s[moving, 1], a.vel_ned_m_s[moving, 0])
+        rate[moving] = wrap_angle(course - a.yaw_rad[moving]) / profile.yaw_tau_s
     rate = np.clip(rate, -profile.max_yaw_rate_rad_s, profile.max_yaw_rate_rad_s)
     rate[a.landed & (a.guidance == Guidance.IDLE)] = 0.0
     a.yaw_rate_rad_s = rate
