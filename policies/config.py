@@ -211,15 +211,16 @@ class GeneralistConfig:
     """Where the separation term starts, in d_col (the PSO threshold d̄_U2U and the spacing
     targets keep)."""
 
-    teacher: str = "none"
-    """A teacher to learn from: "none" (from scratch) or "orca-shield" (ORCA's actions through
-    the safety shield, heading changes only: the strongest hand-written method of the suite,
-    87 % mean solvable success). With TD3 the run first collects ``teacher_transitions`` of
-    the teacher's flights, clones it (``bc_updates`` supervised steps, the critics learning its
-    values meanwhile), then fine-tunes with TD3 plus a behaviour-cloning term on the teacher's
-    transitions (TD3+BC). With PPO the teacher labels every state the student's own rollouts
-    visit (DAgger's on-policy labels, Ross et al. 2011) and the PPO loss gains α·(π − a_teacher)²
-    on them. Either way α falls from ``bc_weight`` to 0 over the run's first ``bc_fraction``."""
+    teacher: str = "orca-shield"
+    """A teacher to learn from: "orca-shield" (ORCA's actions through the safety shield, heading
+    changes only: the strongest hand-written method of the suite, 87 % mean solvable success;
+    the shipped recipe) or "none" (from scratch). With PPO the run is DAgger first for its
+    ``dagger_fraction`` (`policies.generalist_dagger`); then the teacher labels every state the
+    student's own rollouts visit and the PPO loss gains α·(π − a_teacher)² on them. With TD3
+    the run first collects ``teacher_transitions`` of the teacher's flights, clones it
+    (``bc_updates`` supervised steps, the critics learning its values meanwhile), then
+    fine-tunes with TD3 plus a behaviour-cloning term on the teacher's transitions (TD3+BC).
+    Either way α falls from ``bc_weight`` to 0 over the run's first ``bc_fraction``."""
 
     teacher_transitions: int = 400_000
     """UAV transitions flown by the teacher before learning (its replay share)."""
@@ -232,11 +233,14 @@ class GeneralistConfig:
     on the teacher's transitions (Fujimoto & Gu 2021's normalisation); with PPO, the weight of
     (π − a_teacher)² next to the clipped surrogate (on normalised advantages)."""
 
-    bc_fraction: float = 0.5
-    """Share of the run's budget over which α falls linearly from ``bc_weight`` to 0."""
+    bc_fraction: float = 0.75
+    """Share of the run's budget over which α falls linearly from ``bc_weight`` to 0 (the
+    shipped recipe: to 0 a quarter of the run after DAgger ends)."""
 
-    dagger_fraction: float = 0.0
-    """PPO with a teacher: share of the run spent in DAgger before PPO (0: none). The student
+    dagger_fraction: float = 0.5
+    """PPO with a teacher: share of the run spent in DAgger before PPO (0: none; the shipped
+    recipe: the first half, docs/MODEL.md §20; without a teacher, or with TD3, there is no
+    DAgger phase, as there is no cloning term: `dagger_share`). The student
     flies (the teacher with probability β), the teacher labels every state flown, and the actor
     takes supervised steps on all the labels so far; the value network learns the rollouts'
     returns meanwhile (`policies.generalist_dagger`). PPO then goes on from the clone, with
@@ -302,8 +306,9 @@ class GeneralistConfig:
     """Share of families flown in the real world (fitted ArduCopter/PX4 responses randomised
     per UAV, ADS-B intruders, GPS noise) rather than the paper's ideal one."""
 
-    minutes: float = 170.0
-    """Wall-clock budget of the run (resumes count the time already spent)."""
+    minutes: float = 60.0
+    """Wall-clock budget of the run (resumes count the time already spent): the shipped
+    generalist's run, whose best validation came at 45.7 minutes (docs/MODEL.md §20)."""
 
     total_iterations: int = 1_000_000
     """Upper bound on iterations (the budget usually ends the run first)."""
@@ -372,8 +377,10 @@ class GeneralistConfig:
         check(0 <= self.dagger_fraction <= 1, "dagger_fraction", "must be in [0, 1]")
         check(0 <= self.dagger_beta <= 1, "dagger_beta", "must be in [0, 1]")
         check(self.dagger_lr > 0, "dagger_lr", "must be > 0")
-        check(
-            self.dagger_fraction == 0 or (self.teacher != "none" and self.learner == "ppo"),
-            "dagger_fraction",
-            'needs a teacher (e.g. "orca-shield") and the "ppo" learner',
-        )
+
+    def dagger_share(self) -> float:
+        """The share of the run spent in DAgger.
+
+        ``dagger_fraction`` where it applies (PPO with a teacher), else 0.
+        """
+        return self.dagger_fraction if self.teacher != "none" and self.learner == "ppo" else 0.0

@@ -81,7 +81,7 @@ class Labels:
 
 def dagger_beta(cfg: GeneralistConfig, frac: float) -> float:
     """β, the chance a UAV flies the teacher's action, at the run's fraction ``frac`` done."""
-    half = 0.5 * cfg.dagger_fraction
+    half = 0.5 * cfg.dagger_share()
     return cfg.dagger_beta * max(0.0, 1.0 - frac / half) if half > 0 else 0.0
 
 

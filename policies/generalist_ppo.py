@@ -178,12 +178,12 @@ def train_generalist_ppo(
     worlds, layout, device, rng = book.worlds, book.layout, book.device, book.rng
     recent: list[dict[str, Any]] = []
     env_s = learn_s = 0.0
-    dagger = Dagger.create(cfg, layout.size, nets) if cfg.dagger_fraction > 0 else None
+    dagger = Dagger.create(cfg, layout.size, nets) if cfg.dagger_share() > 0 else None
     try:
         # ---- DAgger first, where asked (`policies.generalist_dagger`)
         while (
             dagger is not None
-            and book.fraction_done() < cfg.dagger_fraction
+            and book.fraction_done() < cfg.dagger_share()
             and book.iteration < cfg.total_iterations
             and not book.out_of_time()
         ):

@@ -62,10 +62,15 @@ def add_choice(
     choices: Sequence[str],
     *,
     default: str | None = None,
+    unset: bool = False,
     help: str | None = None,
 ) -> None:
-    """Add an option taking one of ``choices``; the default is the first unless given."""
-    first = choices[0] if default is None else default
+    """Add an option taking one of ``choices``.
+
+    The default is the first unless given, or None with ``unset`` (a config's own default then
+    applies where the flag is left out).
+    """
+    first = None if unset else choices[0] if default is None else default
     p.add_argument(flag, choices=list(choices), default=first, help=help)
 
 

@@ -62,13 +62,15 @@ def add_train(sub: Any) -> None:
         "--generalist",
         action="store_true",
         help="train the generalist (one shared set-encoder policy, any N, the encounter "
-        "mixture; --minutes is its budget, default 170; --scenario, --steps, --envs, "
+        "mixture; --minutes is its budget, default the shipped run's (docs/MODEL.md §20); "
+        "--scenario, --steps, --envs, "
         "--shared, --reward and --eval-every do not apply)",
     )
     add_choice(
         p,
         "--device",
         ["auto", "cpu", "cuda"],
+        unset=True,
         help="generalist: where the networks learn (default auto: cuda when present)",
     )
     p.add_argument(
@@ -97,6 +99,7 @@ def add_train(sub: Any) -> None:
         p,
         "--swarm-field",
         list(SWARM_FIELDS),
+        unset=True,
         help="generalist: worlds whose reward holds the swarm's peak around the virtual centre: "
         "all (the paper, default) or formation (only families that fly one formation)",
     )
@@ -111,8 +114,10 @@ def add_train(sub: Any) -> None:
         p,
         "--teacher",
         list(TEACHERS),
-        help="generalist: learn from ORCA through the shield as well (PPO: the teacher labels "
-        "the states the policy's own rollouts visit; TD3: clone, then TD3+BC)",
+        unset=True,
+        help="generalist: learn from ORCA through the shield as well (default; PPO: DAgger, "
+        "then the teacher labels the states the policy's own rollouts visit; TD3: clone, then "
+        "TD3+BC) or from scratch (none, with --dagger-fraction 0)",
     )
     p.add_argument(
         "--bc-weight",
@@ -125,19 +130,21 @@ def add_train(sub: Any) -> None:
         type=float,
         metavar="F",
         help="generalist with a teacher: the share of the run over which the cloning weight "
-        "falls to 0 (default 0.5)",
+        "falls to 0 (default 0.75)",
     )
     p.add_argument(
         "--dagger-fraction",
         type=float,
         metavar="F",
         help="generalist, PPO with a teacher: the share of the run spent in DAgger first (the "
-        "student flies, the teacher labels, supervised steps on every label; default 0: none)",
+        "student flies, the teacher labels, supervised steps on every label; default 0.5; "
+        "0: none, as td3 and --teacher none need)",
     )
     add_choice(
         p,
         "--pooling",
         list(POOLINGS),
+        unset=True,
         help="generalist: how the set networks pool the neighbour and intruder rows: max and "
         "mean (deep sets, default) or max and attention (a query from the UAV's own state)",
     )
@@ -145,6 +152,7 @@ def add_train(sub: Any) -> None:
         p,
         "--learner",
         ["ppo", "td3"],
+        unset=True,
         help="generalist: the learner (default ppo, by the side-by-side of docs/MODEL.md §20)",
     )
     finish(p, cmd_train)
@@ -325,13 +333,19 @@ def generalist_config(args: argparse.Namespace) -> GeneralistConfig:
         "separation_weight": args.separation_weight,
     }
     try:
-        return GeneralistConfig(
+        cfg = GeneralistConfig(
             seed=args.seed,
             family_weights=weights,
             **{name: value for name, value in given.items() if value is not None},
         )
     except ValueError as exc:  # the config's own range checks: say so, not a traceback
         raise ConfigError(f"train --generalist: {exc}") from exc
+    if args.dagger_fraction and cfg.dagger_share() == 0:  # asked for, and cannot apply
+        raise ConfigError(
+            "train --generalist: dagger_fraction: DAgger needs a teacher and the ppo learner "
+            f"(here --teacher {cfg.teacher} --learner {cfg.learner}): drop --dagger-fraction"
+        )
+    return cfg
 
 
 def cmd_train_generalist(args: argparse.Namespace) -> int:

@@ -267,6 +267,7 @@ def test_tiny_generalist_run_trains_checkpoints_and_resumes(tmp_path):
     cfg = GeneralistConfig(
         suites=(str(suite),),
         learner="td3",
+        teacher="none",
         agents_per_family=4,
         hidden=8,
         batch_size=32,
@@ -304,6 +305,7 @@ def test_a_generalist_run_exports_a_policy_fly_can_load_for_any_n(tmp_path):
     cfg = GeneralistConfig(
         suites=(str(suite),),
         learner="td3",
+        teacher="none",
         agents_per_family=2,
         hidden=8,
         batch_size=16,
@@ -434,13 +436,15 @@ def test_a_bad_family_weight_flag_says_what_to_write(text):
         ("--bc-fraction", "0", "bc_fraction"),
         ("--ppo-min-std", "2", "ppo_min_std"),
         ("--separation-weight", "-1", "separation_weight"),
-        ("--dagger-fraction", "0.5", "dagger_fraction"),  # without a teacher
+        ("--dagger-fraction", "1.5", "dagger_fraction"),
+        ("--dagger-fraction 0.5 --teacher", "none", "dagger_fraction"),  # asked, cannot apply
+        ("--dagger-fraction 0.5 --learner", "td3", "dagger_fraction"),
     ],
 )
 def test_a_generalist_flag_out_of_range_is_a_clear_error(tmp_path, capsys, flag, value, setting):
     from remarl_fc.cli import main
 
-    argv = ["train", "--generalist", flag, value, "--out", str(tmp_path / "run")]
+    argv = ["train", "--generalist", *flag.split(), value, "--out", str(tmp_path / "run")]
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert f"train --generalist: {setting}" in err and "Traceback" not in err

@@ -50,14 +50,20 @@ def test_beta_falls_from_its_start_to_zero_over_half_the_phase():
     assert dagger_beta(cfg, 0.0) == pytest.approx(0.8)
     assert dagger_beta(cfg, 0.1) == pytest.approx(0.4)
     assert dagger_beta(cfg, 0.2) == 0.0 and dagger_beta(cfg, 0.9) == 0.0
-    assert dagger_beta(GeneralistConfig(), 0.0) == 0.0  # no phase, no teacher flying
+    no_phase = GeneralistConfig(dagger_fraction=0.0)
+    assert dagger_beta(no_phase, 0.0) == 0.0  # no phase, no teacher flying
+    assert dagger_beta(GeneralistConfig(teacher="none"), 0.0) == 0.0  # no teacher, no phase
+
+
+def test_dagger_applies_only_to_ppo_with_a_teacher():
+    assert GeneralistConfig().dagger_share() == 0.5  # the shipped recipe
+    assert GeneralistConfig(teacher="none").dagger_share() == 0.0
+    assert GeneralistConfig(learner="td3").dagger_share() == 0.0
 
 
 @pytest.mark.parametrize(
     ("changes", "message"),
     [
-        ({"dagger_fraction": 0.5}, "needs a teacher"),
-        ({"dagger_fraction": 0.5, "teacher": "orca-shield", "learner": "td3"}, "needs a teacher"),
         ({"dagger_fraction": 1.5, "teacher": "orca-shield"}, r"in \[0, 1\]"),
         ({"dagger_beta": 1.5}, r"in \[0, 1\]"),
         ({"dagger_batch": 0}, ">= 1"),

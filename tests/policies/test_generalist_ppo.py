@@ -119,13 +119,17 @@ def test_a_tiny_ppo_run_trains_validates_resumes_and_exports(tmp_path, pooling):
 
 
 def test_a_tiny_ppo_run_with_a_teacher_clones_it_on_its_own_states(tmp_path):
-    summary, seen = tiny_ppo_run(tmp_path, teacher="orca-shield", bc_fraction=1.0)
+    summary, seen = tiny_ppo_run(
+        tmp_path, teacher="orca-shield", bc_fraction=1.0, dagger_fraction=0.0
+    )
     assert seen[0]["charts/bc_weight"] == pytest.approx(2.5) and seen[0]["losses/clone"] > 0
     assert summary["teacher"] == "orca-shield"
 
 
 def tiny_ppo_run(tmp_path, **changes):
-    """A 3-iteration PPO run, resumed to 5, exported; its summary and progress rows."""
+    """A 3-iteration PPO run (from scratch unless ``changes`` say otherwise), resumed to 5,
+    exported; its summary and progress rows."""
+    changes = {"teacher": "none", "dagger_fraction": 0.0, **changes}
     from policies.generalist_train import export_generalist_run
     from remarl_fc.policy_io import load_policy
     from sim.scenarios import load_scenario
@@ -219,8 +223,15 @@ def test_an_unknown_learner_is_refused():
         GeneralistConfig(learner="sac")
 
 
-def test_ppo_is_the_default_and_learns_from_scratch_unless_given_a_teacher():
-    assert GeneralistConfig().learner == "ppo" and GeneralistConfig().teacher == "none"
+def test_the_default_is_the_shipped_recipe_dagger_on_the_teacher_then_ppo():
+    cfg = GeneralistConfig()
+    assert (cfg.learner, cfg.teacher, cfg.dagger_fraction, cfg.bc_fraction) == (
+        "ppo",
+        "orca-shield",
+        0.5,
+        0.75,
+    )
+    assert GeneralistConfig(teacher="none").dagger_share() == 0.0  # from scratch: no DAgger
     with pytest.raises(ValueError, match="teacher"):
         GeneralistConfig(teacher="orca")
     with pytest.raises(ValueError, match="bc_fraction"):
@@ -232,7 +243,8 @@ def test_the_cloning_weight_falls_to_zero_over_its_share_of_the_run():
 
     cfg = GeneralistConfig(teacher="orca-shield", bc_weight=2.0, bc_fraction=0.5)
     assert [bc_weight(cfg, f) for f in (0.0, 0.25, 0.5, 0.9)] == [2.0, 1.0, 0.0, 0.0]
-    assert bc_weight(GeneralistConfig(bc_weight=2.0), 0.0) == 0.0  # no teacher, no term
+    scratch = GeneralistConfig(bc_weight=2.0, teacher="none", dagger_fraction=0.0)
+    assert bc_weight(scratch, 0.0) == 0.0  # no teacher, no term
 
 
 def test_the_cloning_term_pulls_the_mean_to_the_teacher_where_it_labelled():
