@@ -117,7 +117,7 @@ def add_train(sub: Any) -> None:
         unset=True,
         help="generalist: learn from ORCA through the shield as well (default; PPO: DAgger, "
         "then the teacher labels the states the policy's own rollouts visit; TD3: clone, then "
-        "TD3+BC) or from scratch (none, with --dagger-fraction 0)",
+        "TD3+BC) or from scratch (none)",
     )
     p.add_argument(
         "--bc-weight",
@@ -138,7 +138,7 @@ def add_train(sub: Any) -> None:
         metavar="F",
         help="generalist, PPO with a teacher: the share of the run spent in DAgger first (the "
         "student flies, the teacher labels, supervised steps on every label; default 0.5; "
-        "0: none, as td3 and --teacher none need)",
+        "0: none; td3 and --teacher none have no DAgger phase)",
     )
     add_choice(
         p,
