@@ -18,7 +18,6 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-from policies.config import GeneralistConfig
 from policies.generalist_train import export_generalist_run
 from remarl_fc.offline.suite import MethodSpec, evaluate_suite
 from remarl_fc.policy_io import zoo_dir
@@ -97,8 +96,9 @@ def main() -> None:
         "suite_version": suite.version,
         "seed": suite.seed,
         "checkpoint": args.checkpoint,
-        "training": {  # a key a run's config.json predates: that run had the default
-            k: config.get(k, getattr(GeneralistConfig(), k))
+        "training": {  # a key a run's config.json predates: not recorded (None), since
+            # defaults change (the teacher and DAgger became the default after the first runs)
+            k: config.get(k)
             for k in (
                 "learner",
                 "suites",

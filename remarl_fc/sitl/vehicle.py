@@ -192,8 +192,7 @@ def commanded_velocity(a: Airframes, cfg: VehicleModelConfig) -> FloatArray:
         climb_err = a.pos_target_ned_m[climb, 2] - a.pos_ned_m[climb, 2]  # < 0 below target
         cmd[climb, 2] = np.maximum(-a.climb_m_s[climb], gain * climb_err)
 
-    if Guidance.LAND in present or Guidance.RETURN in present:
-        height = a.height_m()
+    height = a.height_m()
     if Guidance.LAND in present:
         land = g == Guidance.LAND
         cmd[land, :2] = gain * (a.hold_ned_m[land, :2] - a.pos_ned_m[land, :2])

@@ -129,7 +129,7 @@ def test_a_tiny_ppo_run_with_a_teacher_clones_it_on_its_own_states(tmp_path):
 def tiny_ppo_run(tmp_path, **changes):
     """A 3-iteration PPO run (from scratch unless ``changes`` say otherwise), resumed to 5,
     exported; its summary and progress rows."""
-    changes = {"teacher": "none", "dagger_fraction": 0.0, **changes}
+    changes = {"teacher": "none", **changes}
     from policies.generalist_train import export_generalist_run
     from remarl_fc.policy_io import load_policy
     from sim.scenarios import load_scenario
@@ -171,6 +171,9 @@ def tiny_ppo_run(tmp_path, **changes):
     assert any(moved)
     assert summary["updates"] > 0 and summary["transitions"] > 0
     assert seen and "losses/policy" in seen[-1] and "charts/log_std" in seen[-1]
+    if cfg.teacher == "none":  # no DAgger phase without a teacher, whatever dagger_fraction says
+        assert cfg.dagger_fraction > 0 or "dagger_fraction" in changes
+        assert not any("charts/dagger_beta" in row for row in seen)
     evals = [json.loads(line) for line in (out / "evals.jsonl").read_text().splitlines()]
     assert evals and set(evals[-1]["families"]) <= {"crossing-2u", "paper-2u1o"}
     again = train_generalist(
