@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import dataclasses
+from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
 from sim.config import SWARM_FIELDS, TEACHERS
 from sim.setnet import ATTENTION_HEADS, POOLINGS
@@ -310,6 +313,12 @@ class GeneralistConfig:
     """Wall-clock budget of the run (resumes count the time already spent): the shipped
     generalist's run, whose best validation came at 45.7 minutes (docs/MODEL.md §20)."""
 
+    schedule_minutes: float = 0.0
+    """The minutes over which the run's schedule is laid out — DAgger's share, the cloning
+    term's fade, TD3's exploration noise, all fractions of it (`fraction_of`); 0: ``minutes``.
+    A resumed run given a new budget keeps its first one here (`resumed_config`): the minutes
+    added come after the schedule, which never starts over."""
+
     total_iterations: int = 1_000_000
     """Upper bound on iterations (the budget usually ends the run first)."""
 
@@ -349,6 +358,7 @@ class GeneralistConfig:
         check(self.separation_weight >= 0, "separation_weight", "must be >= 0")
         check(self.separation_horizon_s >= 0, "separation_horizon_s", "must be >= 0")
         check(self.minutes >= 0 and self.eval_minutes > 0, "minutes", "must be >= 0")
+        check(self.schedule_minutes >= 0, "schedule_minutes", "must be >= 0")
         check_at_least(
             self,
             1,
@@ -384,3 +394,51 @@ class GeneralistConfig:
         ``dagger_fraction`` where it applies (PPO with a teacher), else 0.
         """
         return self.dagger_fraction if self.teacher != "none" and self.learner == "ppo" else 0.0
+
+    def fraction_of(self, elapsed_s: float) -> float:
+        """The schedule's fraction done after ``elapsed_s`` seconds, in [0, 1] (``minutes`` > 0)."""
+        minutes = self.schedule_minutes or self.minutes
+        return min(elapsed_s / max(60.0 * minutes, 1e-9), 1.0)
+
+
+SETTINGS_BEFORE_THEY_EXISTED: dict[str, Any] = {
+    "teacher": "none",
+    "learner": "td3",
+    "dagger_fraction": 0.0,
+}
+"""What a generalist run did before a setting existed, where that is not today's default: the
+first runs had no teacher and learned with TD3, and DAgger came after the teacher. A run's
+stored settings (its ``config.json``) that lack one of these take this value when the run is
+resumed; any other missing setting takes its default, which is what the code did before it."""
+
+
+def resumed_config(
+    stored: Mapping[str, Any], *, minutes: float | None = None, device: str | None = None
+) -> GeneralistConfig:
+    """The settings of a stored generalist run (``config.json``'s "generalist"), to resume it.
+
+    A resumed run is the run it was: every setting comes from ``stored``. Two may change,
+    neither of which changes what is learned: ``minutes``, a new budget (the schedule keeps
+    the first budget's minutes, `GeneralistConfig.schedule_minutes`), and ``device``.
+
+    Raises:
+        ValueError: ``stored`` holds a setting this version does not know, or a value out of
+            range.
+    """
+    fields = {f.name for f in dataclasses.fields(GeneralistConfig)}
+    unknown = sorted(set(stored) - fields)
+    check(
+        not unknown,
+        ", ".join(unknown),
+        "not a setting of this version: resume the run with the version that started it",
+    )
+    values = {**SETTINGS_BEFORE_THEY_EXISTED, **stored}
+    values["suites"] = tuple(values.get("suites", GeneralistConfig.suites))
+    weights = values.get("family_weights", ())
+    values["family_weights"] = tuple((str(p), float(w)) for p, w in weights)
+    if minutes is not None and minutes != values.get("minutes", GeneralistConfig.minutes):
+        first = values.get("schedule_minutes") or values.get("minutes", GeneralistConfig.minutes)
+        values["schedule_minutes"], values["minutes"] = first, minutes
+    if device is not None:
+        values["device"] = device
+    return GeneralistConfig(**values)

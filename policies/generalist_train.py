@@ -56,6 +56,7 @@ from sim.encounters import Family, draw_episodes, family_scenario
 from sim.env import episode_metrics
 from sim.evaluation import evaluation_seed
 from sim.observation import ObservationLayout
+from sim.oracle import oracle_actions
 from sim.orca import orca_actions
 from sim.scenarios import REAL_WORLD
 from sim.shield import ShieldConfig, shield_state, vehicle_of
@@ -312,13 +313,21 @@ TEACHER_NOISE = 0.1
 states a little off its own path, so the clone learns to come back to it."""
 
 
-def teacher_actions(world: World) -> NDArray[np.float32]:
-    """The "orca-shield" teacher's actions (B, N) in a world: ORCA through the shield.
+def teacher_actions(world: World, teacher: str) -> NDArray[np.float32]:
+    """The teacher's actions (B, N) in a world (`GeneralistConfig.teacher`).
 
-    Heading changes only (the policy commands no speed), and ORCA reads the simulator's state,
-    the true positions even where the UAVs' sensors are ADS-B: a privileged teacher, which the
-    student, seeing only its observation, imitates as far as it can.
+    "orca-shield": ORCA through the shield. Heading changes only (the policy commands no
+    speed), and ORCA reads the simulator's state, the true positions even where the UAVs'
+    sensors are ADS-B: a privileged teacher, which the student, seeing only its observation,
+    imitates as far as it can. "oracle": the oracle's plan from the current state, replanned
+    at every step (`sim.oracle.oracle_actions`), and ORCA through the shield in the
+    environments where it finds no plan.
     """
+    if teacher == "oracle":
+        planned_actions, planned = oracle_actions(world.state, world.cfg)
+        if planned.all():
+            return planned_actions
+        return np.where(planned[:, None], planned_actions, teacher_actions(world, "orca-shield"))
     proposed = orca_actions(world.state, world.cfg)
     vehicle = dataclasses.replace(vehicle_of(world.cfg), can_slow=False)
     return shield_state(ShieldConfig(mode="on"), world.cfg, world.state, proposed, vehicle).action
@@ -348,7 +357,7 @@ def learn_from_teacher(
     collected, episodes = 0, []
     while collected < cfg.teacher_transitions:
         for world in worlds:
-            taught = teacher_actions(world)
+            taught = teacher_actions(world, cfg.teacher)
             flown = np.clip(taught + rng.normal(0.0, TEACHER_NOISE, taught.shape), -1.0, 1.0)
             transitions, ended = step_world(
                 world, flown.astype(np.float32), cfg, goal_value, rng, teacher=taught
@@ -519,10 +528,14 @@ class RunBook:
         return bool(self.cfg.minutes) and self.elapsed() >= 60 * self.cfg.minutes
 
     def fraction_done(self) -> float:
-        """The run's fraction of its budget, in [0, 1] (of ``total_iterations`` without one)."""
+        """The run's fraction of its schedule, in [0, 1].
+
+        `GeneralistConfig.fraction_of` its elapsed time; without a budget, of
+        ``total_iterations``.
+        """
         if not self.cfg.minutes:
             return min(self.iteration / self.cfg.total_iterations, 1.0)
-        return min(self.elapsed() / max(60 * self.cfg.minutes, 1e-9), 1.0)
+        return self.cfg.fraction_of(self.elapsed())
 
     def checkpoint(self, path: Path) -> None:
         """Networks, optimisers and counters to ``path``."""

@@ -26,12 +26,20 @@ import dataclasses
 import numpy as np
 
 from sim.arrays import BoolArray, Float32Array, FloatArray, IntArray
-from sim.config import ScenarioConfig
+from sim.config import DynamicsRandomisation, ScenarioConfig, SensorConfig
 from sim.oracle_search import OracleConfig, OraclePlans, fly_plans, plan_known
 from sim.spawn import EpisodeStart
+from sim.state import SwarmState
 from sim.swarm import SwarmSim
 
-__all__ = ["ORACLE_VERSION", "OracleConfig", "OraclePlans", "fly_plans", "plan_episodes"]
+__all__ = [
+    "ORACLE_VERSION",
+    "OracleConfig",
+    "OraclePlans",
+    "fly_plans",
+    "oracle_actions",
+    "plan_episodes",
+]
 
 ORACLE_VERSION = 2
 """Bumped whenever a change to the oracle can change a label (the label cache checks it)."""
@@ -148,3 +156,52 @@ def _restart(
         obstacle_appear_step=np.maximum(episodes.obstacle_appear_step - at[:, None], 0),
     )
     return _hide(moved, hidden)
+
+
+def oracle_actions(
+    state: SwarmState, cfg: ScenarioConfig, oracle: OracleConfig | None = None
+) -> tuple[Float32Array, BoolArray]:
+    """The oracle as a controller: plan from this state, fly the plan's first step.
+
+    Replanned at every decision (receding horizon), it is a centralised controller that knows
+    every UAV's state and the future of every intruder seen so far (they fly straight): the
+    strongest teacher a policy can imitate (`policies.config.GeneralistConfig.teacher`,
+    "oracle"). Each episode is planned from where it stands — positions, headings, the UAVs
+    that arrived parked on their targets — against the intruders that can be sensed now (the
+    hidden ones parked), for the steps it has left, in the ideal world: the plan is checked by
+    a flight of the ideal vehicle with exact sensing, whatever the world's vehicle and sensors
+    (a privileged teacher reads the true state; its first step is a heading change like any
+    other).
+
+    Returns:
+        (B, N) the plans' first normalised actions (0 where no plan was found) and (B,) whether
+        a plan was found.
+    """
+    oracle = oracle or OracleConfig()
+    n = state.pos_m.shape[1]
+    parked = PARKED_M + PARKED_SPACING_M * np.arange(n, dtype=np.float64)
+    park = np.stack([parked, parked], axis=-1)
+    gone = (state.reached | ~state.active)[..., None]
+    steps = state.steps.astype(np.int64)
+    episodes = EpisodeStart(
+        start_m=np.where(gone, park, state.pos_m),
+        target_m=np.where(gone, park, state.target_m),
+        centre_m=state.centre_m,
+        swarm_vel_m_s=state.swarm_vel_m_s,
+        obstacle_pos_m=state.obstacle_pos_m,
+        obstacle_vel_m_s=state.obstacle_vel_m_s,
+        obstacle_appear_step=np.zeros_like(state.obstacle_appear_step),
+        heading_rad=state.heading_rad.copy(),
+    )
+    episodes = _hide(episodes, state.obstacle_appear_step > steps[:, None])
+    left = cfg.max_steps - int(steps[state.active.any(axis=-1)].min(initial=cfg.max_steps))
+    ideal = dataclasses.replace(
+        cfg,
+        max_steps=max(left, 1),
+        dynamics="ideal",
+        dynamics_randomisation=DynamicsRandomisation(),
+        sensors=SensorConfig(),
+    )
+    plans = plan_known(ideal, episodes, oracle)
+    actions = np.where(plans.planned[:, None], plans.actions[:, 0, :], 0.0)
+    return actions.astype(np.float32), plans.planned

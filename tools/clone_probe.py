@@ -64,7 +64,7 @@ def collect(cfg: GeneralistConfig, sweeps: int) -> dict[str, Any]:
     obs, labels, world_of, sweep_of = [], [], [], []
     for sweep in range(sweeps):
         for k, world in enumerate(worlds):
-            taught = teacher_actions(world)
+            taught = teacher_actions(world, cfg.teacher)
             noisy = taught + rng.normal(0.0, TEACHER_NOISE, taught.shape)
             flown = np.clip(noisy, -1.0, 1.0).astype(np.float32)
             seen = world.obs

@@ -317,8 +317,72 @@ def generalist_config(args: argparse.Namespace) -> GeneralistConfig:
     """
     from policies.config import GeneralistConfig
 
-    weights = tuple(family_weight_arg(text) for text in args.family_weight)
-    given = {  # a flag left out (None; --minutes 0) keeps the config's default
+    try:
+        cfg = GeneralistConfig(**{"seed": args.seed, **generalist_flags(args)})
+    except ValueError as exc:  # the config's own range checks: say so, not a traceback
+        raise ConfigError(f"train --generalist: {exc}") from exc
+    if args.dagger_fraction and cfg.dagger_share() == 0:  # asked for, and cannot apply
+        raise ConfigError(
+            "train --generalist: dagger_fraction: DAgger needs a teacher and the ppo learner "
+            f"(here --teacher {cfg.teacher} --learner {cfg.learner}): drop --dagger-fraction"
+        )
+    return cfg
+
+
+RESUME_MAY_CHANGE = ("minutes", "device")
+"""The settings a resumed generalist run may be given anew: neither changes what it learns."""
+
+
+def resumed_generalist_config(args: argparse.Namespace, out: Path) -> GeneralistConfig:
+    """The settings of the run in ``out``, for ``train --generalist --resume``.
+
+    A resumed run keeps the settings it started with (its ``config.json``), not today's
+    defaults; ``--minutes`` (a new budget) and ``--device`` may change. Any other flag that
+    disagrees with the stored run is an error, as is a folder without a checkpoint.
+
+    Raises:
+        ConfigError: nothing to resume in ``out``, an unreadable ``config.json``, or a flag
+            that would change the run.
+    """
+    from policies.config import resumed_config
+
+    where = "train --generalist --resume"
+    if not (out / "last.safetensors").is_file():
+        raise ConfigError(
+            f"{where}: {out} holds no checkpoint (last.safetensors) to resume: start the run "
+            "without --resume, or name the run's folder with --out"
+        )
+    try:
+        stored = json.loads((out / "config.json").read_text())["generalist"]
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise ConfigError(
+            f"{where}: {out / 'config.json'} is missing or unreadable ({exc}); it holds the "
+            "run's settings, without which the run cannot be resumed as it was"
+        ) from exc
+    try:
+        cfg = resumed_config(stored, minutes=args.minutes or None, device=args.device)
+        asked = generalist_config(args)
+    except ValueError as exc:
+        raise ConfigError(f"{where}: {out / 'config.json'}: {exc}") from exc
+    clash = [
+        f"{name} {getattr(asked, name)!r} (the run's: {getattr(cfg, name)!r})"
+        for name in generalist_flags(args)
+        if name not in RESUME_MAY_CHANGE and getattr(asked, name) != getattr(cfg, name)
+    ]
+    if clash:
+        raise ConfigError(
+            f"{where}: a resumed run keeps the settings it started with; these flags would "
+            f"change them: {'; '.join(clash)}. Drop them, or start a new run in another --out"
+        )
+    return cfg
+
+
+def generalist_flags(args: argparse.Namespace) -> dict[str, Any]:
+    """The `GeneralistConfig` settings that ``train --generalist``'s flags give explicitly.
+
+    A flag left out (None; ``--minutes 0``; ``--seed 0``, the default) is not in it.
+    """
+    flags = {
         "minutes": args.minutes or None,
         "device": args.device,
         "learner": args.learner,
@@ -331,29 +395,19 @@ def generalist_config(args: argparse.Namespace) -> GeneralistConfig:
         "dagger_fraction": args.dagger_fraction,
         "separation_horizon_s": args.separation_horizon,
         "separation_weight": args.separation_weight,
+        "seed": args.seed or None,
     }
-    try:
-        cfg = GeneralistConfig(
-            seed=args.seed,
-            family_weights=weights,
-            **{name: value for name, value in given.items() if value is not None},
-        )
-    except ValueError as exc:  # the config's own range checks: say so, not a traceback
-        raise ConfigError(f"train --generalist: {exc}") from exc
-    if args.dagger_fraction and cfg.dagger_share() == 0:  # asked for, and cannot apply
-        raise ConfigError(
-            "train --generalist: dagger_fraction: DAgger needs a teacher and the ppo learner "
-            f"(here --teacher {cfg.teacher} --learner {cfg.learner}): drop --dagger-fraction"
-        )
-    return cfg
+    if args.family_weight:
+        flags["family_weights"] = tuple(family_weight_arg(text) for text in args.family_weight)
+    return {name: value for name, value in flags.items() if value is not None}
 
 
 def cmd_train_generalist(args: argparse.Namespace) -> int:
     """``train --generalist``: the mixture run of `policies.generalist_train`."""
     from policies.generalist_train import train_generalist
 
-    cfg = generalist_config(args)
-    out = Path(args.out or f"runs/generalist-s{cfg.seed}")
+    out = Path(args.out or f"runs/generalist-s{args.seed}")
+    cfg = resumed_generalist_config(args, out) if args.resume else generalist_config(args)
     with progress_bar(enabled=not args.json) as progress:
         task = progress.add_task("train", total=cfg.minutes)
 

@@ -370,7 +370,7 @@ def test_the_teacher_is_orca_through_the_shield():
     for _ in range(4):
         state, _ = sim.step(state, np.zeros((3, 3), np.float32), np.random.default_rng(0))
     world.state = state
-    actions = teacher_actions(world)
+    actions = teacher_actions(world, "orca-shield")
     assert actions.shape == (3, 3) and (np.abs(actions) <= 1).all()
     from sim.orca import orca_actions
     from sim.shield import ShieldConfig, shield_state, vehicle_of
@@ -380,6 +380,31 @@ def test_the_teacher_is_orca_through_the_shield():
     expected = shield_state(ShieldConfig(mode="on"), cfg, state, orca, straight_only).action
     np.testing.assert_array_equal(actions, expected)
     assert not np.array_equal(actions, np.zeros_like(actions))  # not a constant stand-in
+
+
+def test_the_oracle_teacher_flies_its_plans_and_orca_through_the_shield_where_it_has_none(
+    monkeypatch,
+):
+    import policies.generalist_train as generalist_train
+    from policies.generalist_train import World, teacher_actions, with_layout
+    from sim.scenarios import load_scenario
+    from sim.swarm import SwarmSim
+
+    cfg = with_layout(load_scenario("3u2o"), LAYOUT)
+    sim = SwarmSim(cfg)
+    state = sim.initial_state(np.random.default_rng(0), 3)
+    for _ in range(4):
+        state, _ = sim.step(state, np.zeros((3, 3), np.float32), np.random.default_rng(0))
+    world = World(None, cfg, False, sim, state, sim.observe(state).flat(), 3)  # type: ignore[arg-type]
+    planned = np.array([True, False, True])
+    plans = np.full((3, 3), 0.25, np.float32)
+    monkeypatch.setattr(generalist_train, "oracle_actions", lambda s, c: (plans, planned))
+    taught = teacher_actions(world, "oracle")
+    np.testing.assert_array_equal(taught[planned], plans[planned])
+    np.testing.assert_array_equal(taught[1], teacher_actions(world, "orca-shield")[1])
+    monkeypatch.undo()
+    real = teacher_actions(world, "oracle")  # the oracle itself, from this mid-flight state
+    assert real.shape == (3, 3) and (np.abs(real) <= 1).all()
 
 
 def test_family_weights_scale_a_familys_environments():

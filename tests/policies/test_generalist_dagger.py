@@ -93,9 +93,10 @@ def test_supervised_steps_fit_the_actor_to_the_labels():
         assert torch.equal(before, after)
 
 
-def test_a_tiny_run_clones_first_then_goes_on_with_ppo(tmp_path):
+@pytest.mark.parametrize("teacher", ["orca-shield", "oracle"])
+def test_a_tiny_run_clones_first_then_goes_on_with_ppo(tmp_path, teacher):
     summary, seen = tiny_ppo_run(
-        tmp_path, teacher="orca-shield", dagger_fraction=0.5, dagger_updates=3, dagger_batch=16
+        tmp_path, teacher=teacher, dagger_fraction=0.5, dagger_updates=3, dagger_batch=16
     )
     # a row is logged for each iteration once an episode has ended: DAgger's iterations (the
     # first two of three: under half the budget), then PPO's
@@ -105,4 +106,4 @@ def test_a_tiny_run_clones_first_then_goes_on_with_ppo(tmp_path):
     dagger = [row for row in seen if "charts/dagger_beta" in row]
     assert all(row["losses/clone"] > 0 and row["charts/dagger_labels"] > 0 for row in dagger)
     assert dagger[-1]["iteration"] <= 2
-    assert summary["teacher"] == "orca-shield"
+    assert summary["teacher"] == teacher

@@ -6,7 +6,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from sim.oracle import OracleConfig, fly_plans, plan_episodes
+from sim.oracle import OracleConfig, fly_plans, oracle_actions, plan_episodes
 from sim.scenarios import load_scenario
 from sim.spawn import EpisodeStart, spawn_episodes
 from sim.swarm import SwarmSim
@@ -165,3 +165,75 @@ def test_a_pop_up_seen_in_time_is_solvable_after_it_appears():
     assert plans.solvable.all()
     assert (plans.actions[0, :4, 0] == 0).all()  # nothing to avoid before it appears
     assert np.abs(plans.actions[0, 4:, 0]).max() > 0  # then it turns
+
+
+def fly_oracle(cfg, episodes, rng_seed=1):
+    """Fly the oracle as a controller, replanning at every step; (success, planned at each step)."""
+    sim, rng = SwarmSim(cfg, scored=False), np.random.default_rng(rng_seed)
+    state = sim.start(episodes, rng)
+    success, planned = np.zeros(episodes.num_envs, dtype=bool), []
+    for _ in range(cfg.max_steps):
+        actions, found = oracle_actions(state, cfg)
+        assert actions.shape == state.heading_rad.shape and (np.abs(actions) <= 1).all()
+        planned.append(found)
+        state, result = sim.step(state, actions, rng)
+        success |= result.success
+        if not state.active.any():
+            break
+    return success, np.array(planned)
+
+
+def test_the_oracle_as_a_controller_flies_where_straight_flight_collides():
+    episodes = EpisodeStart.concat(
+        [one_uav((200.0, 150.0), (-10.0, 0.0)), one_uav((160.0, 45.0), (0.0, 10.0))]
+    )
+    straight = np.zeros((2, ONE.max_steps, 1), dtype=np.float32)
+    assert not fly_plans(ONE, episodes, straight).any()
+    success, planned = fly_oracle(ONE, episodes)
+    assert success.all() and planned.all()
+
+
+def test_the_oracle_as_a_controller_keeps_a_swarm_apart():
+    episodes = spawn_episodes(SWARM, np.random.default_rng(0), 6)
+    success, _ = fly_oracle(SWARM, episodes)
+    assert success.all()
+
+
+def test_the_oracle_as_a_controller_ignores_what_cannot_be_seen_yet():
+    cfg, ep = _pop_up(appear_step=4, ahead_m=90.0, speed_m_s=5.0)
+    sim, rng = SwarmSim(cfg, scored=False), np.random.default_rng(0)
+    state = sim.start(ep, rng)
+    hidden, _ = oracle_actions(state, cfg)
+    alone = dataclasses.replace(state, obstacle_pos_m=np.full_like(state.obstacle_pos_m, 1e7))
+    assert hidden == pytest.approx(oracle_actions(alone, cfg)[0])  # as if it were not there
+    seen = dataclasses.replace(state, obstacle_appear_step=np.zeros((1, 1), np.int64))
+    assert oracle_actions(seen, cfg)[0] != pytest.approx(hidden)  # known, it is avoided now
+    success, _ = fly_oracle(cfg, ep)
+    assert success.all()  # and it turns once it appears
+
+
+def test_where_the_oracle_finds_no_plan_it_says_so():
+    episodes = one_uav(TARGET, (0.0, 0.0))  # a static obstacle on the target
+    state = SwarmSim(ONE, scored=False).start(episodes, np.random.default_rng(0))
+    actions, planned = oracle_actions(state, ONE)
+    assert not planned.any() and (actions == 0).all()
+
+
+def test_the_oracle_as_a_controller_plans_nothing_around_a_uav_that_arrived():
+    cfg = load_scenario("2u1o", obstacles={"count": 0})
+    starts = np.array([[[50.0, 150.0], [10.0, 150.0]]])  # the second flies through the first
+    targets = np.array([[[50.0, 150.0], [300.0, 150.0]]])  # ...which is on its own target
+    episodes = EpisodeStart.of_swarm(
+        starts,
+        targets,
+        np.zeros((1, 0, 2)),
+        np.zeros((1, 0, 2)),
+        np.zeros((1, 0), dtype=np.int64),
+        cfg.uav.speed_m_s,
+        cfg.field.swarm_lead_m,
+    )
+    state = SwarmSim(cfg, scored=False).start(episodes, np.random.default_rng(0))
+    arrived = np.array([[True, False]])
+    state = dataclasses.replace(state, reached=arrived, active=~arrived)
+    actions, planned = oracle_actions(state, cfg)
+    assert planned.all() and actions[0, 1] == 0.0  # straight on: the first is no longer there
