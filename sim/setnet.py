@@ -105,12 +105,18 @@ def _pool(
 
     With a ``query`` (..., h): max and attention (`attend`) instead of the mean.
     """
-    # One matrix product over every row of every UAV (a stacked product costs one call per
-    # UAV): each row's encoding is computed alone all the same, wherever it sits.
+    # One matrix product over the kept rows of every UAV (a stacked product costs one call
+    # per UAV): each row's encoding is computed alone all the same, wherever it sits. A
+    # dropped row's encoding is 0 and is never computed: most intruder slots of a swarm are
+    # empty (50u8o: 46 of its 400 rows kept, on average), and they were half the actor's time.
     flat = rows.reshape(-1, rows.shape[-1])
+    kept = mask.reshape(-1)
+    rows_kept = np.flatnonzero(kept)
     h = second[0].shape[-1]
-    e = _dense(_dense(flat, first), second).reshape(*rows.shape[:-1], h)  # (..., R, h), ≥ 0
-    e *= mask[..., None]
+    e = np.zeros((flat.shape[0], h))
+    if rows_kept.size:
+        e[rows_kept] = _dense(_dense(flat[rows_kept], first), second) * kept[rows_kept, None]
+    e = e.reshape(*rows.shape[:-1], h)  # (..., R, h), ≥ 0
     if e.shape[-2] == 0:
         zero = np.zeros((*e.shape[:-2], e.shape[-1]))
         return zero, zero.copy()

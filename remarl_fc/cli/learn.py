@@ -48,7 +48,12 @@ def add_train(sub: Any) -> None:
     p.add_argument("--envs", type=positive_int, default=16, help="environments stepped at once")
     add_seed(p)
     p.add_argument("--out", default=None, help="run folder (default runs/SCENARIO-sSEED)")
-    p.add_argument("--resume", action="store_true", help="continue the run in --out")
+    p.add_argument(
+        "--resume",
+        action="store_true",
+        help="continue the run in --out (a generalist run with its own settings; --minutes "
+        "may give it a new budget)",
+    )
     p.add_argument("--shared", action="store_true", help="one network for all agents")
     add_choice(
         p,
@@ -115,9 +120,10 @@ def add_train(sub: Any) -> None:
         "--teacher",
         list(TEACHERS),
         unset=True,
-        help="generalist: learn from ORCA through the shield as well (default; PPO: DAgger, "
-        "then the teacher labels the states the policy's own rollouts visit; TD3: clone, then "
-        "TD3+BC) or from scratch (none)",
+        help="generalist: learn from ORCA through the shield as well (orca-shield, default; "
+        "PPO: DAgger, then the teacher labels the states the policy's own rollouts visit; TD3: "
+        "clone, then TD3+BC), from the oracle replanned at every step (oracle: far stronger, "
+        "about 100 times slower to label, docs/MODEL.md §20) or from scratch (none)",
     )
     p.add_argument(
         "--bc-weight",

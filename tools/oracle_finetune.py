@@ -1,0 +1,195 @@
+"""Does the oracle teach the generalist what ORCA could not? DAgger on the oracle, measured.
+
+    OMP_NUM_THREADS=1 python tools/oracle_finetune.py [--policy generalist] [--minutes 60]
+        [--families 'beyond-20u4o,dense-*,...'] [--seed 13] --out tuned.safetensors [--json]
+
+Starts from a generalist policy file (the shipped one by default) and runs DAgger (Ross,
+Gordon & Bagnell 2011) on the training mixture of `remarl-fc train --generalist`: the student
+flies every world (its own action plus N(0, 0.1²) noise, the DAgger phase's); in the worlds of
+``--families`` the oracle replanned from the student's own state labels every UAV
+(`sim.oracle.oracle_actions`, ORCA through the shield where it finds no plan: the "oracle"
+teacher of `policies.generalist_train.teacher_actions`); in every other world the starting
+policy labels its own states, an anchor that keeps what it flies well. After every step of
+every world the actor takes supervised steps (the DAgger phase's `clone_update`, Adam 3·10⁻⁴)
+on minibatches drawn half from the oracle's labels and half from the anchor's. A copy is
+exported to ``--out`` every 15 minutes and at the end: fly it with
+``remarl-fc eval --suite standard --policy tuned.safetensors --json``.
+
+Why a tool and not `train --generalist --teacher oracle`: the oracle replanned at every step of
+every world costs about 100 times ORCA through the shield (23 s against 0.23 s for one step of
+the whole mixture on one core), so a DAgger phase of 30 minutes would take 4 iterations
+instead of 80. Labelling only the families where the oracle flies far better than the student
+(docs/MODEL.md §20), from a student that already flies the rest, is what one core affords.
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import fnmatch
+import json
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from policies.config import GeneralistConfig
+from policies.export import export_generalist
+from policies.generalist import SetNet
+from policies.generalist_dagger import Labels, clone_update
+from policies.generalist_train import (
+    TEACHER_NOISE,
+    advance_world,
+    generalist_layout,
+    make_worlds,
+    teacher_actions,
+    with_layout,
+)
+from policies.train import reward_upper_bound
+from remarl_fc.policy_io import load_policy
+from sim.encounters import family_scenario
+from sim.suite import load_suite
+
+HARD_FAMILIES = (
+    "beyond-20u4o,crossing-20u,crossing-8u,crossing-12u,dense-3u,dense-6u,dense-10u,"
+    "swarms-2x5,swarms-2x8,3u2o-fast-intruders,crossing-fast-5u,overtaken-*,random-formation-5u"
+)
+"""Where the oracle replanned at every step flies far better than the shipped generalist (the
+suite's first 10–20 episodes of each: 90–100 % where the generalist flies 3–86 %), and one of
+its steps costs under a second on one core (not the 30- and 50-UAV worlds, nor dense-20u)."""
+
+BATCH = 1024
+"""Labels per supervised step (half the oracle's, half the anchor's)."""
+
+UPDATES = 20
+"""Supervised steps after each step of every world."""
+
+LEARNING_RATE = 3e-4
+"""Adam's, a fine-tune's: the DAgger phase's 10⁻³ is for a fresh actor."""
+
+ROWS = 1_000_000
+"""Labels kept of each kind (the oldest dropped first)."""
+
+EXPORT_MINUTES = 15.0
+"""Minutes between exports of the actor."""
+
+
+def load_actor(name: str) -> tuple[SetNet, Any]:
+    """The actor of a generalist policy file as a torch `SetNet`, and the loaded policy."""
+    policy = load_policy(name)
+    net = SetNet(policy.layout, int(policy.meta["hidden"]), critic=False)
+    state = {}
+    for layer, (weight, bias) in policy.actor.items():
+        state[f"{layer}.weight"] = torch.from_numpy(np.asarray(weight, dtype=np.float32))
+        state[f"{layer}.bias"] = torch.from_numpy(np.asarray(bias, dtype=np.float32))
+    net.load_state_dict(state)
+    return net, policy
+
+
+def act(net: SetNet, obs: np.ndarray) -> np.ndarray:
+    """(B, N) the actor's actions on flat observations (B, N, D)."""
+    with torch.no_grad():
+        out: np.ndarray = net(torch.from_numpy(obs.reshape(-1, obs.shape[-1]))).numpy()
+    return out.reshape(obs.shape[:-1])
+
+
+def main() -> None:
+    """Fine-tune, export, report."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--policy", default="generalist", help="the starting policy file")
+    parser.add_argument("--minutes", type=float, default=60.0)
+    parser.add_argument("--families", default=HARD_FAMILIES, help="oracle-labelled (patterns)")
+    parser.add_argument("--seed", type=int, default=13, help="not the training runs' seeds")
+    parser.add_argument("--out", type=Path, required=True, help="the tuned policy file")
+    parser.add_argument("--json", action="store_true", help="print the result as JSON")
+    args = parser.parse_args()
+    torch.manual_seed(args.seed)
+    rng = np.random.default_rng(args.seed)
+    net, policy = load_actor(args.policy)
+    anchor = copy.deepcopy(net)
+    cfg = GeneralistConfig(seed=args.seed, hidden=int(policy.meta["hidden"]))
+    base = family_scenario(load_suite(cfg.suites[0]).families[0])
+    layout = generalist_layout(cfg, base)
+    if layout.size != policy.layout.size:
+        raise SystemExit(f"{args.policy}: its observation is not the mixture's ({layout})")
+    goal = reward_upper_bound(base, "remarl") / (1.0 - cfg.gamma)
+    worlds = make_worlds(cfg, layout, np.random.default_rng([args.seed, 1]))
+    patterns = [p.strip() for p in args.families.split(",") if p.strip()]
+    hard = [any(fnmatch.fnmatchcase(w.family.name, p) for p in patterns) for w in worlds]
+    if not any(hard):
+        raise SystemExit(f"--families {args.families!r} names no family of the mixture")
+    oracle, own = Labels.create(ROWS, layout.size), Labels.create(ROWS, layout.size)
+    opt = torch.optim.Adam(net.parameters(), lr=LEARNING_RATE)
+    start = last_export = time.monotonic()
+    label_s = sweeps = updates = 0
+    episodes: dict[str, list[float]] = {}
+    loss = 0.0
+
+    def export() -> None:
+        export_generalist(
+            args.out,
+            net.state_dict(),
+            None,
+            base_cfg=with_layout(base, layout),
+            hidden=cfg.hidden,
+            uav_range=(1, cfg.max_uavs),
+            reward=f"none (DAgger on the oracle from {args.policy})",
+            training={"steps": updates, "seed": args.seed},
+        )
+
+    while time.monotonic() - start < 60.0 * args.minutes:
+        for world, by_oracle in zip(worlds, hard, strict=True):
+            obs = world.obs
+            student = act(net, obs)
+            t0 = time.perf_counter()
+            taught = teacher_actions(world, "oracle") if by_oracle else act(anchor, obs)
+            label_s += time.perf_counter() - t0 if by_oracle else 0.0
+            noise = rng.normal(0.0, TEACHER_NOISE, student.shape)
+            flown = np.clip(student + noise, -1.0, 1.0).astype(np.float32)
+            step, ended = advance_world(world, flown, cfg, goal, rng)
+            (oracle if by_oracle else own).add(obs[step.acted], taught[step.acted])
+            for row in ended:
+                episodes.setdefault(world.family.name, []).append(float(row["success"]))
+        sweeps += 1
+        for _ in range(UPDATES):
+            x1, y1 = oracle.sample(BATCH // 2, rng)
+            x2, y2 = own.sample(BATCH // 2, rng)
+            x = torch.from_numpy(np.concatenate([x1, x2]))
+            y = torch.from_numpy(np.concatenate([y1, y2]))
+            loss = clone_update(net, opt, x, y, cfg.grad_clip)
+            updates += 1
+        if time.monotonic() - last_export >= 60.0 * EXPORT_MINUTES:
+            export()
+            last_export = time.monotonic()
+            print(
+                json.dumps({"minutes": (last_export - start) / 60, "sweeps": sweeps}),
+                flush=True,
+            )
+    export()
+    result = {
+        "policy": str(args.out),
+        "from": args.policy,
+        "minutes": (time.monotonic() - start) / 60.0,
+        "sweeps": sweeps,
+        "updates": updates,
+        "oracle_labels": oracle.count,
+        "anchor_labels": own.count,
+        "oracle_seconds": label_s,
+        "last_loss": loss,
+        "oracle_families": [w.family.name for w, h in zip(worlds, hard, strict=True) if h],
+        "flown_success": {k: float(np.mean(v)) for k, v in sorted(episodes.items())},
+    }
+    if args.json:
+        print(json.dumps(result, indent=2))
+        return
+    print(
+        f"{sweeps} steps of every world in {result['minutes']:.0f} min ({label_s:.0f} s of "
+        f"oracle), {updates} supervised steps; {oracle.count} oracle labels, {own.count} "
+        f"anchor labels; last loss {loss:.4f}; wrote {args.out}"
+    )
+
+
+if __name__ == "__main__":
+    main()
