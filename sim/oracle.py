@@ -26,7 +26,7 @@ import dataclasses
 import numpy as np
 
 from sim.arrays import BoolArray, Float32Array, FloatArray, IntArray
-from sim.config import DynamicsRandomisation, ScenarioConfig, SensorConfig
+from sim.config import DynamicsRandomisation, ObstacleConfig, ScenarioConfig, SensorConfig
 from sim.oracle_search import OracleConfig, OraclePlans, fly_plans, plan_known
 from sim.spawn import EpisodeStart
 from sim.state import SwarmState
@@ -171,7 +171,8 @@ def oracle_actions(
     hidden ones parked), for the steps it has left, in the ideal world: the plan is checked by
     a flight of the ideal vehicle with exact sensing, whatever the world's vehicle and sensors
     (a privileged teacher reads the true state; its first step is a heading change like any
-    other).
+    other). Where arrived UAVs hover on their targets (``arrival = "hover"``) they are
+    obstacles at rest to the others.
 
     Returns:
         (B, N) the plans' first normalised actions (0 where no plan was found) and (B,) whether
@@ -194,10 +195,14 @@ def oracle_actions(
         heading_rad=state.heading_rad.copy(),
     )
     episodes = _hide(episodes, state.obstacle_appear_step > steps[:, None])
+    obstacles = cfg.obstacles
+    if cfg.arrival == "hover":  # arrived UAVs hover on their targets: in the way, at rest
+        episodes, obstacles = _hovering(episodes, state, cfg)
     left = cfg.max_steps - int(steps[state.active.any(axis=-1)].min(initial=cfg.max_steps))
     ideal = dataclasses.replace(
         cfg,
         max_steps=max(left, 1),
+        obstacles=obstacles,
         dynamics="ideal",
         dynamics_randomisation=DynamicsRandomisation(),
         sensors=SensorConfig(),
@@ -205,3 +210,27 @@ def oracle_actions(
     plans = plan_known(ideal, episodes, oracle)
     actions = np.where(plans.planned[:, None], plans.actions[:, 0, :], 0.0)
     return actions.astype(np.float32), plans.planned
+
+
+def _hovering(
+    episodes: EpisodeStart, state: SwarmState, cfg: ScenarioConfig
+) -> tuple[EpisodeStart, ObstacleConfig]:
+    """``episodes`` with every UAV that arrived added as an obstacle at rest where it hovers.
+
+    One obstacle slot per UAV (the flying ones' parked far away), after the intruders; and the
+    obstacle settings for M + N of them.
+    """
+    b, n = state.pos_m.shape[:2]
+    far = -(PARKED_M + PARKED_SPACING_M * (np.arange(n) + episodes.obstacle_pos_m.shape[1] + 1))
+    parked = np.broadcast_to(np.stack([far, far], axis=-1), (b, n, 2))
+    hover = np.where(state.reached[..., None], state.pos_m, parked)
+    moved = dataclasses.replace(
+        episodes,
+        obstacle_pos_m=np.concatenate([episodes.obstacle_pos_m, hover], axis=1),
+        obstacle_vel_m_s=np.concatenate([episodes.obstacle_vel_m_s, np.zeros((b, n, 2))], axis=1),
+        obstacle_appear_step=np.concatenate(
+            [episodes.obstacle_appear_step, np.zeros((b, n), np.int64)], axis=1
+        ),
+    )
+    count = cfg.obstacles.count + n
+    return moved, dataclasses.replace(cfg.obstacles, count=count)

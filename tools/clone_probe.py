@@ -1,10 +1,12 @@
 """How well can the generalist's network clone its teacher? Supervised steps alone, measured.
 
     OMP_NUM_THREADS=1 python tools/clone_probe.py [--sweeps 300] [--steps 16000] [--hidden 64]
-        [--seed 11] [--out clone.safetensors] [--json]
+        [--seed 11] [--teacher orca-shield|oracle] [--families 'dense-*,...']
+        [--out clone.safetensors] [--json]
 
 Flies the "orca-shield" teacher (ORCA through the shield, `policies.generalist_train
-.teacher_actions`) over the training mixture of `remarl-fc train --generalist` (every family of
+.teacher_actions`; or the oracle replanned at every step, ``--teacher oracle``) over the
+training mixture of `remarl-fc train --generalist` (every family of
 the standard and generalist-extra suites, a third in the real world) for ``--sweeps`` steps of
 every world, with the same N(0, 0.1²) noise on its actions as the TD3 teacher phase, and keeps
 every UAV's version-2 observation and the teacher's action there. The last fifth of the sweeps
@@ -23,6 +25,7 @@ swarms, where every reinforcement-learning run had failed them (docs/MODEL.md §
 from __future__ import annotations
 
 import argparse
+import fnmatch
 import json
 import time
 from pathlib import Path
@@ -54,12 +57,22 @@ HELD_OUT = 0.2
 """Share of the sweeps (the last ones) held out."""
 
 
-def collect(cfg: GeneralistConfig, sweeps: int) -> dict[str, Any]:
-    """The teacher's flights: observations, its actions, the world and sweep of each row."""
+def collect(cfg: GeneralistConfig, sweeps: int, families: str = "*") -> dict[str, Any]:
+    """The teacher's flights: observations, its actions, the world and sweep of each row.
+
+    ``families``: comma-separated patterns of the mixture's families to fly (all by default).
+    """
     base = family_scenario(load_suite(cfg.suites[0]).families[0])
     layout = generalist_layout(cfg, base)
     rng = np.random.default_rng(cfg.seed)
-    worlds = make_worlds(cfg, layout, np.random.default_rng([cfg.seed, 1]))
+    patterns = [p.strip() for p in families.split(",") if p.strip()]
+    worlds = [
+        w
+        for w in make_worlds(cfg, layout, np.random.default_rng([cfg.seed, 1]))
+        if any(fnmatch.fnmatchcase(w.family.name, p) for p in patterns)
+    ]
+    if not worlds:
+        raise SystemExit(f"--families {families!r} names no family of the mixture")
     goal = reward_upper_bound(base, "remarl") / (1.0 - cfg.gamma)
     obs, labels, world_of, sweep_of = [], [], [], []
     for sweep in range(sweeps):
@@ -115,12 +128,16 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=16_000, help="supervised steps")
     parser.add_argument("--hidden", type=int, default=GeneralistConfig.hidden)
     parser.add_argument("--seed", type=int, default=11, help="not the training runs' seeds")
+    parser.add_argument(
+        "--teacher", default="orca-shield", choices=("orca-shield", "oracle"), help="who flies"
+    )
+    parser.add_argument("--families", default="*", help="patterns of the families flown")
     parser.add_argument("--out", type=Path, help="export the clone as a generalist policy file")
     parser.add_argument("--json", action="store_true", help="print the result as JSON")
     args = parser.parse_args()
-    cfg = GeneralistConfig(teacher="orca-shield", seed=args.seed, hidden=args.hidden)
+    cfg = GeneralistConfig(teacher=args.teacher, seed=args.seed, hidden=args.hidden)
     t0 = time.perf_counter()
-    data = collect(cfg, args.sweeps)
+    data = collect(cfg, args.sweeps, args.families)
     t1 = time.perf_counter()
     net, err = fit(data, args.hidden, args.steps, args.seed, cfg.grad_clip)
     t2 = time.perf_counter()
@@ -154,7 +171,7 @@ def main() -> None:
             base_cfg=with_layout(data["base"], data["layout"]),
             hidden=args.hidden,
             uav_range=(1, cfg.max_uavs),
-            reward="none (a clone of orca-shield)",
+            reward=f"none (a clone of {args.teacher})",
             training={"steps": args.steps, "seed": args.seed},
         )
         result["policy"] = str(args.out)

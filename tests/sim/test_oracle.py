@@ -219,8 +219,9 @@ def test_where_the_oracle_finds_no_plan_it_says_so():
     assert not planned.any() and (actions == 0).all()
 
 
-def test_the_oracle_as_a_controller_plans_nothing_around_a_uav_that_arrived():
-    cfg = load_scenario("2u1o", obstacles={"count": 0})
+@pytest.mark.parametrize("arrival", ["leave", "hover"])
+def test_the_oracle_as_a_controller_sees_an_arrived_uav_only_where_it_hovers(arrival):
+    cfg = load_scenario("2u1o", obstacles={"count": 0}, arrival=arrival)
     starts = np.array([[[50.0, 150.0], [10.0, 150.0]]])  # the second flies through the first
     targets = np.array([[[50.0, 150.0], [300.0, 150.0]]])  # ...which is on its own target
     episodes = EpisodeStart.of_swarm(
@@ -232,8 +233,21 @@ def test_the_oracle_as_a_controller_plans_nothing_around_a_uav_that_arrived():
         cfg.uav.speed_m_s,
         cfg.field.swarm_lead_m,
     )
-    state = SwarmSim(cfg, scored=False).start(episodes, np.random.default_rng(0))
+    sim, rng = SwarmSim(cfg, scored=False), np.random.default_rng(0)
+    state = sim.start(episodes, rng)
     arrived = np.array([[True, False]])
     state = dataclasses.replace(state, reached=arrived, active=~arrived)
     actions, planned = oracle_actions(state, cfg)
-    assert planned.all() and actions[0, 1] == 0.0  # straight on: the first is no longer there
+    assert planned.all()
+    if arrival == "leave":
+        assert actions[0, 1] == 0.0  # straight on: the first is no longer there
+    else:
+        assert actions[0, 1] != 0.0  # it hovers in the way: turn now
+    reached = False
+    for _ in range(cfg.max_steps):  # and flown, the second gets through
+        state, result = sim.step(state, oracle_actions(state, cfg)[0], rng)
+        assert not result.collided_u2u.any()
+        reached |= bool(state.reached[0, 1])
+        if not state.active.any():
+            break
+    assert reached
