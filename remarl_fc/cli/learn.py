@@ -367,9 +367,9 @@ def resumed_generalist_config(args: argparse.Namespace, out: Path) -> Generalist
         ) from exc
     try:
         cfg = resumed_config(stored, minutes=args.minutes or None, device=args.device)
-        asked = generalist_config(args)
-    except ValueError as exc:
+    except (ValueError, TypeError) as exc:  # a setting out of range, or of the wrong type
         raise ConfigError(f"{where}: {out / 'config.json'}: {exc}") from exc
+    asked = generalist_config(args)  # the flags as a new run would take them
     clash = [
         f"{name} {getattr(asked, name)!r} (the run's: {getattr(cfg, name)!r})"
         for name in generalist_flags(args)

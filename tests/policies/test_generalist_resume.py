@@ -120,4 +120,11 @@ def test_nothing_to_resume_or_no_settings_is_a_clear_error(tmp_path, capsys, fak
     assert main(["train", "--generalist", "--resume", "--out", str(out)]) == 2
     err = capsys.readouterr().err
     assert "config.json is missing or unreadable" in err and "Traceback" not in err
+    (out / "config.json").write_text(json.dumps({"generalist": {"warp_drive": 1}}))
+    assert main(["train", "--generalist", "--resume", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "warp_drive: not a setting of this version" in err and "Traceback" not in err
+    (out / "config.json").write_text(json.dumps({"generalist": {"minutes": -1}}))
+    assert main(["train", "--generalist", "--resume", "--out", str(out)]) == 2
+    assert "minutes: must be >= 0" in capsys.readouterr().err
     assert not fake_train
