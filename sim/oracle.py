@@ -100,6 +100,12 @@ def plan_episodes(
     return OraclePlans(actions=actions, planned=planned, solvable=solvable)
 
 
+def _parked_uavs(n: int) -> FloatArray:
+    """(N, 2) where UAVs that may be ignored wait: each on its own spot, far from everything."""
+    parked = PARKED_M + PARKED_SPACING_M * np.arange(n, dtype=np.float64)
+    return np.stack([parked, parked], axis=-1)
+
+
 def _hide(episodes: EpisodeStart, hidden: BoolArray) -> EpisodeStart:
     """The episodes with the ``hidden`` (B, M) obstacles parked at rest, far away."""
     far = PARKED_M + PARKED_SPACING_M * np.arange(hidden.shape[1], dtype=np.float64)
@@ -141,8 +147,7 @@ def _restart(
         failed |= crashed & (t < at)  # before its snapshot; later steps are not its plan
     pos, heading, reached, obstacles = (np.stack(parts) for parts in zip(*snap, strict=True))
     n = pos.shape[1]
-    parked = PARKED_M + PARKED_SPACING_M * np.arange(n, dtype=np.float64)
-    park = np.stack([parked, parked], axis=-1)
+    park = _parked_uavs(n)
     start = np.where(reached[..., None], park, pos)
     target = np.where(reached[..., None], park, episodes.target_m)
     start[failed] = np.nan
@@ -179,10 +184,8 @@ def oracle_actions(
         a plan was found.
     """
     oracle = oracle or OracleConfig()
-    n = state.pos_m.shape[1]
-    parked = PARKED_M + PARKED_SPACING_M * np.arange(n, dtype=np.float64)
-    park = np.stack([parked, parked], axis=-1)
-    gone = (state.reached | ~state.active)[..., None]
+    park = _parked_uavs(state.pos_m.shape[1])
+    gone = ~state.active[..., None]  # arrived, or the episode is over
     steps = state.steps.astype(np.int64)
     episodes = EpisodeStart(
         start_m=np.where(gone, park, state.pos_m),

@@ -94,7 +94,12 @@ def test_supervised_steps_fit_the_actor_to_the_labels():
 
 
 @pytest.mark.parametrize("teacher", ["orca-shield", "oracle"])
-def test_a_tiny_run_clones_first_then_goes_on_with_ppo(tmp_path, teacher):
+def test_a_tiny_run_clones_first_then_goes_on_with_ppo(tmp_path, teacher, monkeypatch):
+    import policies.generalist_train as generalist_train
+
+    asked = []  # the configured teacher is the one that labels
+    plan = generalist_train.oracle_actions
+    monkeypatch.setattr(generalist_train, "oracle_actions", lambda *a: asked.append(1) or plan(*a))
     summary, seen = tiny_ppo_run(
         tmp_path, teacher=teacher, dagger_fraction=0.5, dagger_updates=3, dagger_batch=16
     )
@@ -107,3 +112,4 @@ def test_a_tiny_run_clones_first_then_goes_on_with_ppo(tmp_path, teacher):
     assert all(row["losses/clone"] > 0 and row["charts/dagger_labels"] > 0 for row in dagger)
     assert dagger[-1]["iteration"] <= 2
     assert summary["teacher"] == teacher
+    assert bool(asked) == (teacher == "oracle")
