@@ -141,6 +141,16 @@ class GeneralistConfig:
     max_intruders: int = 8
     """m: intruder rows of the observation (version 2)."""
 
+    sensing_range_m: float = 0.0
+    """Range of the observation's neighbour and intruder rows, metres, and the scale of its
+    positions; 0: the base scenario's ``sensing.range_m`` (100 m, the paper's forward sensor).
+    A generalist reads its neighbours from their telemetry and the intruders from ADS-B, neither
+    of which ends at 100 m (docs/MODEL.md §20, "How far it sees")."""
+
+    sensing_aperture_deg: float = 0.0
+    """Full aperture of the sector the rows are kept from, degrees, centred on the heading;
+    0: the base scenario's ``sensing.aperture_rad`` (270°); 360: all around."""
+
     max_uavs: int = 50
     """Largest swarm the exported policy declares it flies (the smallest is 1)."""
 
@@ -359,6 +369,12 @@ class GeneralistConfig:
         check(self.separation_horizon_s >= 0, "separation_horizon_s", "must be >= 0")
         check(self.minutes >= 0 and self.eval_minutes > 0, "minutes", "must be >= 0")
         check(self.schedule_minutes >= 0, "schedule_minutes", "must be >= 0")
+        check(self.sensing_range_m >= 0, "sensing_range_m", "must be >= 0 (0: the scenario's)")
+        check(
+            0 <= self.sensing_aperture_deg <= 360,
+            "sensing_aperture_deg",
+            "must be in [0, 360] (0: the scenario's)",
+        )
         check_at_least(
             self,
             1,

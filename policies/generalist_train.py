@@ -76,18 +76,28 @@ VALIDATION_SEED = evaluation_seed(suite="training", offset=7_777)
 
 
 def generalist_layout(cfg: GeneralistConfig, base: ScenarioConfig) -> ObservationLayout:
-    """The version-2 layout of the generalist on scenarios with ``base``'s sensing and speed."""
+    """The version-2 layout of the generalist on scenarios with ``base``'s speed.
+
+    Range and aperture are the run's (``sensing_range_m``, ``sensing_aperture_deg``) where it
+    sets them, else ``base``'s sensing.
+    """
     s = base.sensing
+    range_m = cfg.sensing_range_m or s.range_m
+    aperture = (
+        math.radians(cfg.sensing_aperture_deg) if cfg.sensing_aperture_deg else s.aperture_rad
+    )
     return ObservationLayout(
-        cfg.max_intruders, s.range_m, s.aperture_rad, base.uav.speed_m_s, cfg.max_neighbours, 2
+        cfg.max_intruders, range_m, aperture, base.uav.speed_m_s, cfg.max_neighbours, 2
     )
 
 
 def with_layout(cfg: ScenarioConfig, layout: ObservationLayout) -> ScenarioConfig:
-    """``cfg`` sensing with ``layout``'s version-2 observation."""
+    """``cfg`` sensing with ``layout``'s version-2 observation (its rows, range and aperture)."""
     sensing = dataclasses.replace(
         cfg.sensing,
         observation=2,
+        range_m=layout.range_m,
+        aperture_rad=layout.aperture_rad,
         max_neighbours=layout.max_neighbours,
         max_obstacles=layout.max_obstacles,
     )

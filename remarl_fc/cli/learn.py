@@ -94,6 +94,20 @@ def add_train(sub: Any) -> None:
         "within S seconds to every other UAV and intruder (default 0: the step's own)",
     )
     p.add_argument(
+        "--sensing-range",
+        type=float,
+        metavar="M",
+        help="generalist: range of the neighbour and intruder rows, metres (default: the "
+        "scenarios' 100 m; telemetry and ADS-B reach further)",
+    )
+    p.add_argument(
+        "--sensing-aperture",
+        type=float,
+        metavar="DEG",
+        help="generalist: full aperture of the sensed sector, degrees (default: the scenarios' "
+        "270; 360: all around)",
+    )
+    p.add_argument(
         "--separation-weight",
         type=float,
         metavar="W",
@@ -401,6 +415,8 @@ def generalist_flags(args: argparse.Namespace) -> dict[str, Any]:
         "dagger_fraction": args.dagger_fraction,
         "separation_horizon_s": args.separation_horizon,
         "separation_weight": args.separation_weight,
+        "sensing_range_m": args.sensing_range,
+        "sensing_aperture_deg": args.sensing_aperture,
         "seed": args.seed or None,
     }
     if args.family_weight:
