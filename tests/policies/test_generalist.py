@@ -357,6 +357,36 @@ def test_a_teacher_run_flies_the_teacher_clones_it_then_fine_tunes(tmp_path):
     assert json.loads(evals[0])["iteration"] == 1  # the clone is validated at once
 
 
+def test_the_run_sets_how_far_and_how_wide_the_observation_sees():
+    """The layout takes the run's range and aperture (else the scenario's), and the training
+    worlds — the teacher's sensing with them — are built with the layout's."""
+    import math
+
+    from policies.generalist_train import generalist_layout, with_layout
+    from sim.scenarios import load_scenario
+    from sim.swarm import SwarmSim
+
+    base = load_scenario("3u2o")
+    plain = generalist_layout(GeneralistConfig(), base)
+    assert (plain.range_m, plain.aperture_rad) == (base.sensing.range_m, base.sensing.aperture_rad)
+    wide = generalist_layout(GeneralistConfig(sensing_range_m=300, sensing_aperture_deg=360), base)
+    assert (wide.range_m, wide.aperture_rad) == (300.0, 2 * math.pi)
+    cfg = with_layout(base, wide)
+    assert (cfg.sensing.range_m, cfg.sensing.aperture_rad) == (300.0, 2 * math.pi)
+    # an intruder 200 m behind a UAV: outside the scenario's 100 m forward sector, inside the run's
+    sim = SwarmSim(cfg)
+    state = sim.initial_state(np.random.default_rng(0), 1)
+    behind = state.pos_m[:, 0] - 200.0 * np.stack(
+        [np.cos(state.heading_rad[:, 0]), np.sin(state.heading_rad[:, 0])], axis=-1
+    )
+    state.obstacle_pos_m[:, 0] = behind
+    state.obstacle_pos_m[:, 1] = behind + 5_000.0  # out of any range
+    seen = sim.observe(state, layout=wide).flat()[0, 0, wide.blocks()["intruder_mask"]]
+    assert seen.tolist() == [1.0] + [0.0] * (wide.max_obstacles - 1)
+    narrow = sim.observe(state, layout=plain).flat()[0, 0, plain.blocks()["intruder_mask"]]
+    assert not narrow.any()
+
+
 def test_the_teacher_is_orca_through_the_shield():
     from policies.generalist_train import World, teacher_actions, with_layout
     from sim.scenarios import load_scenario
@@ -464,6 +494,8 @@ def test_a_bad_family_weight_flag_says_what_to_write(text):
         ("--dagger-fraction", "1.5", "dagger_fraction"),
         ("--dagger-fraction 0.5 --teacher", "none", "dagger_fraction"),  # asked, cannot apply
         ("--dagger-fraction 0.5 --learner", "td3", "dagger_fraction"),
+        ("--sensing-range", "-5", "sensing_range_m"),
+        ("--sensing-aperture", "400", "sensing_aperture_deg"),
     ],
 )
 def test_a_generalist_flag_out_of_range_is_a_clear_error(tmp_path, capsys, flag, value, setting):
@@ -492,7 +524,7 @@ def test_train_generalist_flags_reach_the_config(tmp_path, monkeypatch):
     argv += ["--separation-horizon", "8", "--separation-weight", "0"]
     argv += ["--pooling", "max-attention", "--ppo-min-std", "0.1"]
     argv += ["--teacher", "orca-shield", "--bc-weight", "1.5", "--bc-fraction", "0.8"]
-    argv += ["--dagger-fraction", "0.25"]
+    argv += ["--dagger-fraction", "0.25", "--sensing-range", "300", "--sensing-aperture", "360"]
     assert main([*argv, "--out", str(tmp_path / "run")]) == 0
     ((cfg, out, resume),) = seen
     assert cfg.swarm_field == "formation" and cfg.family_weights == (("swarms-*", 2.0),)
@@ -500,6 +532,7 @@ def test_train_generalist_flags_reach_the_config(tmp_path, monkeypatch):
     assert cfg.pooling == "max-attention" and cfg.ppo_min_std == 0.1
     assert (cfg.teacher, cfg.bc_weight, cfg.bc_fraction) == ("orca-shield", 1.5, 0.8)
     assert cfg.dagger_fraction == 0.25
+    assert (cfg.sensing_range_m, cfg.sensing_aperture_deg) == (300.0, 360.0)
     assert cfg.minutes == 2 and cfg.seed == 4 and out == tmp_path / "run" and not resume
     assert GeneralistConfig().swarm_field == "all"  # the paper's reward unless asked
     seen.clear()
