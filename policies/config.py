@@ -141,15 +141,16 @@ class GeneralistConfig:
     max_intruders: int = 8
     """m: intruder rows of the observation (version 2)."""
 
-    sensing_range_m: float = 0.0
+    sensing_range_m: float = 200.0
     """Range of the observation's neighbour and intruder rows, metres, and the scale of its
     positions; 0: the base scenario's ``sensing.range_m`` (100 m, the paper's forward sensor).
     A generalist reads its neighbours from their telemetry and the intruders from ADS-B, neither
-    of which ends at 100 m (docs/MODEL.md §20, "How far it sees")."""
+    of which ends at 100 m: 200 m all around is the shipped run's, 8 s of warning at the
+    suite's largest closing speed (docs/MODEL.md §20, "How far it sees")."""
 
-    sensing_aperture_deg: float = 0.0
+    sensing_aperture_deg: float = 360.0
     """Full aperture of the sector the rows are kept from, degrees, centred on the heading;
-    0: the base scenario's ``sensing.aperture_rad`` (270°); 360: all around."""
+    0: the base scenario's ``sensing.aperture_rad`` (270°); 360: all around (the shipped run)."""
 
     max_uavs: int = 50
     """Largest swarm the exported policy declares it flies (the smallest is 1)."""
@@ -421,9 +422,12 @@ SETTINGS_BEFORE_THEY_EXISTED: dict[str, Any] = {
     "teacher": "none",
     "learner": "td3",
     "dagger_fraction": 0.0,
+    "sensing_range_m": 0.0,
+    "sensing_aperture_deg": 0.0,
 }
 """What a generalist run did before a setting existed, where that is not today's default: the
-first runs had no teacher and learned with TD3, and DAgger came after the teacher. A run's
+first runs had no teacher and learned with TD3, DAgger came after the teacher, and every run
+sensed as the scenarios do (100 m, 270°) until the range and aperture were the run's. A run's
 stored settings (its ``config.json``) that lack one of these take this value when the run is
 resumed; any other missing setting takes its default, which is what the code did before it."""
 

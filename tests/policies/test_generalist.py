@@ -367,10 +367,10 @@ def test_the_run_sets_how_far_and_how_wide_the_observation_sees():
     from sim.swarm import SwarmSim
 
     base = load_scenario("3u2o")
-    plain = generalist_layout(GeneralistConfig(), base)
+    plain = generalist_layout(GeneralistConfig(sensing_range_m=0, sensing_aperture_deg=0), base)
     assert (plain.range_m, plain.aperture_rad) == (base.sensing.range_m, base.sensing.aperture_rad)
-    wide = generalist_layout(GeneralistConfig(sensing_range_m=300, sensing_aperture_deg=360), base)
-    assert (wide.range_m, wide.aperture_rad) == (300.0, 2 * math.pi)
+    wide = generalist_layout(GeneralistConfig(sensing_range_m=300), base)
+    assert (wide.range_m, wide.aperture_rad) == (300.0, 2 * math.pi)  # all around by default
     cfg = with_layout(base, wide)
     assert (cfg.sensing.range_m, cfg.sensing.aperture_rad) == (300.0, 2 * math.pi)
     # an intruder 200 m behind a UAV: outside the scenario's 100 m forward sector, inside the run's
