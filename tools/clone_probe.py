@@ -132,10 +132,28 @@ def main() -> None:
         "--teacher", default="orca-shield", choices=("orca-shield", "oracle"), help="who flies"
     )
     parser.add_argument("--families", default="*", help="patterns of the families flown")
+    parser.add_argument(
+        "--sensing-range",
+        type=float,
+        default=GeneralistConfig.sensing_range_m,
+        help="metres the student sees (0: the scenarios' 100 m)",
+    )
+    parser.add_argument(
+        "--sensing-aperture",
+        type=float,
+        default=GeneralistConfig.sensing_aperture_deg,
+        help="degrees around its heading (0: the scenarios' 270)",
+    )
     parser.add_argument("--out", type=Path, help="export the clone as a generalist policy file")
     parser.add_argument("--json", action="store_true", help="print the result as JSON")
     args = parser.parse_args()
-    cfg = GeneralistConfig(teacher=args.teacher, seed=args.seed, hidden=args.hidden)
+    cfg = GeneralistConfig(
+        teacher=args.teacher,
+        seed=args.seed,
+        hidden=args.hidden,
+        sensing_range_m=args.sensing_range,
+        sensing_aperture_deg=args.sensing_aperture,
+    )
     t0 = time.perf_counter()
     data = collect(cfg, args.sweeps, args.families)
     t1 = time.perf_counter()

@@ -28,6 +28,7 @@ import argparse
 import copy
 import fnmatch
 import json
+import math
 import time
 from pathlib import Path
 from typing import Any
@@ -109,10 +110,15 @@ def main() -> None:
     rng = np.random.default_rng(args.seed)
     net, policy = load_actor(args.policy)
     anchor = copy.deepcopy(net)
-    cfg = GeneralistConfig(seed=args.seed, hidden=int(policy.meta["hidden"]))
+    cfg = GeneralistConfig(  # the mixture seen as the policy sees it
+        seed=args.seed,
+        hidden=int(policy.meta["hidden"]),
+        sensing_range_m=policy.layout.range_m,
+        sensing_aperture_deg=math.degrees(policy.layout.aperture_rad),
+    )
     base = family_scenario(load_suite(cfg.suites[0]).families[0])
     layout = generalist_layout(cfg, base)
-    if layout.size != policy.layout.size:
+    if layout != policy.layout:
         raise SystemExit(f"{args.policy}: its observation is not the mixture's ({layout})")
     goal = reward_upper_bound(base, "remarl") / (1.0 - cfg.gamma)
     worlds = make_worlds(cfg, layout, np.random.default_rng([args.seed, 1]))

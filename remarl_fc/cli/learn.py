@@ -97,15 +97,15 @@ def add_train(sub: Any) -> None:
         "--sensing-range",
         type=float,
         metavar="M",
-        help="generalist: range of the neighbour and intruder rows, metres (default: the "
-        "scenarios' 100 m; telemetry and ADS-B reach further)",
+        help="generalist: range of the neighbour and intruder rows, metres (default 200, the "
+        "shipped run's; 0: the scenarios' 100 m)",
     )
     p.add_argument(
         "--sensing-aperture",
         type=float,
         metavar="DEG",
-        help="generalist: full aperture of the sensed sector, degrees (default: the scenarios' "
-        "270; 360: all around)",
+        help="generalist: full aperture of the sensed sector, degrees (default 360: all "
+        "around; 0: the scenarios' 270)",
     )
     p.add_argument(
         "--separation-weight",
