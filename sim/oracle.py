@@ -100,16 +100,25 @@ def plan_episodes(
     return OraclePlans(actions=actions, planned=planned, solvable=solvable)
 
 
+def _parked_spots(count: int, first: int = 0, side: float = 1.0) -> FloatArray:
+    """(count, 2) spots far from everything, one per vehicle set aside.
+
+    ``PARKED_SPACING_M`` apart on the diagonal: spots ``first`` … ``first + count − 1``, on the
+    + (UAVs) or the − (obstacles) ``side``.
+    """
+    far = side * (PARKED_M + PARKED_SPACING_M * np.arange(first, first + count, dtype=np.float64))
+    return np.stack([far, far], axis=-1)
+
+
 def _parked_uavs(n: int) -> FloatArray:
     """(N, 2) where UAVs that may be ignored wait: each on its own spot, far from everything."""
-    parked = PARKED_M + PARKED_SPACING_M * np.arange(n, dtype=np.float64)
-    return np.stack([parked, parked], axis=-1)
+    return _parked_spots(n)
 
 
 def _hide(episodes: EpisodeStart, hidden: BoolArray) -> EpisodeStart:
     """The episodes with the ``hidden`` (B, M) obstacles parked at rest, far away."""
-    far = PARKED_M + PARKED_SPACING_M * np.arange(hidden.shape[1], dtype=np.float64)
-    pos = np.where(hidden[..., None], np.stack([-far, -far], axis=-1), episodes.obstacle_pos_m)
+    far = _parked_spots(hidden.shape[1], side=-1.0)
+    pos = np.where(hidden[..., None], far, episodes.obstacle_pos_m)
     vel = np.where(hidden[..., None], 0.0, episodes.obstacle_vel_m_s)
     return dataclasses.replace(
         episodes,
@@ -224,8 +233,8 @@ def _hovering(
     obstacle settings for M + N of them.
     """
     b, n = state.pos_m.shape[:2]
-    far = -(PARKED_M + PARKED_SPACING_M * (np.arange(n) + episodes.obstacle_pos_m.shape[1] + 1))
-    parked = np.broadcast_to(np.stack([far, far], axis=-1), (b, n, 2))
+    spots = _parked_spots(n, first=episodes.obstacle_pos_m.shape[1] + 1, side=-1.0)
+    parked = np.broadcast_to(spots, (b, n, 2))
     hover = np.where(state.reached[..., None], state.pos_m, parked)
     moved = dataclasses.replace(
         episodes,
