@@ -214,7 +214,11 @@ def train_generalist_ppo(
                     )
                 ):
                     # DAgger: the teacher labels the state the student flies from
-                    taught = teacher_actions(world, cfg.teacher) if bc > 0 else None
+                    taught = (
+                        teacher_actions(world, cfg.teacher, cfg.teacher_horizon_s)
+                        if bc > 0
+                        else None
+                    )
                     step, ended = advance_world(world, a, cfg, book.goal_value, rng)
                     flown[k].append((step, u, lp, taught))
                     book.transitions += int(step.acted.sum())

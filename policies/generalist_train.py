@@ -57,6 +57,7 @@ from sim.env import episode_metrics
 from sim.evaluation import evaluation_seed
 from sim.observation import ObservationLayout
 from sim.oracle import oracle_actions
+from sim.orca import HORIZON_S as ORCA_HORIZON_S
 from sim.orca import orca_actions
 from sim.scenarios import REAL_WORLD
 from sim.shield import ShieldConfig, shield_state, vehicle_of
@@ -323,22 +324,26 @@ TEACHER_NOISE = 0.1
 states a little off its own path, so the clone learns to come back to it."""
 
 
-def teacher_actions(world: World, teacher: str) -> NDArray[np.float32]:
+def teacher_actions(
+    world: World, teacher: str, horizon_s: float = ORCA_HORIZON_S
+) -> NDArray[np.float32]:
     """The teacher's actions (B, N) in a world (`GeneralistConfig.teacher`).
 
     "orca-shield": ORCA through the shield. Heading changes only (the policy commands no
     speed), and ORCA reads the simulator's state, the true positions even where the UAVs'
     sensors are ADS-B: a privileged teacher, which the student, seeing only its observation,
-    imitates as far as it can. "oracle": the oracle's plan from the current state, replanned
-    at every step (`sim.oracle.oracle_actions`), and ORCA through the shield in the
-    environments where it finds no plan.
+    imitates as far as it can. ``horizon_s`` is its τ_o against the intruders
+    (`GeneralistConfig.teacher_horizon_s`). "oracle": the oracle's plan from the current
+    state, replanned at every step (`sim.oracle.oracle_actions`), and ORCA through the shield
+    in the environments where it finds no plan.
     """
     if teacher == "oracle":
         planned_actions, planned = oracle_actions(world.state, world.cfg)
         if planned.all():
             return planned_actions
-        return np.where(planned[:, None], planned_actions, teacher_actions(world, "orca-shield"))
-    proposed = orca_actions(world.state, world.cfg)
+        fallback = teacher_actions(world, "orca-shield", horizon_s)
+        return np.where(planned[:, None], planned_actions, fallback)
+    proposed = orca_actions(world.state, world.cfg, horizon_s=horizon_s)
     vehicle = dataclasses.replace(vehicle_of(world.cfg), can_slow=False)
     return shield_state(ShieldConfig(mode="on"), world.cfg, world.state, proposed, vehicle).action
 
@@ -367,7 +372,7 @@ def learn_from_teacher(
     collected, episodes = 0, []
     while collected < cfg.teacher_transitions:
         for world in worlds:
-            taught = teacher_actions(world, cfg.teacher)
+            taught = teacher_actions(world, cfg.teacher, cfg.teacher_horizon_s)
             flown = np.clip(taught + rng.normal(0.0, TEACHER_NOISE, taught.shape), -1.0, 1.0)
             transitions, ended = step_world(
                 world, flown.astype(np.float32), cfg, goal_value, rng, teacher=taught

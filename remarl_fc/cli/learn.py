@@ -101,6 +101,13 @@ def add_train(sub: Any) -> None:
         "shipped run's; 0: the scenarios' 100 m)",
     )
     p.add_argument(
+        "--teacher-horizon",
+        type=float,
+        metavar="S",
+        help="generalist: how far ahead the ORCA teacher checks its turns against the "
+        "intruders, seconds (default 20, the shipped run's; ORCA's own 10 s suits 100 m)",
+    )
+    p.add_argument(
         "--sensing-aperture",
         type=float,
         metavar="DEG",
@@ -417,6 +424,7 @@ def generalist_flags(args: argparse.Namespace) -> dict[str, Any]:
         "separation_weight": args.separation_weight,
         "sensing_range_m": args.sensing_range,
         "sensing_aperture_deg": args.sensing_aperture,
+        "teacher_horizon_s": args.teacher_horizon,
         "seed": args.seed or None,
     }
     if args.family_weight:
