@@ -7,7 +7,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from sim.config import SWARM_FIELDS, TEACHERS
+from sim.config import SWARM_FIELDS, TEACHERS, ScenarioConfig
 from sim.setnet import ATTENTION_HEADS, POOLINGS
 
 
@@ -378,7 +378,12 @@ class GeneralistConfig:
         check(self.separation_horizon_s >= 0, "separation_horizon_s", "must be >= 0")
         check(self.minutes >= 0 and self.eval_minutes > 0, "minutes", "must be >= 0")
         check(self.schedule_minutes >= 0, "schedule_minutes", "must be >= 0")
-        check(self.teacher_horizon_s > 0, "teacher_horizon_s", "must be > 0 seconds")
+        step_s = ScenarioConfig.dt_s
+        check(
+            self.teacher_horizon_s >= step_s,
+            "teacher_horizon_s",
+            f"must be >= one decision step ({step_s} s)",
+        )
         check(self.sensing_range_m >= 0, "sensing_range_m", "must be >= 0 (0: the scenario's)")
         check(
             0 <= self.sensing_aperture_deg <= 360,

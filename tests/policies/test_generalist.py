@@ -412,6 +412,32 @@ def test_the_teacher_is_orca_through_the_shield():
     assert not np.array_equal(actions, np.zeros_like(actions))  # not a constant stand-in
 
 
+def test_the_teacher_turns_for_an_intruder_as_far_ahead_as_its_horizon_reaches():
+    from policies.generalist_train import World, teacher_actions, with_layout
+    from sim.orca import orca_actions
+    from sim.scenarios import load_scenario
+    from sim.swarm import SwarmSim
+
+    wide = dataclasses.replace(LAYOUT, range_m=200.0, aperture_rad=2 * np.pi)
+    cfg = with_layout(load_scenario("3u2o"), wide)
+    sim = SwarmSim(cfg)
+    state = sim.initial_state(np.random.default_rng(0), 1)
+    heading = state.heading_rad[0, 0]
+    ahead = np.array([np.cos(heading), np.sin(heading)])
+    # the UAV flies at its target; the other UAVs and the second intruder are far away
+    state.target_m[0, 0] = state.pos_m[0, 0] + 800.0 * ahead
+    state.pos_m[0, 1:] = state.pos_m[0, 0] + [[0.0, 5_000.0], [0.0, -5_000.0]]
+    state.target_m[0, 1:] = state.pos_m[0, 1:]
+    state.obstacle_pos_m[0, 1] = state.pos_m[0, 0] - 5_000.0 * ahead
+    # a head-on intruder 170 m ahead, closing at 12.5 m/s: at d_col in 12 s
+    state.obstacle_pos_m[0, 0] = state.pos_m[0, 0] + 170.0 * ahead
+    state.obstacle_vel_m_s[0, 0] = -state.obstacle_speed_m_s[0, 0] * ahead
+    world = World(None, cfg, False, sim, state, sim.observe(state).flat(), 1)  # type: ignore[arg-type]
+    assert orca_actions(state, cfg, horizon_s=20.0)[0, 0] != 0.0  # ORCA alone turns at 20 s
+    assert teacher_actions(world, "orca-shield", horizon_s=10.0)[0, 0] == 0.0  # not yet in view
+    assert teacher_actions(world, "orca-shield", horizon_s=20.0)[0, 0] != 0.0  # already turning
+
+
 def test_the_oracle_teacher_flies_its_plans_and_orca_through_the_shield_where_it_has_none(
     monkeypatch,
 ):
@@ -496,6 +522,7 @@ def test_a_bad_family_weight_flag_says_what_to_write(text):
         ("--dagger-fraction 0.5 --learner", "td3", "dagger_fraction"),
         ("--sensing-range", "-5", "sensing_range_m"),
         ("--sensing-aperture", "400", "sensing_aperture_deg"),
+        ("--teacher-horizon", "1", "teacher_horizon_s"),
     ],
 )
 def test_a_generalist_flag_out_of_range_is_a_clear_error(tmp_path, capsys, flag, value, setting):
@@ -525,6 +552,7 @@ def test_train_generalist_flags_reach_the_config(tmp_path, monkeypatch):
     argv += ["--pooling", "max-attention", "--ppo-min-std", "0.1"]
     argv += ["--teacher", "orca-shield", "--bc-weight", "1.5", "--bc-fraction", "0.8"]
     argv += ["--dagger-fraction", "0.25", "--sensing-range", "300", "--sensing-aperture", "360"]
+    argv += ["--teacher-horizon", "14"]
     assert main([*argv, "--out", str(tmp_path / "run")]) == 0
     ((cfg, out, resume),) = seen
     assert cfg.swarm_field == "formation" and cfg.family_weights == (("swarms-*", 2.0),)
@@ -533,6 +561,7 @@ def test_train_generalist_flags_reach_the_config(tmp_path, monkeypatch):
     assert (cfg.teacher, cfg.bc_weight, cfg.bc_fraction) == ("orca-shield", 1.5, 0.8)
     assert cfg.dagger_fraction == 0.25
     assert (cfg.sensing_range_m, cfg.sensing_aperture_deg) == (300.0, 360.0)
+    assert cfg.teacher_horizon_s == 14.0
     assert cfg.minutes == 2 and cfg.seed == 4 and out == tmp_path / "run" and not resume
     assert GeneralistConfig().swarm_field == "all"  # the paper's reward unless asked
     seen.clear()

@@ -32,6 +32,7 @@ def test_a_run_from_before_a_setting_existed_resumes_as_it_ran():
     cfg = resumed_config(old)
     assert (cfg.teacher, cfg.learner, cfg.dagger_fraction) == ("none", "td3", 0.0)
     assert (cfg.sensing_range_m, cfg.sensing_aperture_deg) == (0.0, 0.0)  # the scenarios' sensing
+    assert cfg.teacher_horizon_s == 10.0  # ORCA's own horizon
     assert cfg.pooling == GeneralistConfig().pooling and cfg.seed == 2
 
 
