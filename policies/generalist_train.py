@@ -343,9 +343,20 @@ def teacher_actions(
             return planned_actions
         fallback = teacher_actions(world, "orca-shield", horizon_s)
         return np.where(planned[:, None], planned_actions, fallback)
-    proposed = orca_actions(world.state, world.cfg, horizon_s=horizon_s)
-    vehicle = dataclasses.replace(vehicle_of(world.cfg), can_slow=False)
-    return shield_state(ShieldConfig(mode="on"), world.cfg, world.state, proposed, vehicle).action
+    return orca_shield_actions(world.state, world.cfg, horizon_s)
+
+
+def orca_shield_actions(
+    state: SwarmState, cfg: ScenarioConfig, horizon_s: float = ORCA_HORIZON_S
+) -> NDArray[np.float32]:
+    """The "orca-shield" teacher's actions (B, N).
+
+    ORCA looking ``horizon_s`` ahead at the intruders it senses with ``cfg``, then the safety
+    shield, turning only.
+    """
+    proposed = orca_actions(state, cfg, horizon_s=horizon_s)
+    vehicle = dataclasses.replace(vehicle_of(cfg), can_slow=False)
+    return shield_state(ShieldConfig(mode="on"), cfg, state, proposed, vehicle).action
 
 
 def bc_weight(cfg: GeneralistConfig, frac: float) -> float:
