@@ -240,9 +240,10 @@ class GeneralistConfig:
     """τ_o of the ORCA teacher, seconds: how far ahead it checks its candidates against the
     intruders (`sim.orca.orca_plan`'s ``horizon_s``; ORCA's own default, 10 s, suits the
     scenarios' 100 m sensor). With the run's 200 m, 20 s covers what the teacher sees: a
-    head-on intruder closing at 12.5 m/s is in view 16 s before it arrives. On the suite's
-    large swarms the teacher then flies 20u4o 94 % instead of 80 %, 50u8o 46 % instead of
-    21 % (docs/MODEL.md §20, "A teacher that looks as far as it sees")."""
+    head-on intruder closing at 12.5 m/s is in view 16 s before it arrives. The teacher then
+    flies 20u4o 91 % instead of 78 %, 50u8o 46 % instead of 28 % (its students, over four
+    seeds, about as well as with 10 s: docs/MODEL.md §20, "A teacher that looks as far as it
+    sees")."""
 
     teacher_transitions: int = 400_000
     """UAV transitions flown by the teacher before learning (its replay share)."""

@@ -105,7 +105,7 @@ def add_train(sub: Any) -> None:
         type=float,
         metavar="S",
         help="generalist: how far ahead the ORCA teacher checks its turns against the "
-        "intruders, seconds (default 20, the shipped run's; ORCA's own 10 s suits 100 m)",
+        "intruders, seconds (default 20; ORCA's own 10 s suits 100 m)",
     )
     p.add_argument(
         "--sensing-aperture",
