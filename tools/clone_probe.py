@@ -2,6 +2,7 @@
 
     OMP_NUM_THREADS=1 python tools/clone_probe.py [--sweeps 300] [--steps 16000] [--hidden 64]
         [--seed 11] [--teacher orca-shield|oracle] [--families 'dense-*,...']
+        [--sensing-range 200] [--sensing-aperture 360] [--teacher-horizon 20]
         [--out clone.safetensors] [--json]
 
 Flies the "orca-shield" teacher (ORCA through the shield, `policies.generalist_train
@@ -77,7 +78,7 @@ def collect(cfg: GeneralistConfig, sweeps: int, families: str = "*") -> dict[str
     obs, labels, world_of, sweep_of = [], [], [], []
     for sweep in range(sweeps):
         for k, world in enumerate(worlds):
-            taught = teacher_actions(world, cfg.teacher)
+            taught = teacher_actions(world, cfg.teacher, cfg.teacher_horizon_s)
             noisy = taught + rng.normal(0.0, TEACHER_NOISE, taught.shape)
             flown = np.clip(noisy, -1.0, 1.0).astype(np.float32)
             seen = world.obs
@@ -144,6 +145,12 @@ def main() -> None:
         default=GeneralistConfig.sensing_aperture_deg,
         help="degrees around its heading (0: the scenarios' 270)",
     )
+    parser.add_argument(
+        "--teacher-horizon",
+        type=float,
+        default=GeneralistConfig.teacher_horizon_s,
+        help="seconds the ORCA teacher looks ahead at intruders (10: ORCA's own)",
+    )
     parser.add_argument("--out", type=Path, help="export the clone as a generalist policy file")
     parser.add_argument("--json", action="store_true", help="print the result as JSON")
     args = parser.parse_args()
@@ -153,6 +160,7 @@ def main() -> None:
         hidden=args.hidden,
         sensing_range_m=args.sensing_range,
         sensing_aperture_deg=args.sensing_aperture,
+        teacher_horizon_s=args.teacher_horizon,
     )
     t0 = time.perf_counter()
     data = collect(cfg, args.sweeps, args.families)
