@@ -17,14 +17,17 @@ from __future__ import annotations
 import argparse
 
 import numpy as np
+from numpy.typing import NDArray
 
 from policies.config import GeneralistConfig
 from policies.generalist_train import orca_shield_actions, with_layout
-from remarl_fc.offline.rollout import PolicyFileAct, observe_for
+from remarl_fc.offline.rollout import PolicyFileAct
+from remarl_fc.offline.suite import fly_episodes
 from remarl_fc.policy_io import load_policy
-from sim.encounters import sample_family
+from sim.config import ScenarioConfig
+from sim.encounters import Family, sample_family
+from sim.state import SwarmState
 from sim.suite import load_suite
-from sim.swarm import SwarmSim
 
 FAMILIES = (
     "paper-3u2o,crossing-fast-5u,swarms-2x5,beyond-20u4o,crossing-20u,beyond-50u8o,"
@@ -32,25 +35,35 @@ FAMILIES = (
 )
 
 
-def gap(act: PolicyFileAct, family: str, episodes: int, horizon_s: float) -> dict[str, float]:
+class Recorded:
+    """The policy as a suite act function that also keeps, at every decision, its actions and
+    the teacher's labels of the UAVs still flying."""
+
+    def __init__(self, act: PolicyFileAct, teacher_cfg: ScenarioConfig, horizon_s: float) -> None:
+        self.act, self.teacher_cfg, self.horizon_s = act, teacher_cfg, horizon_s
+        self.layout = act.layout  # `observe_for` builds the observations the policy reads
+        self.mine: list[NDArray[np.float32]] = []
+        self.taught: list[NDArray[np.float32]] = []
+
+    def __call__(
+        self, obs: NDArray[np.float32], state: SwarmState, cfg: ScenarioConfig
+    ) -> NDArray[np.float32]:
+        actions = self.act(obs, state, cfg)
+        labels = orca_shield_actions(state, self.teacher_cfg, self.horizon_s)
+        self.mine.append(actions[state.active])
+        self.taught.append(labels[state.active])
+        return actions
+
+
+def gap(
+    act: PolicyFileAct, family: Family, seed: int, episodes: int, horizon_s: float
+) -> dict[str, float]:
     """The policy against the teacher's labels on its own states in one family."""
-    suite = load_suite("standard")
-    cfg, batch = sample_family(suite.family(family), suite.seed, range(episodes))
+    cfg, batch = sample_family(family, seed, range(episodes))
     assert act.layout is not None  # main refuses other policies
-    seen = with_layout(cfg, act.layout)  # the teacher senses as the policy does
-    sim = SwarmSim(cfg, scored=False)
-    rng = np.random.default_rng(0)  # unused when unscored; kept for the signature
-    state = sim.start(batch, rng)
-    mine, taught = [], []
-    for _ in range(cfg.max_steps):
-        actions = act(observe_for(sim, state, act), state, cfg)
-        labels = orca_shield_actions(state, seen, horizon_s)
-        mine.append(actions[state.active])
-        taught.append(labels[state.active])
-        state, result = sim.step(state, actions, rng)
-        if (result.terminated | result.truncated).all():
-            break
-    a, t = np.concatenate(mine), np.concatenate(taught)
+    recorded = Recorded(act, with_layout(cfg, act.layout), horizon_s)  # sensing as the policy
+    fly_episodes(cfg, batch, recorded)
+    a, t = np.concatenate(recorded.mine), np.concatenate(recorded.taught)
     error, variance = float(np.mean((a - t) ** 2)), float(np.var(t))
     return {
         "labels": float(a.size),
@@ -75,8 +88,9 @@ def main() -> None:
         raise SystemExit(f"{args.policy}: not a generalist (no version-2 layout), no teacher")
     print("| family | labels | gap (MSE) | labels' variance | R² | mean abs: policy / teacher |")
     print("|---|---:|---:|---:|---:|---|")
+    suite = load_suite("standard")
     for family in args.families.split(","):
-        g = gap(act, family, args.episodes, args.teacher_horizon)
+        g = gap(act, suite.family(family), suite.seed, args.episodes, args.teacher_horizon)
         print(
             f"| {family} | {g['labels']:.0f} | {g['gap']:.3f} | {g['variance']:.3f} | "
             f"{g['r2']:.2f} | {g['policy_abs']:.3f} / {g['teacher_abs']:.3f} |",

@@ -29,10 +29,9 @@ from numpy.typing import NDArray
 
 from policies.config import GeneralistConfig
 from policies.generalist_train import generalist_layout, orca_shield_actions, with_layout
-from remarl_fc.offline.suite import fly_episodes
+from remarl_fc.offline.suite import fly_episodes, success_summary
 from sim.config import ScenarioConfig
 from sim.encounters import Family, sample_family
-from sim.evaluation import summarize
 from sim.state import SwarmState
 from sim.suite import Suite, family_labels, load_suite
 
@@ -48,15 +47,7 @@ def teacher_cell(
         return orca_shield_actions(state, scenario, horizon_s)
 
     rows = fly_episodes(cfg, batch, act).rows
-    solvable = family_labels(suite, family, count)
-    success = np.array([bool(r["success"]) for r in rows])
-    summary = summarize(rows)
-    return {
-        "success_rate_solvable": float(success[solvable].mean()) if solvable.any() else math.nan,
-        "success_rate": float(success.mean()),
-        "collision_rate_u2o": summary["collision_rate_u2o"],
-        "collision_rate_u2u": summary["collision_rate_u2u"],
-    }
+    return success_summary(rows, family_labels(suite, family, count))
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -138,7 +138,7 @@ def run_family(
     shielded: dict[str, Any] = {"shield": "off"}
     if shield is not None and shield.mode != "off":
         if shield.mode == "on":
-            plain = _success(fly_episodes(cfg, batch, act).rows, solvable)
+            plain = success_summary(fly_episodes(cfg, batch, act).rows, solvable)
             shielded |= {f"{k}_unshielded": v for k, v in plain.items()}
         act = Shielded(act, shield)
     t0 = time.perf_counter()
@@ -167,7 +167,7 @@ def run_family(
     }
 
 
-def _success(rows: list[dict[str, Any]], solvable: BoolArray) -> dict[str, float]:
+def success_summary(rows: list[dict[str, Any]], solvable: BoolArray) -> dict[str, float]:
     """Success over all episodes and over the solvable ones, and the collision rates."""
     success = np.array([bool(r["success"]) for r in rows])
     summary = summarize(rows)

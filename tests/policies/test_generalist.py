@@ -332,7 +332,10 @@ def test_a_generalist_run_exports_a_policy_fly_can_load_for_any_n(tmp_path):
         assert actions.shape == (2, scen.uav.count) and np.isfinite(actions).all()
 
 
-def test_a_teacher_run_flies_the_teacher_clones_it_then_fine_tunes(tmp_path):
+def test_a_teacher_run_flies_the_teacher_clones_it_then_fine_tunes(tmp_path, monkeypatch):
+    from test_generalist_ppo import spy_teacher_horizons
+
+    horizons = spy_teacher_horizons(monkeypatch)
     suite = tiny_suite(tmp_path)
     cfg = GeneralistConfig(
         suites=(str(suite),),
@@ -342,6 +345,7 @@ def test_a_teacher_run_flies_the_teacher_clones_it_then_fine_tunes(tmp_path):
         learner="td3",
         teacher="orca-shield",
         teacher_transitions=200,
+        teacher_horizon_s=14,
         bc_updates=20,
         updates_per_iteration=1,
         minutes=0.0,
@@ -353,6 +357,7 @@ def test_a_teacher_run_flies_the_teacher_clones_it_then_fine_tunes(tmp_path):
     summary = train_generalist(cfg, tmp_path / "run", progress=seen.append)
     assert seen and "teacher/success" in seen[0] and seen[0]["losses/clone"] > 0
     assert summary["iterations"] == 4
+    assert horizons and set(horizons) == {14}  # the run's horizon, not ORCA's own
     evals = (tmp_path / "run" / "evals.jsonl").read_text().splitlines()
     assert json.loads(evals[0])["iteration"] == 1  # the clone is validated at once
 

@@ -7,7 +7,7 @@ import pytest
 import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from test_generalist_ppo import LAYOUT, tiny_ppo_run
+from test_generalist_ppo import LAYOUT, spy_teacher_horizons, tiny_ppo_run
 
 from policies.config import GeneralistConfig
 from policies.generalist_dagger import Labels, clone_update, dagger_beta
@@ -100,9 +100,17 @@ def test_a_tiny_run_clones_first_then_goes_on_with_ppo(tmp_path, teacher, monkey
     asked = []  # the configured teacher is the one that labels
     plan = generalist_train.oracle_actions
     monkeypatch.setattr(generalist_train, "oracle_actions", lambda *a: asked.append(1) or plan(*a))
+    horizons = spy_teacher_horizons(monkeypatch)
     summary, seen = tiny_ppo_run(
-        tmp_path, teacher=teacher, dagger_fraction=0.5, dagger_updates=3, dagger_batch=16
+        tmp_path,
+        teacher=teacher,
+        dagger_fraction=0.5,
+        dagger_updates=3,
+        dagger_batch=16,
+        teacher_horizon_s=14,
     )
+    assert set(horizons) <= {14}  # ORCA (the oracle's fallback too) looks as far as the run says
+    assert horizons or teacher == "oracle"
     # a row is logged for each iteration once an episode has ended: DAgger's iterations (the
     # first two of three: under half the budget), then PPO's
     phases = ["dagger" if "charts/dagger_beta" in row else "ppo" for row in seen]

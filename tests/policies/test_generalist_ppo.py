@@ -118,12 +118,29 @@ def test_a_tiny_ppo_run_trains_validates_resumes_and_exports(tmp_path, pooling):
     tiny_ppo_run(tmp_path, pooling=pooling)
 
 
-def test_a_tiny_ppo_run_with_a_teacher_clones_it_on_its_own_states(tmp_path):
+def test_a_tiny_ppo_run_with_a_teacher_clones_it_on_its_own_states(tmp_path, monkeypatch):
+    horizons = spy_teacher_horizons(monkeypatch)
     summary, seen = tiny_ppo_run(
-        tmp_path, teacher="orca-shield", bc_fraction=1.0, dagger_fraction=0.0
+        tmp_path, teacher="orca-shield", bc_fraction=1.0, dagger_fraction=0.0, teacher_horizon_s=14
     )
+    assert horizons and set(horizons) == {14}  # the run's horizon, not ORCA's own
     assert seen[0]["charts/bc_weight"] == pytest.approx(2.5) and seen[0]["losses/clone"] > 0
     assert summary["teacher"] == "orca-shield"
+
+
+def spy_teacher_horizons(monkeypatch) -> list[float]:
+    """Every horizon the training's ORCA teacher is asked to look ahead, in order."""
+    import policies.generalist_train as generalist_train
+
+    horizons: list[float] = []
+    orca = generalist_train.orca_actions
+
+    def spied(state, cfg, **settings):
+        horizons.append(settings["horizon_s"])
+        return orca(state, cfg, **settings)
+
+    monkeypatch.setattr(generalist_train, "orca_actions", spied)
+    return horizons
 
 
 def tiny_ppo_run(tmp_path, **changes):
