@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -286,6 +287,13 @@ class GeneralistConfig:
     dagger_batch: int = 1024
     """DAgger: labels per supervised step."""
 
+    dagger_turn_weight: float = 0.0
+    """DAgger: κ, the weight of a label in the supervised step's squared error is 1 + κ·|a_teacher
+    − a_goal|, where a_goal is the turn straight toward the UAV's target (what it flies alone,
+    `sim.orca.goal_turn_rad`); the mean is weighted (Σ w·e² / Σ w). 0: every label alike. In
+    the large swarms most labels say "fly on" and the few that turn to open a gap are averaged
+    away (docs/MODEL.md §20, "What the student does with 50 UAVs")."""
+
     learner: str = "ppo"
     """"ppo" (on-policy: clipped surrogate over rollouts of every world, GAE,
     `policies.generalist_ppo`) or "td3" (off-policy: one replay buffer of every UAV's
@@ -419,6 +427,11 @@ class GeneralistConfig:
         check(0 <= self.dagger_fraction <= 1, "dagger_fraction", "must be in [0, 1]")
         check(0 <= self.dagger_beta <= 1, "dagger_beta", "must be in [0, 1]")
         check(self.dagger_lr > 0, "dagger_lr", "must be > 0")
+        check(
+            math.isfinite(self.dagger_turn_weight) and self.dagger_turn_weight >= 0,
+            "dagger_turn_weight",
+            "must be >= 0",
+        )
 
     def dagger_share(self) -> float:
         """The share of the run spent in DAgger.

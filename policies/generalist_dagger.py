@@ -30,6 +30,7 @@ from numpy.typing import NDArray
 from torch import nn
 
 from policies.config import GeneralistConfig
+from sim.orca import goal_turn_rad
 
 if TYPE_CHECKING:
     from policies.generalist_ppo import PPONets
@@ -38,12 +39,13 @@ if TYPE_CHECKING:
 
 @dataclass
 class Labels:
-    """The aggregated data set: the last ``capacity`` (observation, teacher action) pairs."""
+    """The aggregated data set: the last ``capacity`` (observation, teacher action, weight) rows."""
 
     capacity: int
     size: int
     obs: NDArray[np.float32] = field(repr=False)
     action: NDArray[np.float32] = field(repr=False)
+    weight: NDArray[np.float32] = field(repr=False)
     count: int = 0
     head: int = 0
 
@@ -55,28 +57,50 @@ class Labels:
             size,
             np.zeros((capacity, size), np.float32),
             np.zeros(capacity, np.float32),
+            np.zeros(capacity, np.float32),
         )
 
-    def add(self, obs: NDArray[np.float32], action: NDArray[np.float32]) -> None:
-        """Append rows (T, size) and (T,), overwriting the oldest when full."""
-        if obs.shape[0] != action.shape[0] or obs.shape[1:] != (self.size,):
-            raise ValueError(f"labels: obs {obs.shape} and actions {action.shape} do not match")
+    def add(
+        self, obs: NDArray[np.float32], action: NDArray[np.float32], weight: NDArray[np.float32]
+    ) -> None:
+        """Append rows (T, size), (T,) and (T,), overwriting the oldest when full."""
+        if (
+            obs.shape[0] != action.shape[0]
+            or weight.shape != action.shape
+            or obs.shape[1:] != (self.size,)
+        ):
+            raise ValueError(
+                f"labels: obs {obs.shape}, actions {action.shape} and weights {weight.shape}"
+                " do not match"
+            )
         rows = obs.shape[0]
         if rows >= self.capacity:  # only the newest fit
-            obs, action, rows = obs[-self.capacity :], action[-self.capacity :], self.capacity
+            keep = slice(rows - self.capacity, rows)
+            obs, action, weight, rows = obs[keep], action[keep], weight[keep], self.capacity
         idx = (self.head + np.arange(rows)) % self.capacity
-        self.obs[idx], self.action[idx] = obs, action
+        self.obs[idx], self.action[idx], self.weight[idx] = obs, action, weight
         self.head = int((self.head + rows) % self.capacity)
         self.count = min(self.count + rows, self.capacity)
 
     def sample(
         self, batch: int, rng: np.random.Generator
-    ) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
-        """``batch`` rows drawn uniformly with replacement."""
+    ) -> tuple[NDArray[np.float32], NDArray[np.float32], NDArray[np.float32]]:
+        """``batch`` rows (observations, actions, weights) drawn uniformly with replacement."""
         if self.count == 0:
             raise ValueError("labels: nothing to sample yet")
         idx = rng.integers(0, self.count, batch)
-        return self.obs[idx], self.action[idx]
+        return self.obs[idx], self.action[idx], self.weight[idx]
+
+
+def label_weights(
+    taught: NDArray[np.floating[Any]], goal: NDArray[np.floating[Any]], turn_weight: float
+) -> NDArray[np.float32]:
+    """Each label's weight, 1 + κ·|a_teacher − a_goal| (`GeneralistConfig.dagger_turn_weight`).
+
+    ``taught`` and ``goal``: the teacher's action and the turn straight toward the target, both
+    normalised to [−1, 1]; ``turn_weight``: κ ≥ 0.
+    """
+    return (1.0 + turn_weight * np.abs(taught - goal)).astype(np.float32)
 
 
 def dagger_beta(cfg: GeneralistConfig, frac: float) -> float:
@@ -105,9 +129,14 @@ def clone_update(
     obs: torch.Tensor,
     teacher: torch.Tensor,
     clip: float,
+    weight: torch.Tensor | None = None,
 ) -> float:
-    """One supervised step of ``actor`` toward the teacher's actions (mean squared error)."""
-    loss = ((actor(obs) - teacher) ** 2).mean()
+    """One supervised step of ``actor`` toward the teacher's actions.
+
+    The mean squared error, weighted by ``weight`` (Σ w·e² / Σ w) where given.
+    """
+    error = (actor(obs) - teacher) ** 2
+    loss = error.mean() if weight is None else (weight * error).sum() / weight.sum()
     opt.zero_grad(set_to_none=True)
     loss.backward()
     nn.utils.clip_grad_norm_(list(actor.parameters()), clip)
@@ -156,8 +185,10 @@ def dagger_iteration(
             noise = rng.normal(0.0, TEACHER_NOISE, own.shape)
             action = np.clip(np.where(pick, taught, own) + noise, -1.0, 1.0).astype(np.float32)
             obs = world.obs
+            goal = goal_turn_rad(world.state, world.cfg) / world.cfg.uav.max_turn_rad
             step, ended = advance_world(world, action, cfg, book.goal_value, rng)
-            labels.add(obs[step.acted], taught[step.acted].astype(np.float32))
+            weight = label_weights(taught, goal, cfg.dagger_turn_weight)
+            labels.add(obs[step.acted], taught[step.acted].astype(np.float32), weight[step.acted])
             zeros = np.zeros_like(action)
             flown[k].append((step, action, zeros, taught))
             book.transitions += int(step.acted.sum())
@@ -176,13 +207,14 @@ def dagger_iteration(
             value_loss = value_update(nets, obs_t[idx], target_t[idx], cfg.grad_clip)
     clone_loss = 0.0
     for _ in range(cfg.dagger_updates):
-        obs, taught = labels.sample(cfg.dagger_batch, rng)
+        obs, taught, weight = labels.sample(cfg.dagger_batch, rng)
         clone_loss = clone_update(
             nets.actor,
             dagger.opt,
             torch.from_numpy(obs).to(device),
             torch.from_numpy(taught).to(device),
             cfg.grad_clip,
+            torch.from_numpy(weight).to(device) if cfg.dagger_turn_weight > 0 else None,
         )
         book.updates += 1
     return {

@@ -176,6 +176,22 @@ def orca_actions(state: SwarmState, cfg: ScenarioConfig, **settings: Any) -> NDA
     return orca_plan(state, cfg, **settings).actions
 
 
+def goal_bearing_rad(state: SwarmState) -> FloatArray:
+    """(B, N) the bearing from each UAV to its target, rad (world frame)."""
+    to_goal = state.target_m - state.pos_m
+    return np.arctan2(to_goal[..., 1], to_goal[..., 0])
+
+
+def goal_turn_rad(state: SwarmState, cfg: ScenarioConfig) -> FloatArray:
+    """(B, N) the turn toward each UAV's target this step, clipped to ±a_max, rad.
+
+    What a UAV alone flies; ORCA's last candidate, and what a teacher's label departs from
+    when it avoids something (`policies.generalist_dagger.label_weights`).
+    """
+    a_max = cfg.uav.max_turn_rad
+    return np.clip(wrap_angle(goal_bearing_rad(state) - state.heading_rad), -a_max, a_max)
+
+
 def orca_plan(
     state: SwarmState,
     cfg: ScenarioConfig,
@@ -211,12 +227,11 @@ def orca_plan(
     if not 0.0 <= priority <= 0.5:
         raise ValueError(f"priority must be in [0, 0.5], got {priority!r}")
     a_max = cfg.uav.max_turn_rad
-    pos, heading, active = state.pos_m, state.heading_rad, state.active
+    heading, active = state.heading_rad, state.active
     b, n = heading.shape
 
-    to_goal = state.target_m - pos
-    goal = np.arctan2(to_goal[..., 1], to_goal[..., 0])  # (B, N)
-    toward = np.clip(wrap_angle(goal - heading), -a_max, a_max)
+    goal = goal_bearing_rad(state)
+    toward = goal_turn_rad(state, cfg)
     grid = np.broadcast_to(np.linspace(-a_max, a_max, candidates), (b, n, candidates))
     turn = np.concatenate([grid, toward[..., None]], axis=-1)  # (B, N, C)
     goal_error = np.abs(wrap_angle(heading[..., None] + turn - goal[..., None]))

@@ -3,7 +3,7 @@
     OMP_NUM_THREADS=1 python tools/clone_probe.py [--sweeps 300] [--steps 16000] [--hidden 64]
         [--seed 11] [--teacher orca-shield|oracle] [--families 'dense-*,...']
         [--sensing-range 200] [--sensing-aperture 360] [--teacher-horizon 20]
-        [--out clone.safetensors] [--json]
+        [--turn-weight 0] [--out clone.safetensors] [--json]
 
 Flies the "orca-shield" teacher (ORCA through the shield, `policies.generalist_train
 .teacher_actions`; or the oracle replanned at every step, ``--teacher oracle``) over the
@@ -14,8 +14,11 @@ every UAV's version-2 observation and the teacher's action there. The last fifth
 is held out; a fresh actor of the shipped shape (`policies.generalist.SetNet`) takes
 ``--steps`` Adam steps (minibatches of 1,024, learning rate 10⁻³ then 3·10⁻⁴ for the second
 half, the gradient norm clipped to 1: the DAgger phase's own step) of mean squared error on
-the rest. Prints the held-out error, the labels' variance (the error of an actor that says 0
-everywhere) and, per family, the share of the variance explained (R²). With ``--out`` the
+the rest, each label weighted as DAgger weighs it with ``--turn-weight`` κ (1 + κ·|a_teacher −
+a_goal|, `policies.generalist_dagger.label_weights`). Prints the held-out error, the labels'
+variance (the error of an actor that says 0 everywhere) and, per family, the share of the
+variance explained (R²) and the turn kept: how far the clone's actions depart from the
+straight way to the target, over how far the teacher's do (1: it turns as much). With ``--out`` the
 clone is exported as a generalist policy file, to fly it:
 ``remarl-fc eval --suite standard --policy clone.safetensors --json``.
 
@@ -38,7 +41,7 @@ import torch
 from policies.config import GeneralistConfig
 from policies.export import export_generalist
 from policies.generalist import SetNet
-from policies.generalist_dagger import clone_update
+from policies.generalist_dagger import clone_update, label_weights
 from policies.generalist_train import (
     TEACHER_NOISE,
     advance_world,
@@ -49,6 +52,7 @@ from policies.generalist_train import (
 )
 from policies.train import reward_upper_bound
 from sim.encounters import family_scenario
+from sim.orca import goal_turn_rad
 from sim.suite import load_suite
 
 BATCH = 1024
@@ -75,16 +79,18 @@ def collect(cfg: GeneralistConfig, sweeps: int, families: str = "*") -> dict[str
     if not worlds:
         raise SystemExit(f"--families {families!r} names no family of the mixture")
     goal = reward_upper_bound(base, "remarl") / (1.0 - cfg.gamma)
-    obs, labels, world_of, sweep_of = [], [], [], []
+    obs, labels, goals, world_of, sweep_of = [], [], [], [], []
     for sweep in range(sweeps):
         for k, world in enumerate(worlds):
             taught = teacher_actions(world, cfg.teacher, cfg.teacher_horizon_s)
             noisy = taught + rng.normal(0.0, TEACHER_NOISE, taught.shape)
             flown = np.clip(noisy, -1.0, 1.0).astype(np.float32)
             seen = world.obs
+            straight = goal_turn_rad(world.state, world.cfg) / world.cfg.uav.max_turn_rad
             step, _ = advance_world(world, flown, cfg, goal, rng)
             obs.append(seen[step.acted])
             labels.append(taught[step.acted].astype(np.float32))
+            goals.append(straight[step.acted].astype(np.float32))
             world_of.append(np.full(len(labels[-1]), k, np.int32))
             sweep_of.append(np.full(len(labels[-1]), sweep, np.int32))
     return {
@@ -93,21 +99,23 @@ def collect(cfg: GeneralistConfig, sweeps: int, families: str = "*") -> dict[str
         "names": [w.family.name for w in worlds],
         "obs": np.concatenate(obs),
         "label": np.concatenate(labels),
+        "goal": np.concatenate(goals),
         "world": np.concatenate(world_of),
         "sweep": np.concatenate(sweep_of),
     }
 
 
 def fit(
-    data: dict[str, Any], hidden: int, steps: int, seed: int, clip: float
+    data: dict[str, Any], hidden: int, steps: int, seed: int, clip: float, turn_weight: float
 ) -> tuple[SetNet, np.ndarray]:
     """Train a fresh actor on the kept sweeps (the DAgger phase's supervised step,
-    `policies.generalist_dagger.clone_update`, its gradient norm clipped to ``clip``); returns
-    it and its squared errors held out."""
+    `policies.generalist_dagger.clone_update`, its gradient norm clipped to ``clip``, the
+    labels weighted by ``turn_weight``); returns it and its actions on the held-out rows."""
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
     held = data["sweep"] >= np.quantile(data["sweep"], 1.0 - HELD_OUT)
     x_fit, y_fit = torch.from_numpy(data["obs"][~held]), torch.from_numpy(data["label"][~held])
+    w_fit = torch.from_numpy(label_weights(data["label"][~held], data["goal"][~held], turn_weight))
     net = SetNet(data["layout"], hidden, critic=False)
     opt = torch.optim.Adam(net.parameters(), lr=1e-3)
     for step in range(steps):
@@ -115,11 +123,11 @@ def fit(
             for group in opt.param_groups:
                 group["lr"] = 3e-4
         idx = torch.from_numpy(rng.integers(0, len(x_fit), BATCH))
-        clone_update(net, opt, x_fit[idx], y_fit[idx], clip)
+        clone_update(net, opt, x_fit[idx], y_fit[idx], clip, w_fit[idx] if turn_weight else None)
     x_held = torch.from_numpy(data["obs"][held])
     with torch.no_grad():
         pred = torch.cat([net(x_held[i : i + 8192]) for i in range(0, len(x_held), 8192)])
-    return net, (pred.numpy() - data["label"][held]) ** 2
+    return net, pred.numpy()
 
 
 def main() -> None:
@@ -151,6 +159,12 @@ def main() -> None:
         default=GeneralistConfig.teacher_horizon_s,
         help="seconds the ORCA teacher looks ahead at intruders (10: ORCA's own)",
     )
+    parser.add_argument(
+        "--turn-weight",
+        type=float,
+        default=GeneralistConfig.dagger_turn_weight,
+        help="κ: each label weighs 1 + κ·|a_teacher − a_goal| (DAgger's dagger_turn_weight)",
+    )
     parser.add_argument("--out", type=Path, help="export the clone as a generalist policy file")
     parser.add_argument("--json", action="store_true", help="print the result as JSON")
     args = parser.parse_args()
@@ -165,15 +179,20 @@ def main() -> None:
     t0 = time.perf_counter()
     data = collect(cfg, args.sweeps, args.families)
     t1 = time.perf_counter()
-    net, err = fit(data, args.hidden, args.steps, args.seed, cfg.grad_clip)
+    net, pred = fit(data, args.hidden, args.steps, args.seed, cfg.grad_clip, args.turn_weight)
     t2 = time.perf_counter()
     held = data["sweep"] >= np.quantile(data["sweep"], 1.0 - HELD_OUT)
-    label, world = data["label"][held], data["world"][held]
+    label, world, straight = data["label"][held], data["world"][held], data["goal"][held]
+    err = (pred - label) ** 2
     families = {
         name: {
             "mse": float(err[world == k].mean()),
             "label_variance": float(label[world == k].var()),
             "r2": float(1.0 - err[world == k].mean() / max(label[world == k].var(), 1e-12)),
+            "turn_kept": float(
+                np.abs(pred - straight)[world == k].mean()
+                / max(np.abs(label - straight)[world == k].mean(), 1e-12)
+            ),
         }
         for k, name in enumerate(data["names"])
         if (world == k).any()
@@ -184,6 +203,7 @@ def main() -> None:
         "held_out_mse": float(err.mean()),
         "label_variance": float(label.var()),
         "hidden": args.hidden,
+        "turn_weight": args.turn_weight,
         "steps": args.steps,
         "collect_s": t1 - t0,
         "fit_s": t2 - t1,
@@ -197,7 +217,7 @@ def main() -> None:
             base_cfg=with_layout(data["base"], data["layout"]),
             hidden=args.hidden,
             uav_range=(1, cfg.max_uavs),
-            reward=f"none (a clone of {args.teacher})",
+            reward=f"none (a clone of {args.teacher}, turn weight {args.turn_weight:g})",
             training={"steps": args.steps, "seed": args.seed},
         )
         result["policy"] = str(args.out)
@@ -217,7 +237,8 @@ def main() -> None:
     for name, row in sorted(families.items(), key=lambda kv: kv[1]["r2"]):
         print(
             f"  {name:24s} MSE {row['mse']:.4f}  "
-            f"variance {row['label_variance']:.4f}  R² {row['r2']:.2f}"
+            f"variance {row['label_variance']:.4f}  R² {row['r2']:.2f}  "
+            f"turn kept {row['turn_kept']:.2f}"
         )
 
 

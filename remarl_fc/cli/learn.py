@@ -108,6 +108,13 @@ def add_train(sub: Any) -> None:
         "intruders, seconds (default 20; ORCA's own 10 s suits 100 m)",
     )
     p.add_argument(
+        "--turn-weight",
+        type=float,
+        metavar="K",
+        help="generalist: DAgger weighs each teacher label 1 + K x how far it turns from the "
+        "straight way to the target (default 0: every label alike)",
+    )
+    p.add_argument(
         "--sensing-aperture",
         type=float,
         metavar="DEG",
@@ -425,6 +432,7 @@ def generalist_flags(args: argparse.Namespace) -> dict[str, Any]:
         "sensing_range_m": args.sensing_range,
         "sensing_aperture_deg": args.sensing_aperture,
         "teacher_horizon_s": args.teacher_horizon,
+        "dagger_turn_weight": args.turn_weight,
         "seed": args.seed or None,
     }
     if args.family_weight:

@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 from test_generalist_ppo import LAYOUT, spy_teacher_horizons, tiny_ppo_run
 
 from policies.config import GeneralistConfig
-from policies.generalist_dagger import Labels, clone_update, dagger_beta
+from policies.generalist_dagger import Labels, clone_update, dagger_beta, label_weights
 from policies.generalist_ppo import PPONets
 
 
@@ -24,25 +24,29 @@ def test_labels_keep_the_newest_rows_up_to_their_capacity(capacity, chunks):
     added: list[float] = []
     for rows in chunks:
         values = np.arange(len(added), len(added) + rows, dtype=np.float32)
-        labels.add(np.stack([values, -values], axis=1), values)
+        labels.add(np.stack([values, -values], axis=1), values, 2 * values)
         added += values.tolist()
     kept = sorted(labels.action[: labels.count].tolist())
     assert labels.count == min(len(added), capacity)
     assert kept == added[len(added) - labels.count :]  # the newest, each once
     np.testing.assert_array_equal(labels.obs[: labels.count, 0], labels.action[: labels.count])
+    np.testing.assert_array_equal(labels.weight[: labels.count], 2 * labels.action[: labels.count])
 
 
 def test_labels_refuse_rows_that_do_not_match_and_sampling_nothing():
     labels = Labels.create(4, 3)
+    two, three = np.zeros(2, np.float32), np.zeros(3, np.float32)
     with pytest.raises(ValueError, match="do not match"):
-        labels.add(np.zeros((2, 3), np.float32), np.zeros(3, np.float32))
+        labels.add(np.zeros((2, 3), np.float32), three, three)
     with pytest.raises(ValueError, match="do not match"):
-        labels.add(np.zeros((2, 2), np.float32), np.zeros(2, np.float32))
+        labels.add(np.zeros((2, 2), np.float32), two, two)
+    with pytest.raises(ValueError, match="do not match"):
+        labels.add(np.zeros((2, 3), np.float32), two, three)
     with pytest.raises(ValueError, match="nothing to sample"):
         labels.sample(1, np.random.default_rng(0))
-    labels.add(np.ones((1, 3), np.float32), np.full(1, 0.5, np.float32))
-    obs, action = labels.sample(5, np.random.default_rng(0))
-    assert obs.shape == (5, 3) and np.all(action == 0.5)
+    labels.add(np.ones((1, 3), np.float32), np.full(1, 0.5, np.float32), np.full(1, 3, np.float32))
+    obs, action, weight = labels.sample(5, np.random.default_rng(0))
+    assert obs.shape == (5, 3) and np.all(action == 0.5) and np.all(weight == 3)
 
 
 def test_beta_falls_from_its_start_to_zero_over_half_the_phase():
@@ -68,6 +72,8 @@ def test_dagger_applies_only_to_ppo_with_a_teacher():
         ({"dagger_beta": 1.5}, r"in \[0, 1\]"),
         ({"dagger_batch": 0}, ">= 1"),
         ({"dagger_lr": 0.0}, "> 0"),
+        ({"dagger_turn_weight": -1.0}, ">= 0"),
+        ({"dagger_turn_weight": float("inf")}, ">= 0"),
     ],
 )
 def test_bad_dagger_settings_are_refused_by_name(changes, message):
@@ -91,6 +97,41 @@ def test_supervised_steps_fit_the_actor_to_the_labels():
     # only the actor learns from the labels
     for before, after in zip(value_before, nets.value.parameters(), strict=True):
         assert torch.equal(before, after)
+
+
+@settings(max_examples=50, deadline=None)
+@given(
+    taught=st.floats(-1, 1),
+    goal=st.floats(-1, 1),
+    kappa=st.floats(0, 50),
+)
+def test_a_label_weighs_more_the_further_the_teacher_turns_from_the_goal(taught, goal, kappa):
+    weight = label_weights(np.array([taught, goal]), np.array([goal, goal]), kappa)
+    assert weight.dtype == np.float32
+    assert weight[1] == 1.0  # flying straight to the target: the base weight
+    assert weight[0] == pytest.approx(1.0 + kappa * abs(taught - goal), rel=1e-6)
+    assert label_weights(np.array([taught]), np.array([goal]), 0.0)[0] == 1.0
+
+
+def test_the_weighted_step_is_the_plain_one_for_equal_weights_and_follows_heavy_labels():
+    obs = torch.from_numpy(np.random.default_rng(1).normal(0, 1, (64, LAYOUT.size)).astype("f4"))
+    teacher = torch.linspace(-1, 1, 64)
+    losses = []
+    for weight in (None, torch.full((64,), 3.0)):
+        torch.manual_seed(0)
+        nets = PPONets.create(LAYOUT, GeneralistConfig(hidden=16), "cpu")
+        opt = torch.optim.Adam(nets.actor.parameters(), lr=1e-3)
+        losses.append(clone_update(nets.actor, opt, obs, teacher, 1.0, weight))
+    assert losses[0] == pytest.approx(losses[1], rel=1e-6)
+    # every weight on one label: the step fits that label alone
+    torch.manual_seed(0)
+    nets = PPONets.create(LAYOUT, GeneralistConfig(hidden=16), "cpu")
+    with torch.no_grad():
+        alone = float((nets.actor(obs[:1]) - teacher[:1]) ** 2)
+    only_first = torch.zeros(64)
+    only_first[0] = 1.0
+    opt = torch.optim.Adam(nets.actor.parameters(), lr=1e-3)
+    assert clone_update(nets.actor, opt, obs, teacher, 1.0, only_first) == pytest.approx(alone)
 
 
 @pytest.mark.parametrize("teacher", ["orca-shield", "oracle"])
@@ -121,3 +162,38 @@ def test_a_tiny_run_clones_first_then_goes_on_with_ppo(tmp_path, teacher, monkey
     assert dagger[-1]["iteration"] <= 2
     assert summary["teacher"] == teacher
     assert bool(asked) == (teacher == "oracle")
+
+
+@pytest.mark.parametrize("turn_weight", [0.0, 5.0])
+def test_dagger_weighs_its_labels_by_the_runs_turn_weight(tmp_path, monkeypatch, turn_weight):
+    import policies.generalist_dagger as generalist_dagger
+
+    added: list[np.ndarray] = []
+    stepped: list[torch.Tensor | None] = []
+    add, step = generalist_dagger.Labels.add, generalist_dagger.clone_update
+
+    def spied_add(self, obs, action, weight):
+        added.append(weight.copy())
+        return add(self, obs, action, weight)
+
+    def spied_step(actor, opt, obs, teacher, clip, weight=None):
+        stepped.append(weight)
+        return step(actor, opt, obs, teacher, clip, weight)
+
+    monkeypatch.setattr(generalist_dagger.Labels, "add", spied_add)
+    monkeypatch.setattr(generalist_dagger, "clone_update", spied_step)
+    tiny_ppo_run(
+        tmp_path,
+        teacher="orca-shield",
+        dagger_fraction=0.5,
+        dagger_updates=3,
+        dagger_batch=16,
+        dagger_turn_weight=turn_weight,
+    )
+    weights = np.concatenate(added)
+    assert stepped and weights.size
+    if turn_weight == 0:  # every label alike, the plain mean
+        assert np.all(weights == 1.0) and all(w is None for w in stepped)
+    else:  # 1 where the teacher flies straight for the target, up to 1 + 2κ
+        assert weights.min() == 1.0 and weights.max() <= 1.0 + 2 * turn_weight
+        assert all(w is not None and w.shape == (16,) for w in stepped)

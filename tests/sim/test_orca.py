@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 
 from sim.contour import ArcWindow
 from sim.kinematics import arc_points, heading_velocity, wrap_angle
-from sim.orca import MARGIN_M, orca_actions, orca_plan
+from sim.orca import MARGIN_M, goal_turn_rad, orca_actions, orca_plan
 from sim.scenarios import load_scenario
 from sim.state import EpisodeStats, SwarmState
 from sim.swarm import SwarmSim
@@ -102,6 +102,8 @@ def test_with_nothing_around_it_turns_to_its_target_within_the_turn_limit(bearin
     state = hand_state([[0, 0]], [heading], target, [behind, far], [[0, 0], [-2.5, 0]])
     action = orca_actions(state, CFG)[0, 0]
     assert action == pytest.approx(np.clip(b / A_MAX, -1, 1), abs=1e-6)
+    # the turn toward the target, the one a lone UAV flies
+    assert goal_turn_rad(state, CFG)[0, 0] == pytest.approx(np.clip(b, -A_MAX, A_MAX), abs=1e-9)
 
 
 @pytest.mark.parametrize("side", [1.0, -1.0])
