@@ -290,9 +290,9 @@ class GeneralistConfig:
     dagger_turn_weight: float = 0.0
     """DAgger: κ, the weight of a label in the supervised step's squared error is 1 + κ·|a_teacher
     − a_goal|, where a_goal is the turn straight toward the UAV's target (what it flies alone,
-    `sim.orca.goal_turn_rad`); the mean is weighted (Σ w·e² / Σ w). 0: every label alike. In
-    the large swarms most labels say "fly on" and the few that turn to open a gap are averaged
-    away (docs/MODEL.md §20, "What the student does with 50 UAVs")."""
+    `sim.orca.goal_turn_rad`); the mean is weighted (Σ w·e² / Σ w). 0: every label alike, the
+    shipped recipe. Meant for the large swarms, where most labels say "fly on"; measured with
+    κ = 2 on two seeds it made both worse (docs/MODEL.md §20, "Weighting the turns")."""
 
     learner: str = "ppo"
     """"ppo" (on-policy: clipped surrogate over rollouts of every world, GAE,

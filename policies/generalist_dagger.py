@@ -7,9 +7,10 @@ half of the phase) and the student's deterministic action otherwise, both with N
 `TEACHER_NOISE`²) noise; the teacher labels every state flown (Ross, Gordon & Bagnell 2011:
 the aggregated data set of the states the student's own mixture visits). Then:
 
-- the labels join `Labels`, a ring of the last ``dagger_rows`` (observation, teacher action)
-  pairs, and the actor takes ``dagger_updates`` supervised steps (mean squared error, Adam of
-  its own at ``dagger_lr``) on minibatches of ``dagger_batch`` drawn from all of it;
+- the labels join `Labels`, a ring of the last ``dagger_rows`` (observation, teacher action,
+  weight) rows, and the actor takes ``dagger_updates`` supervised steps (mean squared error,
+  weighted by ``dagger_turn_weight`` where it is > 0: `label_weights`; Adam of its own at
+  ``dagger_lr``) on minibatches of ``dagger_batch`` drawn from all of it;
 - the value network learns the rollout's GAE targets (``ppo_epochs`` passes, the value loss
   alone), so that PPO starts from a critic of the policy it inherits.
 

@@ -58,6 +58,10 @@ from sim.suite import load_suite
 BATCH = 1024
 """Labels per supervised step."""
 
+TURN_FLOOR = 1e-3
+"""Mean departure of the teacher from the straight way (normalised action) below which a
+family has no turn to keep."""
+
 HELD_OUT = 0.2
 """Share of the sweeps (the last ones) held out."""
 
@@ -130,6 +134,14 @@ def fit(
     return net, pred.numpy()
 
 
+def turn_kept(pred: np.ndarray, label: np.ndarray, straight: np.ndarray) -> float | None:
+    """Mean |clone − straight| over mean |teacher − straight|: how much of the teacher's
+    departure from the straight way to the target the clone keeps (None where the teacher
+    departs by less than `TURN_FLOOR` on average: nothing to keep)."""
+    taught = float(np.abs(label - straight).mean())
+    return float(np.abs(pred - straight).mean()) / taught if taught >= TURN_FLOOR else None
+
+
 def main() -> None:
     """Collect, fit, report (and export)."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -189,10 +201,7 @@ def main() -> None:
             "mse": float(err[world == k].mean()),
             "label_variance": float(label[world == k].var()),
             "r2": float(1.0 - err[world == k].mean() / max(label[world == k].var(), 1e-12)),
-            "turn_kept": float(
-                np.abs(pred - straight)[world == k].mean()
-                / max(np.abs(label - straight)[world == k].mean(), 1e-12)
-            ),
+            "turn_kept": turn_kept(pred[world == k], label[world == k], straight[world == k]),
         }
         for k, name in enumerate(data["names"])
         if (world == k).any()
@@ -238,7 +247,7 @@ def main() -> None:
         print(
             f"  {name:24s} MSE {row['mse']:.4f}  "
             f"variance {row['label_variance']:.4f}  R² {row['r2']:.2f}  "
-            f"turn kept {row['turn_kept']:.2f}"
+            "turn kept " + ("–" if row["turn_kept"] is None else f"{row['turn_kept']:.2f}")
         )
 
 
