@@ -55,6 +55,26 @@ from sim.encounters import family_scenario
 from sim.orca import goal_turn_rad
 from sim.suite import load_suite
 
+FLOAT_SETTINGS = (
+    ("--sensing-range", "sensing_range_m", "metres the student sees (0: the scenarios' 100 m)"),
+    (
+        "--sensing-aperture",
+        "sensing_aperture_deg",
+        "degrees around its heading (0: the scenarios' 270)",
+    ),
+    (
+        "--teacher-horizon",
+        "teacher_horizon_s",
+        "seconds the ORCA teacher looks ahead at intruders (10: ORCA's own)",
+    ),
+    (
+        "--turn-weight",
+        "dagger_turn_weight",
+        "κ: each label weighs 1 + κ·|a_teacher − a_goal| (DAgger's dagger_turn_weight)",
+    ),
+)
+"""The flags that set a `GeneralistConfig` float of the same default: (flag, setting, help)."""
+
 BATCH = 1024
 """Labels per supervised step."""
 
@@ -153,30 +173,9 @@ def main() -> None:
         "--teacher", default="orca-shield", choices=("orca-shield", "oracle"), help="who flies"
     )
     parser.add_argument("--families", default="*", help="patterns of the families flown")
-    parser.add_argument(
-        "--sensing-range",
-        type=float,
-        default=GeneralistConfig.sensing_range_m,
-        help="metres the student sees (0: the scenarios' 100 m)",
-    )
-    parser.add_argument(
-        "--sensing-aperture",
-        type=float,
-        default=GeneralistConfig.sensing_aperture_deg,
-        help="degrees around its heading (0: the scenarios' 270)",
-    )
-    parser.add_argument(
-        "--teacher-horizon",
-        type=float,
-        default=GeneralistConfig.teacher_horizon_s,
-        help="seconds the ORCA teacher looks ahead at intruders (10: ORCA's own)",
-    )
-    parser.add_argument(
-        "--turn-weight",
-        type=float,
-        default=GeneralistConfig.dagger_turn_weight,
-        help="κ: each label weighs 1 + κ·|a_teacher − a_goal| (DAgger's dagger_turn_weight)",
-    )
+    for flag, setting, meaning in FLOAT_SETTINGS:
+        default = getattr(GeneralistConfig, setting)
+        parser.add_argument(flag, type=float, default=default, dest=setting, help=meaning)
     parser.add_argument("--out", type=Path, help="export the clone as a generalist policy file")
     parser.add_argument("--json", action="store_true", help="print the result as JSON")
     args = parser.parse_args()
@@ -184,14 +183,15 @@ def main() -> None:
         teacher=args.teacher,
         seed=args.seed,
         hidden=args.hidden,
-        sensing_range_m=args.sensing_range,
-        sensing_aperture_deg=args.sensing_aperture,
-        teacher_horizon_s=args.teacher_horizon,
+        sensing_range_m=args.sensing_range_m,
+        sensing_aperture_deg=args.sensing_aperture_deg,
+        teacher_horizon_s=args.teacher_horizon_s,
+        dagger_turn_weight=args.dagger_turn_weight,
     )
     t0 = time.perf_counter()
     data = collect(cfg, args.sweeps, args.families)
     t1 = time.perf_counter()
-    net, pred = fit(data, args.hidden, args.steps, args.seed, cfg.grad_clip, args.turn_weight)
+    net, pred = fit(data, args.hidden, args.steps, args.seed, cfg.grad_clip, cfg.dagger_turn_weight)
     t2 = time.perf_counter()
     held = data["sweep"] >= np.quantile(data["sweep"], 1.0 - HELD_OUT)
     label, world, straight = data["label"][held], data["world"][held], data["goal"][held]
@@ -212,7 +212,7 @@ def main() -> None:
         "held_out_mse": float(err.mean()),
         "label_variance": float(label.var()),
         "hidden": args.hidden,
-        "turn_weight": args.turn_weight,
+        "turn_weight": cfg.dagger_turn_weight,
         "steps": args.steps,
         "collect_s": t1 - t0,
         "fit_s": t2 - t1,
@@ -226,7 +226,7 @@ def main() -> None:
             base_cfg=with_layout(data["base"], data["layout"]),
             hidden=args.hidden,
             uav_range=(1, cfg.max_uavs),
-            reward=f"none (a clone of {args.teacher}, turn weight {args.turn_weight:g})",
+            reward=f"none (a clone of {args.teacher}, turn weight {cfg.dagger_turn_weight:g})",
             training={"steps": args.steps, "seed": args.seed},
         )
         result["policy"] = str(args.out)
