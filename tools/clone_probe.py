@@ -168,6 +168,12 @@ def main() -> None:
     parser.add_argument("--sweeps", type=int, default=300, help="steps of every world flown")
     parser.add_argument("--steps", type=int, default=16_000, help="supervised steps")
     parser.add_argument("--hidden", type=int, default=GeneralistConfig.hidden)
+    parser.add_argument(
+        "--max-neighbours",
+        type=int,
+        default=GeneralistConfig.max_neighbours,
+        help="k: neighbouring-UAV rows the student sees",
+    )
     parser.add_argument("--seed", type=int, default=11, help="not the training runs' seeds")
     parser.add_argument(
         "--teacher", default="orca-shield", choices=("orca-shield", "oracle"), help="who flies"
@@ -183,6 +189,7 @@ def main() -> None:
         teacher=args.teacher,
         seed=args.seed,
         hidden=args.hidden,
+        max_neighbours=args.max_neighbours,
         sensing_range_m=args.sensing_range_m,
         sensing_aperture_deg=args.sensing_aperture_deg,
         teacher_horizon_s=args.teacher_horizon_s,

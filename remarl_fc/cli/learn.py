@@ -101,6 +101,13 @@ def add_train(sub: Any) -> None:
         "shipped run's; 0: the scenarios' 100 m)",
     )
     p.add_argument(
+        "--max-neighbours",
+        type=int,
+        metavar="K",
+        help="generalist: neighbouring-UAV rows each UAV sees, the nearest first (default 6; "
+        "the policy file carries it)",
+    )
+    p.add_argument(
         "--teacher-horizon",
         type=float,
         metavar="S",
@@ -431,6 +438,7 @@ def generalist_flags(args: argparse.Namespace) -> dict[str, Any]:
         "separation_weight": args.separation_weight,
         "sensing_range_m": args.sensing_range,
         "sensing_aperture_deg": args.sensing_aperture,
+        "max_neighbours": args.max_neighbours,
         "teacher_horizon_s": args.teacher_horizon,
         "dagger_turn_weight": args.turn_weight,
         "seed": args.seed or None,

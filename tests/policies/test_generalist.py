@@ -529,6 +529,7 @@ def test_a_bad_family_weight_flag_says_what_to_write(text):
         ("--sensing-aperture", "400", "sensing_aperture_deg"),
         ("--teacher-horizon", "1", "teacher_horizon_s"),
         ("--turn-weight", "-2", "dagger_turn_weight"),
+        ("--max-neighbours", "-1", "max_neighbours"),
     ],
 )
 def test_a_generalist_flag_out_of_range_is_a_clear_error(tmp_path, capsys, flag, value, setting):
@@ -558,7 +559,7 @@ def test_train_generalist_flags_reach_the_config(tmp_path, monkeypatch):
     argv += ["--pooling", "max-attention", "--ppo-min-std", "0.1"]
     argv += ["--teacher", "orca-shield", "--bc-weight", "1.5", "--bc-fraction", "0.8"]
     argv += ["--dagger-fraction", "0.25", "--sensing-range", "300", "--sensing-aperture", "360"]
-    argv += ["--teacher-horizon", "14", "--turn-weight", "6"]
+    argv += ["--teacher-horizon", "14", "--turn-weight", "6", "--max-neighbours", "12"]
     assert main([*argv, "--out", str(tmp_path / "run")]) == 0
     ((cfg, out, resume),) = seen
     assert cfg.swarm_field == "formation" and cfg.family_weights == (("swarms-*", 2.0),)
@@ -568,6 +569,7 @@ def test_train_generalist_flags_reach_the_config(tmp_path, monkeypatch):
     assert cfg.dagger_fraction == 0.25
     assert (cfg.sensing_range_m, cfg.sensing_aperture_deg) == (300.0, 360.0)
     assert cfg.teacher_horizon_s == 14.0 and cfg.dagger_turn_weight == 6.0
+    assert cfg.max_neighbours == 12
     assert cfg.minutes == 2 and cfg.seed == 4 and out == tmp_path / "run" and not resume
     assert GeneralistConfig().swarm_field == "all"  # the paper's reward unless asked
     seen.clear()
