@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
@@ -113,9 +114,9 @@ def test_the_std_floor_holds_where_the_update_pushes_sigma_down(floor):
         assert sigma < 0.2
 
 
-@pytest.mark.parametrize("pooling", ["max-mean", "max-attention"])
-def test_a_tiny_ppo_run_trains_validates_resumes_and_exports(tmp_path, pooling):
-    tiny_ppo_run(tmp_path, pooling=pooling)
+@pytest.mark.parametrize(("pooling", "neighbours"), [("max-mean", 6), ("max-attention", 2)])
+def test_a_tiny_ppo_run_trains_validates_resumes_and_exports(tmp_path, pooling, neighbours):
+    tiny_ppo_run(tmp_path, pooling=pooling, max_neighbours=neighbours)
 
 
 def test_a_tiny_ppo_run_with_a_teacher_clones_it_on_its_own_states(tmp_path, monkeypatch):
@@ -176,9 +177,10 @@ def tiny_ppo_run(tmp_path, **changes):
     # it learned: the actor and the log std moved away from their seeded start
     from policies.train import load_checkpoint
 
+    layout = dataclasses.replace(LAYOUT, max_neighbours=cfg.max_neighbours)
     torch.manual_seed(cfg.seed)
-    start = PPONets.create(LAYOUT, cfg, "cpu")
-    trained = PPONets.create(LAYOUT, cfg, "cpu")
+    start = PPONets.create(layout, cfg, "cpu")
+    trained = PPONets.create(layout, cfg, "cpu")
     load_checkpoint(out / "last.safetensors", trained)
     assert not torch.equal(trained.log_std.value, start.log_std.value)
     moved = [
@@ -202,8 +204,9 @@ def tiny_ppo_run(tmp_path, **changes):
     meta = export_generalist_run(out, policy_file, checkpoint="last")
     assert meta["network"] == "set" and meta.get("pooling", "max-mean") == cfg.pooling
     policy = load_policy(str(policy_file))
+    assert policy.layout.max_neighbours == cfg.max_neighbours  # the file carries k
     load_checkpoint(out / "last.safetensors", trained)  # the resumed run's last weights
-    obs = np.random.default_rng(1).normal(size=(5, LAYOUT.size)).astype(np.float32)
+    obs = np.random.default_rng(1).normal(size=(5, layout.size)).astype(np.float32)
     with torch.no_grad():
         expected = trained.actor(torch.from_numpy(obs)).numpy()
     np.testing.assert_allclose(policy.act(obs), expected, atol=1e-5)
