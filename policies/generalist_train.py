@@ -327,7 +327,14 @@ states a little off its own path, so the clone learns to come back to it."""
 def teacher_actions(
     world: World, teacher: str, horizon_s: float = ORCA_HORIZON_S
 ) -> NDArray[np.float32]:
-    """The teacher's actions (B, N) in a world (`GeneralistConfig.teacher`).
+    """The teacher's actions (B, N) in a world (`GeneralistConfig.teacher`): `teacher_plan`."""
+    return teacher_plan(world.state, world.cfg, teacher, horizon_s)
+
+
+def teacher_plan(
+    state: SwarmState, cfg: ScenarioConfig, teacher: str, horizon_s: float = ORCA_HORIZON_S
+) -> NDArray[np.float32]:
+    """The teacher's actions (B, N) at a state of scenario ``cfg``.
 
     "orca-shield": ORCA through the shield. Heading changes only (the policy commands no
     speed), and ORCA reads the simulator's state, the true positions even where the UAVs'
@@ -338,12 +345,12 @@ def teacher_actions(
     in the environments where it finds no plan.
     """
     if teacher == "oracle":
-        planned_actions, planned = oracle_actions(world.state, world.cfg)
+        planned_actions, planned = oracle_actions(state, cfg)
         if planned.all():
             return planned_actions
-        fallback = teacher_actions(world, "orca-shield", horizon_s)
+        fallback = orca_shield_actions(state, cfg, horizon_s)
         return np.where(planned[:, None], planned_actions, fallback)
-    return orca_shield_actions(world.state, world.cfg, horizon_s)
+    return orca_shield_actions(state, cfg, horizon_s)
 
 
 def orca_shield_actions(
