@@ -51,6 +51,7 @@ from policies.generalist_train import (
     with_layout,
 )
 from policies.train import reward_upper_bound
+from sim.config import TEACHERS
 from sim.encounters import family_scenario
 from sim.orca import goal_turn_rad
 from sim.suite import load_suite
@@ -176,7 +177,10 @@ def main() -> None:
     )
     parser.add_argument("--seed", type=int, default=11, help="not the training runs' seeds")
     parser.add_argument(
-        "--teacher", default="orca-shield", choices=("orca-shield", "oracle"), help="who flies"
+        "--teacher",
+        default="orca-shield",
+        choices=[t for t in TEACHERS if t != "none"],
+        help="who flies",
     )
     parser.add_argument("--families", default="*", help="patterns of the families flown")
     for flag, setting, meaning in FLOAT_SETTINGS:

@@ -13,8 +13,8 @@ where it finds no plan — over the suite's own episodes, sensing as the run doe
 (``--sensing-range`` and ``--sensing-aperture``, the run's defaults: 200 m all around), once
 per horizon τ_o (``--teacher-horizon``). Prints one row per family: the success over the
 episodes the oracle proves solvable at each horizon, and the mean over the families that have
-any. The teacher
-reads the simulator's true state (it is privileged); the student copies what it can.
+any. The teacher reads the simulator's true state (it is privileged); the student copies what
+it can.
 
 It is what chose the run's ``teacher_horizon_s`` (docs/MODEL.md §20).
 """
@@ -34,7 +34,7 @@ from numpy.typing import NDArray
 from policies.config import GeneralistConfig
 from policies.generalist_train import generalist_layout, teacher_plan, with_layout
 from remarl_fc.offline.suite import fly_episodes, success_summary
-from sim.config import ScenarioConfig
+from sim.config import TEACHERS, ScenarioConfig
 from sim.encounters import Family, sample_family
 from sim.state import SwarmState
 from sim.suite import Suite, family_labels, load_suite
@@ -71,7 +71,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument(
         "--teacher",
         default="orca-shield",
-        choices=("orca-shield", "oracle"),
+        choices=[t for t in TEACHERS if t != "none"],
         help="ORCA through the shield, or the oracle replanned at every step (~100 times slower)",
     )
     p.add_argument("--sensing-range", type=float, default=GeneralistConfig.sensing_range_m)
