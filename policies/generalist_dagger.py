@@ -22,6 +22,7 @@ reaches 0.035 on held-out states.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -31,11 +32,16 @@ from numpy.typing import NDArray
 from torch import nn
 
 from policies.config import GeneralistConfig
+from policies.train import optimiser_tensors, restore_optimiser
 from sim.orca import goal_turn_rad
 
 if TYPE_CHECKING:
     from policies.generalist_ppo import PPONets
     from policies.generalist_train import RunBook
+
+CHECKPOINT_PREFIX = "dagger."
+"""Names of the DAgger phase's state in a run's ``last.safetensors``: its labels and its
+optimiser, kept while the phase lasts so that a run resumed inside it goes on with them."""
 
 
 @dataclass
@@ -83,6 +89,15 @@ class Labels:
         self.head = int((self.head + rows) % self.capacity)
         self.count = min(self.count + rows, self.capacity)
 
+    def oldest_first(self) -> tuple[NDArray[np.float32], NDArray[np.float32], NDArray[np.float32]]:
+        """The rows held (observations, actions, weights), oldest first.
+
+        Added in this order to an empty ring of the same capacity, they give a ring that holds
+        the same rows and drops the same ones first.
+        """
+        order = np.arange(self.head - self.count, self.head) % self.capacity
+        return self.obs[order], self.action[order], self.weight[order]
+
     def sample(
         self, batch: int, rng: np.random.Generator
     ) -> tuple[NDArray[np.float32], NDArray[np.float32], NDArray[np.float32]]:
@@ -122,6 +137,44 @@ class Dagger:
         """Empty labels of observations of length ``size``; Adam over ``nets.actor``."""
         opt = torch.optim.Adam(nets.actor.parameters(), lr=cfg.dagger_lr)
         return cls(Labels.create(cfg.dagger_rows, size), opt)
+
+    def state_tensors(self) -> dict[str, torch.Tensor]:
+        """The labels (oldest first) and the optimiser's moments, as checkpoint tensors.
+
+        Named `CHECKPOINT_PREFIX`…: `policies.train.save_checkpoint`'s ``extra``.
+        """
+        obs, action, weight = self.labels.oldest_first()
+        return {
+            f"{CHECKPOINT_PREFIX}labels.obs": torch.from_numpy(obs),
+            f"{CHECKPOINT_PREFIX}labels.action": torch.from_numpy(action),
+            f"{CHECKPOINT_PREFIX}labels.weight": torch.from_numpy(weight),
+            **optimiser_tensors(f"{CHECKPOINT_PREFIX}opt", self.opt),
+        }
+
+    def restore(self, tensors: Mapping[str, torch.Tensor]) -> int:
+        """Take back what `state_tensors` wrote; returns the labels restored.
+
+        No tensors (a checkpoint from before the labels were kept, or written after the DAgger
+        phase) leave the phase as it was: empty labels, a fresh optimiser.
+
+        Raises:
+            ValueError: the labels' observations are not of this run's length.
+        """
+        if not tensors:
+            return 0
+        obs = tensors[f"{CHECKPOINT_PREFIX}labels.obs"].numpy()
+        if obs.ndim != 2 or obs.shape[1] != self.labels.size:
+            raise ValueError(
+                f"checkpoint: DAgger labels of shape {tuple(obs.shape)}, this run's observations"
+                f" have {self.labels.size} entries; resume the run with its own settings"
+            )
+        self.labels.add(
+            obs,
+            tensors[f"{CHECKPOINT_PREFIX}labels.action"].numpy(),
+            tensors[f"{CHECKPOINT_PREFIX}labels.weight"].numpy(),
+        )
+        restore_optimiser(f"{CHECKPOINT_PREFIX}opt", self.opt, tensors)
+        return int(obs.shape[0])
 
 
 def clone_update(

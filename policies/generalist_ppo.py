@@ -27,7 +27,8 @@ from torch import Tensor, nn
 
 from policies.config import GeneralistConfig
 from policies.generalist import SetNet
-from policies.generalist_dagger import Dagger, dagger_iteration
+from policies.generalist_dagger import CHECKPOINT_PREFIX, Dagger, dagger_iteration
+from policies.train import load_checkpoint_tensors
 from sim.arrays import BoolArray
 from sim.observation import ObservationLayout
 
@@ -179,6 +180,18 @@ def train_generalist_ppo(
     recent: list[dict[str, Any]] = []
     env_s = learn_s = 0.0
     dagger = Dagger.create(cfg, layout.size, nets) if cfg.dagger_share() > 0 else None
+    if dagger is not None:
+        # the labels so far live in last.safetensors while the phase lasts, so that a run
+        # resumed inside it goes on with every label (a run resumed after it finds none)
+        if book.resumed:
+            dagger.restore(load_checkpoint_tensors(out_dir / "last.safetensors", CHECKPOINT_PREFIX))
+        phase = dagger
+
+        def dagger_state() -> dict[str, torch.Tensor]:
+            in_phase = book.fraction_done() < cfg.dagger_share()
+            return phase.state_tensors() if in_phase else {}
+
+        book.run_state = dagger_state
     try:
         # ---- DAgger first, where asked (`policies.generalist_dagger`)
         while (

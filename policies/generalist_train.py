@@ -500,6 +500,8 @@ class RunBook:
     last_eval: float = 0.0
     last_save: float = 0.0
     summary: dict[str, Any] = dataclasses.field(default_factory=dict)
+    run_state: Callable[[], dict[str, torch.Tensor]] | None = None
+    """More of the run to keep in ``last.safetensors`` (the DAgger phase's labels), if any."""
 
     @classmethod
     def open(
@@ -570,8 +572,8 @@ class RunBook:
             return min(self.iteration / self.cfg.total_iterations, 1.0)
         return self.cfg.fraction_of(self.elapsed())
 
-    def checkpoint(self, path: Path) -> None:
-        """Networks, optimisers and counters to ``path``."""
+    def checkpoint(self, path: Path, extra: dict[str, torch.Tensor] | None = None) -> None:
+        """Networks, optimisers and counters to ``path`` (and ``extra`` tensors)."""
         save_checkpoint(
             path,
             self.nets,
@@ -586,11 +588,13 @@ class RunBook:
                 "hidden": self.cfg.hidden,
                 "drawn": {w.family.name: w.drawn for w in self.worlds},
             },
+            extra,
         )
 
     def save_last(self) -> None:
-        """``last.safetensors`` now."""
-        self.checkpoint(self.out_dir / "last.safetensors")
+        """``last.safetensors`` now, with the `run_state` there is."""
+        extra = self.run_state() if self.run_state is not None else None
+        self.checkpoint(self.out_dir / "last.safetensors", extra)
 
     def log(
         self,

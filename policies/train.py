@@ -27,14 +27,14 @@ import dataclasses
 import json
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any, Protocol
 
 import numpy as np
 import torch
 from numpy.typing import NDArray
-from safetensors.torch import load_file, save_file
+from safetensors.torch import save_file
 
 from policies.buffer import ReplayBuffer
 from policies.common import CurveWriter
@@ -78,16 +78,52 @@ class Checkpointable(Protocol):
         ...
 
 
-def save_checkpoint(path: Path, nets: Checkpointable, meta: dict[str, Any]) -> None:
-    """Networks and optimiser moments as safetensors, counters as JSON metadata (atomic)."""
+def optimiser_tensors(name: str, opt: torch.optim.Optimizer) -> dict[str, torch.Tensor]:
+    """``opt``'s moments as checkpoint tensors ``<name>.<param index>.<field>``."""
+    return {
+        f"{name}.{i}.{key}": torch.as_tensor(value).detach().cpu().contiguous()
+        for i, state in opt.state_dict()["state"].items()
+        for key, value in state.items()
+    }
+
+
+def restore_optimiser(
+    name: str, opt: torch.optim.Optimizer, tensors: Mapping[str, torch.Tensor]
+) -> None:
+    """Load ``opt``'s moments from the ``<name>.…`` tensors `optimiser_tensors` wrote."""
+    prefix = f"{name}."
+    sd = opt.state_dict()
+    state: dict[int, dict[str, torch.Tensor]] = {}
+    for key, value in tensors.items():
+        if key.startswith(prefix):
+            idx, field = key[len(prefix) :].split(".", 1)
+            state.setdefault(int(idx), {})[field] = value
+    sd["state"] = state
+    opt.load_state_dict(sd)
+
+
+def save_checkpoint(
+    path: Path,
+    nets: Checkpointable,
+    meta: dict[str, Any],
+    extra: Mapping[str, torch.Tensor] | None = None,
+) -> None:
+    """Networks and optimiser moments as safetensors, counters as JSON metadata (atomic).
+
+    ``extra``: more run state to keep with them (a generalist's DAgger labels), read back with
+    `load_checkpoint_tensors`; its names must not start with a network's or optimiser's.
+    """
     tensors: dict[str, torch.Tensor] = {}
     for name, module in nets.modules().items():
         for key, value in module.state_dict().items():
             tensors[f"{name}.{key}"] = value.detach().cpu().contiguous()
     for name, opt in nets.optimisers().items():
-        for i, state in opt.state_dict()["state"].items():
-            for key, value in state.items():
-                tensors[f"{name}.{i}.{key}"] = torch.as_tensor(value).detach().cpu().contiguous()
+        tensors |= optimiser_tensors(name, opt)
+    for key, value in (extra or {}).items():
+        owner = key.split(".", 1)[0]
+        if owner in nets.modules() or owner in nets.optimisers() or key in tensors:
+            raise ValueError(f"checkpoint: extra tensor {key!r} collides with the networks'")
+        tensors[key] = value.detach().cpu().contiguous()
     tmp = path.with_name(path.name + ".part")
     save_file(tensors, str(tmp), metadata={"remarl_checkpoint": json.dumps(meta)})
     tmp.replace(path)
@@ -97,24 +133,29 @@ def load_checkpoint(path: Path, nets: Checkpointable) -> dict[str, Any]:
     """Restore networks and optimiser moments; returns the saved counters."""
     from safetensors import safe_open
 
-    tensors = load_file(str(path))
+    with safe_open(str(path), framework="pt") as f:
+        meta: dict[str, Any] = json.loads(f.metadata()["remarl_checkpoint"])
+        names = tuple(f"{name}." for name in (*nets.modules(), *nets.optimisers()))
+        tensors = {k: f.get_tensor(k) for k in f.keys() if k.startswith(names)}  # noqa: SIM118 - not a dict
     for name, module in nets.modules().items():
         prefix = f"{name}."
         module.load_state_dict(
             {k[len(prefix) :]: v for k, v in tensors.items() if k.startswith(prefix)}
         )
     for name, opt in nets.optimisers().items():
-        sd = opt.state_dict()
-        state: dict[int, dict[str, torch.Tensor]] = {}
-        for key, value in tensors.items():
-            if key.startswith(f"{name}."):
-                _, idx, field = key.split(".", 2)
-                state.setdefault(int(idx), {})[field] = value
-        sd["state"] = state
-        opt.load_state_dict(sd)
-    with safe_open(str(path), framework="pt") as f:
-        meta: dict[str, Any] = json.loads(f.metadata()["remarl_checkpoint"])
+        restore_optimiser(name, opt, tensors)
     return meta
+
+
+def load_checkpoint_tensors(path: Path, prefix: str) -> dict[str, torch.Tensor]:
+    """The tensors of the checkpoint at ``path`` whose names start with ``prefix``.
+
+    The extra run state `save_checkpoint` kept (none: an empty dict); only those are read.
+    """
+    from safetensors import safe_open
+
+    with safe_open(str(path), framework="pt") as f:
+        return {k: f.get_tensor(k) for k in f.keys() if k.startswith(prefix)}  # noqa: SIM118 - not a dict
 
 
 def train(

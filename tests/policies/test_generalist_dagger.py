@@ -10,7 +10,14 @@ from hypothesis import strategies as st
 from test_generalist_ppo import LAYOUT, spy_teacher_horizons, tiny_ppo_run
 
 from policies.config import GeneralistConfig
-from policies.generalist_dagger import Labels, clone_update, dagger_beta, label_weights
+from policies.generalist_dagger import (
+    CHECKPOINT_PREFIX,
+    Dagger,
+    Labels,
+    clone_update,
+    dagger_beta,
+    label_weights,
+)
 from policies.generalist_ppo import PPONets
 
 
@@ -197,3 +204,126 @@ def test_dagger_weighs_its_labels_by_the_runs_turn_weight(tmp_path, monkeypatch,
     else:  # 1 where the teacher flies straight for the target, up to 1 + 2κ
         assert weights.min() == 1.0 and 1.0 < weights.max() <= 1.0 + 2 * turn_weight
         assert all(w is not None and w.shape == (16,) for w in stepped)
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    capacity=st.integers(1, 10),
+    chunks=st.lists(st.integers(0, 13), min_size=1, max_size=5),
+    more=st.integers(0, 13),
+)
+def test_the_dagger_state_comes_back_whole_from_its_checkpoint_tensors(capacity, chunks, more):
+    torch.manual_seed(0)
+    cfg = GeneralistConfig(hidden=8, dagger_rows=capacity)
+    nets = PPONets.create(LAYOUT, cfg, "cpu")
+    dagger = Dagger.create(cfg, LAYOUT.size, nets)
+    rng = np.random.default_rng(capacity)
+    added = 0
+
+    def rows(count: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        obs = rng.normal(size=(count, LAYOUT.size)).astype(np.float32)
+        return obs, rng.uniform(-1, 1, count).astype(np.float32), np.full(count, 2.0, np.float32)
+
+    for count in chunks:
+        dagger.labels.add(*rows(count))
+        added += count
+    if added:  # the optimiser has moments to keep
+        obs, taught, _ = dagger.labels.sample(8, rng)
+        clone_update(nets.actor, dagger.opt, torch.from_numpy(obs), torch.from_numpy(taught), 1.0)
+    tensors = dagger.state_tensors()
+    assert all(name.startswith(CHECKPOINT_PREFIX) for name in tensors)
+
+    again = Dagger.create(cfg, LAYOUT.size, PPONets.create(LAYOUT, cfg, "cpu"))
+    assert again.restore(tensors) == min(added, capacity)
+    for a, b in zip(dagger.labels.oldest_first(), again.labels.oldest_first(), strict=True):
+        np.testing.assert_array_equal(a, b)
+    # the same rings: the rows added next push out the same oldest ones
+    extra = rows(more)
+    dagger.labels.add(*extra)
+    again.labels.add(*extra)
+    assert again.labels.count == dagger.labels.count
+    for a, b in zip(dagger.labels.oldest_first(), again.labels.oldest_first(), strict=True):
+        np.testing.assert_array_equal(a, b)
+    # and the optimiser's moments
+    mine, theirs = dagger.opt.state_dict()["state"], again.opt.state_dict()["state"]
+    assert mine.keys() == theirs.keys() and bool(mine) == (added > 0)
+    for idx in mine:
+        for key in mine[idx]:
+            assert torch.equal(torch.as_tensor(mine[idx][key]), torch.as_tensor(theirs[idx][key]))
+
+
+def test_nothing_to_restore_leaves_the_phase_fresh_and_foreign_labels_are_refused():
+    cfg = GeneralistConfig(hidden=8, dagger_rows=4)
+    nets = PPONets.create(LAYOUT, cfg, "cpu")
+    dagger = Dagger.create(cfg, LAYOUT.size, nets)
+    assert dagger.restore({}) == 0 and dagger.labels.count == 0
+    other = Dagger.create(cfg, LAYOUT.size + 1, nets)
+    other.labels.add(
+        np.zeros((2, LAYOUT.size + 1), np.float32), np.zeros(2, np.float32), np.ones(2, np.float32)
+    )
+    with pytest.raises(ValueError, match="resume the run with its own settings"):
+        dagger.restore(other.state_tensors())
+
+
+def test_a_run_resumed_inside_its_dagger_phase_goes_on_with_its_labels(tmp_path, monkeypatch):
+    from tiny_policy import tiny_suite
+
+    import policies.generalist_ppo as generalist_ppo
+    from policies.generalist_train import train_generalist
+    from policies.train import load_checkpoint_tensors
+
+    iterate = generalist_ppo.dagger_iteration
+
+    def ctrl_c_after(iterations: int) -> None:
+        """The next run is stopped by Ctrl-C once it has flown ``iterations`` iterations."""
+        flown = []
+
+        def iteration(*args):
+            if len(flown) == iterations:
+                raise KeyboardInterrupt
+            flown.append(1)
+            return iterate(*args)
+
+        monkeypatch.setattr(generalist_ppo, "dagger_iteration", iteration)
+
+    cfg = GeneralistConfig(
+        suites=(str(tiny_suite(tmp_path)),),
+        learner="ppo",
+        teacher="orca-shield",
+        dagger_fraction=1.0,  # DAgger the whole run
+        dagger_updates=2,
+        dagger_batch=16,
+        agents_per_family=4,
+        hidden=8,
+        ppo_rollout=3,
+        ppo_epochs=1,
+        ppo_minibatch=8,
+        minutes=0.0,
+        total_iterations=4,
+        eval_minutes=1e9,  # no validation
+        eval_episodes=1,
+        device="cpu",
+    )
+    out = tmp_path / "run"
+    last = out / "last.safetensors"
+    ctrl_c_after(2)
+    with pytest.raises(KeyboardInterrupt):
+        train_generalist(cfg, out)
+    first = load_checkpoint_tensors(last, CHECKPOINT_PREFIX)
+    assert first[f"{CHECKPOINT_PREFIX}labels.obs"].shape[0] > 0
+    assert any(".opt." in name for name in first)  # the supervised steps' Adam moments
+
+    ctrl_c_after(1)
+    with pytest.raises(KeyboardInterrupt):
+        train_generalist(cfg, out, resume=True)
+    second = load_checkpoint_tensors(last, CHECKPOINT_PREFIX)
+    # the first two iterations' labels, in their order, then the third's
+    for name in ("obs", "action", "weight"):
+        before, after = (t[f"{CHECKPOINT_PREFIX}labels.{name}"] for t in (first, second))
+        assert after.shape[0] > before.shape[0]
+        assert torch.equal(after[: before.shape[0]], before)
+
+    # the last iteration ends the phase: the checkpoint no longer carries it
+    monkeypatch.setattr(generalist_ppo, "dagger_iteration", iterate)
+    assert train_generalist(cfg, out, resume=True)["iterations"] == 4
+    assert not load_checkpoint_tensors(last, CHECKPOINT_PREFIX)

@@ -129,3 +129,26 @@ def test_bad_policy_files_are_clear_errors(tmp_path, trained):
         policy.check_scenario(load_scenario("3u2o"))
     with pytest.raises(PolicySpecMismatch):
         policy.act(np.zeros((3, policy.layout.size), np.float32))
+
+
+def test_a_checkpoint_keeps_extra_run_state_apart_from_the_networks(tmp_path):
+    import torch
+
+    from policies.ddpg import DDPGNets
+    from policies.train import load_checkpoint, load_checkpoint_tensors, save_checkpoint
+
+    torch.manual_seed(0)
+    nets = DDPGNets.create(2, 9, DDPGConfig())
+    path = tmp_path / "last.safetensors"
+    extra = {"labels.rows": torch.arange(6.0).reshape(3, 2)}
+    save_checkpoint(path, nets, {"iteration": 7}, extra)
+    assert load_checkpoint(path, DDPGNets.create(2, 9, DDPGConfig())) == {"iteration": 7}
+    kept = load_checkpoint_tensors(path, "labels.")
+    assert kept.keys() == extra.keys() and torch.equal(kept["labels.rows"], extra["labels.rows"])
+    assert load_checkpoint_tensors(path, "nothing.") == {}
+    # a name a network or optimiser owns is refused, and nothing is written
+    path.unlink()
+    owner = next(iter(nets.modules()))
+    with pytest.raises(ValueError, match="collides with the networks'"):
+        save_checkpoint(path, nets, {}, {f"{owner}.weight": torch.zeros(1)})
+    assert not path.exists()
