@@ -254,7 +254,7 @@ def main() -> None:
         f"{result['label_variance']:.4f} "
         f"(R² {1 - result['held_out_mse'] / result['label_variance']:.2f})"
     )
-    for name, row in sorted(families.items(), key=lambda kv: kv[1]["r2"]):
+    for name, row in sorted(families.items(), key=lambda kv: kv[1]["r2"] or 0.0):
         print(
             f"  {name:24s} MSE {row['mse']:.4f}  "
             f"variance {row['label_variance']:.4f}  R² {row['r2']:.2f}  "

@@ -129,7 +129,8 @@ def main() -> None:
     oracle, own = Labels.create(ROWS, layout.size), Labels.create(ROWS, layout.size)
     opt = torch.optim.Adam(net.parameters(), lr=LEARNING_RATE)
     start = last_export = time.monotonic()
-    label_s = sweeps = updates = 0
+    label_s = 0.0
+    sweeps = updates = 0
     episodes: dict[str, list[float]] = {}
     loss = 0.0
 
@@ -155,13 +156,14 @@ def main() -> None:
             noise = rng.normal(0.0, TEACHER_NOISE, student.shape)
             flown = np.clip(student + noise, -1.0, 1.0).astype(np.float32)
             step, ended = advance_world(world, flown, cfg, goal, rng)
-            (oracle if by_oracle else own).add(obs[step.acted], taught[step.acted])
+            kept = taught[step.acted].astype(np.float32)
+            (oracle if by_oracle else own).add(obs[step.acted], kept, np.ones_like(kept))
             for row in ended:
                 episodes.setdefault(world.family.name, []).append(float(row["success"]))
         sweeps += 1
         for _ in range(UPDATES):
-            x1, y1 = oracle.sample(BATCH // 2, rng)
-            x2, y2 = own.sample(BATCH // 2, rng)
+            x1, y1, _ = oracle.sample(BATCH // 2, rng)
+            x2, y2, _ = own.sample(BATCH // 2, rng)
             x = torch.from_numpy(np.concatenate([x1, x2]))
             y = torch.from_numpy(np.concatenate([y1, y2]))
             loss = clone_update(net, opt, x, y, cfg.grad_clip)

@@ -1,0 +1,82 @@
+"""The training study tools under tools/ run end to end on a few labels and write policies
+that fly: a tool the test suite never runs breaks unseen when the code under it moves."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from remarl_fc.policy_io import load_policy
+from sim.scenarios import load_scenario
+from sim.swarm import SwarmSim
+
+TOOLS = Path(__file__).resolve().parents[2] / "tools"
+
+
+def tool(name: str, *args: str) -> subprocess.CompletedProcess[str]:
+    """``tools/<name>.py args`` on one thread, finished."""
+    return subprocess.run(
+        [sys.executable, str(TOOLS / f"{name}.py"), *args],
+        capture_output=True,
+        text=True,
+        env={**os.environ, "OMP_NUM_THREADS": "1"},
+        timeout=300,
+        check=False,
+    )
+
+
+def run_tool(name: str, *args: str) -> dict:
+    """``tools/<name>.py args --json``: its JSON result (a failure shows its output)."""
+    done = tool(name, *args, "--json")
+    assert done.returncode == 0, done.stdout + done.stderr
+    return json.loads(done.stdout[done.stdout.index("{") :])
+
+
+def flies(path: Path) -> None:
+    """The policy file at ``path`` loads and acts on a swarm it was not trained on."""
+    policy = load_policy(str(path))
+    cfg = load_scenario("5u2o")
+    sim = SwarmSim(cfg, scored=False)
+    state = sim.initial_state(np.random.default_rng(0), 1)
+    actions = policy.act(sim.observe(state, layout=policy.layout).flat())
+    assert actions.shape == (1, 5) and np.all(np.abs(actions) <= 1.0)
+
+
+def test_oracle_finetune_labels_with_the_oracle_and_the_anchor_and_exports(tmp_path):
+    out = tmp_path / "tuned.safetensors"
+    result = run_tool(
+        "oracle_finetune", "--minutes", "0.001", "--families", "paper-2u1o", "--out", str(out)
+    )
+    assert result["sweeps"] >= 1 and result["updates"] == 20 * result["sweeps"]
+    assert result["oracle_families"] == ["paper-2u1o"]
+    assert result["oracle_labels"] > 0 and result["anchor_labels"] > result["oracle_labels"]
+    flies(out)
+
+
+def test_oracle_finetune_refuses_families_the_mixture_lacks(tmp_path):
+    out = tmp_path / "x.safetensors"
+    done = tool("oracle_finetune", "--families", "no-such-*", "--out", str(out))
+    assert done.returncode != 0 and "names no family of the mixture" in done.stderr
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("turn_weight", ["0", "3"])
+def test_clone_probe_fits_reports_each_family_and_exports(tmp_path, turn_weight):
+    out = tmp_path / "clone.safetensors"
+    result = run_tool(
+        "clone_probe",
+        *("--sweeps", "3", "--steps", "4", "--families", "paper-2u1o,crossing-3u"),
+        *("--turn-weight", turn_weight, "--out", str(out)),
+    )
+    assert set(result["families"]) == {"paper-2u1o", "crossing-3u"}
+    assert result["rows"] > result["held_out_rows"] > 0 and result["steps"] == 4
+    assert result["turn_weight"] == float(turn_weight)
+    for row in result["families"].values():
+        assert np.isfinite(row["mse"]) and row["label_variance"] >= 0
+    flies(out)
