@@ -2,7 +2,9 @@
 
 50 UAVs and 8 intruders (the 50u8o scenario) against a generalist of the shipped size (hidden
 64, k = 6 neighbour rows, m = 8 intruder rows); see `remarl_fc.bench.decide`. Prints the median
-and p99 of a decision and of each part, in milliseconds.
+and p99 of a decision and of each part, in milliseconds, and of a fixed numpy reference
+workload timed beside it (`remarl_fc.bench.decide.reference_workload`): the decision's ratio
+to it compares across days, on a machine whose speed varies from one session to the next.
 
     OMP_NUM_THREADS=1 python tools/bench_decide.py [--scenario 50u8o] [--samples 2000] [--json]
         [--pooling max-attention]
@@ -65,11 +67,16 @@ def main() -> None:
         ("act", "  actor"),
         ("shield", "shield (on)"),
         ("shielded_decision", "decision + shield"),
+        ("reference", "reference workload"),
     ):
         print(
             f"{label:<26} median {result[f'{part}_median_ms']:7.3f} ms   "
             f"p99 {result[f'{part}_p99_ms']:7.3f} ms"
         )
+    print(
+        f"decision / reference workload (medians): {result['decision_per_reference']:.2f} "
+        "(compares across machines and days)"
+    )
 
 
 if __name__ == "__main__":

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -103,6 +104,35 @@ def crowded(state: SwarmState, rng: np.random.Generator) -> SwarmState:
     return dataclasses.replace(state, obstacle_pos_m=near + offset)
 
 
+REFERENCE_ROWS = 400
+"""Rows of the reference workload: about the encoder rows of one 50u8o decision."""
+
+REFERENCE_LAYERS = 8
+"""Dense layers (64 → 64, float64, ReLU) of the reference workload."""
+
+
+def reference_workload(seed: int = 0) -> Callable[[], object]:
+    """A fixed numpy workload of the decision's kind, timed beside it in the same run.
+
+    `REFERENCE_ROWS` rows through `REFERENCE_LAYERS` dense ReLU layers of 64 units, float64:
+    small matrix products and element-wise calls, as the actor's. Its time says how fast this
+    machine is at such work today, so that decisions timed on different days compare by
+    their ratio to it (the 2-core machines differ from one session to the next by up to 2.3×).
+    """
+    rng = np.random.default_rng(seed)
+    x = rng.normal(size=(REFERENCE_ROWS, SHIPPED_HIDDEN))
+    shape = (SHIPPED_HIDDEN, SHIPPED_HIDDEN)
+    weights = [rng.normal(0, 0.1, shape) for _ in range(REFERENCE_LAYERS)]
+
+    def run() -> object:
+        y = x
+        for w in weights:
+            y = np.maximum(y @ w, 0.0)
+        return y
+
+    return run
+
+
 def _percentiles(times: NDArray[np.float64], prefix: str) -> dict[str, float]:
     return {
         f"{prefix}_median_ms": float(np.median(times) * 1e3),
@@ -130,7 +160,9 @@ def bench_decide(
     Also each part alone: ``observe_*`` (the version-2 observations of every UAV), ``act_*``
     (the actor on them), ``shield_*`` (the safety shield on the actor's proposals, mode on,
     `sim.shield.shield_state`), and ``shielded_decision_*`` (all three). Decisions cycle over
-    the states of one straight episode and their crowded copies.
+    the states of one straight episode and their crowded copies. ``reference_*``: the
+    `reference_workload` timed after each decision, and ``decision_per_reference`` the ratio
+    of the medians, which compares across machines and days where the milliseconds do not.
     """
     cfg = load_scenario(scenario)
     if policy_name is not None:
@@ -151,7 +183,8 @@ def bench_decide(
     rng = np.random.default_rng(seed)
     states = flown + [crowded(s, rng) for s in flown]
     decide, observe, act = np.empty(samples), np.empty(samples), np.empty(samples)
-    guard = np.empty(samples)
+    guard, reference = np.empty(samples), np.empty(samples)
+    workload = reference_workload(seed)
     shield_cfg = ShieldConfig(mode="on")
     vehicle = vehicle_of(cfg)
     sensed = interventions = 0
@@ -164,7 +197,10 @@ def bench_decide(
         t2 = time.perf_counter()
         shielded = shield_state(shield_cfg, cfg, state, actions, vehicle)
         t3 = time.perf_counter()
+        workload()
+        t4 = time.perf_counter()
         observe[k], act[k], decide[k], guard[k] = t1 - t0, t2 - t1, t2 - t0, t3 - t2
+        reference[k] = t4 - t3
         interventions += int(shielded.intervened.sum())
         if k < len(states):
             sensed = max(sensed, int(obs[..., layout.blocks()["intruder_mask"]].sum(-1).max()))
@@ -185,5 +221,7 @@ def bench_decide(
         **_percentiles(act, "act"),
         **_percentiles(guard, "shield"),
         **_percentiles(decide + guard, "shielded_decision"),
+        **_percentiles(reference, "reference"),
+        "decision_per_reference": float(np.median(decide) / np.median(reference)),
         "shield_intervention_rate": interventions / (samples * cfg.uav.count),
     }
