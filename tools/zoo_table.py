@@ -1,4 +1,8 @@
-"""Print the Markdown table of the shipped zoo from its eval JSON files (for the README)."""
+"""Print the Markdown table of the shipped zoo from its eval JSON files (for the README).
+
+The per-scenario policies' evaluations only: the generalist's (a suite evaluation, with
+another schema) has its table in docs/RESULTS.md (`tools/suite_table.py`).
+"""
 
 from __future__ import annotations
 
@@ -15,6 +19,7 @@ def main() -> None:
     )
     print("|---|---|---|---|---|---|---|---|---|")
     reports = [json.loads(p.read_text()) for p in sorted(ZOO.glob("*.eval.json"))]
+    reports = [r for r in reports if "scenario" in r]  # not the generalist's suite evaluation
     reports.sort(key=lambda r: (r["uavs"], r["scenario"]))
     for r in reports:
         print(

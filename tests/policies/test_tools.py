@@ -80,3 +80,12 @@ def test_clone_probe_fits_reports_each_family_and_exports(tmp_path, turn_weight)
     for row in result["families"].values():
         assert np.isfinite(row["mse"]) and row["label_variance"] >= 0
     flies(out)
+
+
+def test_zoo_table_prints_a_row_per_scenario_policy_and_skips_the_generalists_suite_file():
+    done = tool("zoo_table")
+    assert done.returncode == 0, done.stderr
+    rows = [line for line in done.stdout.splitlines() if line.startswith("| ") and "%" in line]
+    zoo = TOOLS.parent / "policies" / "zoo"
+    scenarios = {p.name.removesuffix(".eval.json") for p in zoo.glob("*.eval.json")}
+    assert len(rows) == len(scenarios - {"generalist"}) > 0
