@@ -1,7 +1,8 @@
 """Does the oracle teach the generalist what ORCA could not? DAgger on the oracle, measured.
 
     OMP_NUM_THREADS=1 python tools/oracle_finetune.py [--policy generalist] [--minutes 60]
-        [--families 'beyond-20u4o,dense-*,...'] [--seed 13] --out tuned.safetensors [--json]
+        [--families 'beyond-20u4o,dense-*,...'] [--teacher oracle|orca-shield] [--seed 13]
+        --out tuned.safetensors [--json]
 
 Starts from a generalist policy file (the shipped one by default) and runs DAgger (Ross,
 Gordon & Bagnell 2011) on the training mixture of `remarl-fc train --generalist`: the student
@@ -13,7 +14,11 @@ policy labels its own states, an anchor that keeps what it flies well. After eve
 every world the actor takes supervised steps (the DAgger phase's `clone_update`, Adam 3·10⁻⁴)
 on minibatches drawn half from the oracle's labels and half from the anchor's. A copy is
 exported to ``--out`` every 15 minutes and at the end: fly it with
-``remarl-fc eval --suite standard --policy tuned.safetensors --json``.
+``remarl-fc eval --suite standard --policy tuned.safetensors --json``. Where the oracle finds
+no plan, ORCA through the shield labels, looking as far ahead as a training run's teacher
+(`GeneralistConfig.teacher_horizon_s`). ``--teacher orca-shield`` runs the same fine-tune
+with ORCA through the shield labelling those families instead: the control, which tells the
+oracle's labels from the fine-tune itself.
 
 Why a tool and not `train --generalist --teacher oracle`: the oracle replanned at every step of
 every world costs about 100 times ORCA through the shield (23 s against 0.23 s for one step of
@@ -50,6 +55,7 @@ from policies.generalist_train import (
 )
 from policies.train import reward_upper_bound
 from remarl_fc.policy_io import load_policy
+from sim.config import TEACHERS
 from sim.encounters import family_scenario
 from sim.suite import load_suite
 
@@ -102,6 +108,13 @@ def main() -> None:
     parser.add_argument("--policy", default="generalist", help="the starting policy file")
     parser.add_argument("--minutes", type=float, default=60.0)
     parser.add_argument("--families", default=HARD_FAMILIES, help="oracle-labelled (patterns)")
+    parser.add_argument(
+        "--teacher",
+        default="oracle",
+        choices=[t for t in TEACHERS if t != "none"],
+        help="who labels those families (orca-shield: the same fine-tune with the recipe's "
+        "teacher, the control)",
+    )
     parser.add_argument("--seed", type=int, default=13, help="not the training runs' seeds")
     parser.add_argument("--out", type=Path, required=True, help="the tuned policy file")
     parser.add_argument("--json", action="store_true", help="print the result as JSON")
@@ -142,7 +155,7 @@ def main() -> None:
             base_cfg=with_layout(base, layout),
             hidden=cfg.hidden,
             uav_range=(1, cfg.max_uavs),
-            reward=f"none (DAgger on the oracle from {args.policy})",
+            reward=f"none (DAgger on {args.teacher} from {args.policy})",
             training={"steps": updates, "seed": args.seed},
         )
 
@@ -151,7 +164,11 @@ def main() -> None:
             obs = world.obs
             student = act(net, obs)
             t0 = time.perf_counter()
-            taught = teacher_actions(world, "oracle") if by_oracle else act(anchor, obs)
+            taught = (
+                teacher_actions(world, args.teacher, cfg.teacher_horizon_s)
+                if by_oracle
+                else act(anchor, obs)
+            )
             label_s += time.perf_counter() - t0 if by_oracle else 0.0
             noise = rng.normal(0.0, TEACHER_NOISE, student.shape)
             flown = np.clip(student + noise, -1.0, 1.0).astype(np.float32)
@@ -179,6 +196,7 @@ def main() -> None:
     result = {
         "policy": str(args.out),
         "from": args.policy,
+        "teacher": args.teacher,
         "minutes": (time.monotonic() - start) / 60.0,
         "sweeps": sweeps,
         "updates": updates,

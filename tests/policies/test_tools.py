@@ -38,25 +38,33 @@ def run_tool(name: str, *args: str) -> dict:
     return json.loads(done.stdout[done.stdout.index("{") :])
 
 
-def flies(path: Path) -> None:
-    """The policy file at ``path`` loads and acts on a swarm it was not trained on."""
+def flies(path: Path) -> np.ndarray:
+    """The policy file at ``path`` loads and acts on a swarm it was not trained on: its actions."""
     policy = load_policy(str(path))
     cfg = load_scenario("5u2o")
     sim = SwarmSim(cfg, scored=False)
     state = sim.initial_state(np.random.default_rng(0), 1)
     actions = policy.act(sim.observe(state, layout=policy.layout).flat())
     assert actions.shape == (1, 5) and np.all(np.abs(actions) <= 1.0)
+    return actions
 
 
-def test_oracle_finetune_labels_with_the_oracle_and_the_anchor_and_exports(tmp_path):
-    out = tmp_path / "tuned.safetensors"
-    result = run_tool(
-        "oracle_finetune", "--minutes", "0.001", "--families", "paper-2u1o", "--out", str(out)
-    )
-    assert result["sweeps"] >= 1 and result["updates"] == 20 * result["sweeps"]
-    assert result["oracle_families"] == ["paper-2u1o"]
-    assert result["oracle_labels"] > 0 and result["anchor_labels"] > result["oracle_labels"]
-    flies(out)
+def test_oracle_finetune_labels_with_its_teacher_and_the_anchor_and_exports(tmp_path):
+    acted = {}
+    for teacher in ("oracle", "orca-shield"):
+        out = tmp_path / f"{teacher}.safetensors"
+        result = run_tool(
+            "oracle_finetune",
+            *("--minutes", "0.001", "--families", "paper-2u1o", "--teacher", teacher),
+            *("--out", str(out)),
+        )
+        assert result["teacher"] == teacher
+        assert result["sweeps"] >= 1 and result["updates"] == 20 * result["sweeps"]
+        assert result["oracle_families"] == ["paper-2u1o"]
+        assert result["oracle_labels"] > 0 and result["anchor_labels"] > result["oracle_labels"]
+        acted[teacher] = flies(out)
+    # the same seed, flights and anchor: only the teacher's labels tell the two apart
+    assert not np.allclose(acted["oracle"], acted["orca-shield"])
 
 
 def test_oracle_finetune_refuses_families_the_mixture_lacks(tmp_path):
