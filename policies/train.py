@@ -119,9 +119,9 @@ def save_checkpoint(
             tensors[f"{name}.{key}"] = value.detach().cpu().contiguous()
     for name, opt in nets.optimisers().items():
         tensors |= optimiser_tensors(name, opt)
+    owners = {*nets.modules(), *nets.optimisers()}
     for key, value in (extra or {}).items():
-        owner = key.split(".", 1)[0]
-        if owner in nets.modules() or owner in nets.optimisers() or key in tensors:
+        if key.split(".", 1)[0] in owners:
             raise ValueError(f"checkpoint: extra tensor {key!r} collides with the networks'")
         tensors[key] = value.detach().cpu().contiguous()
     tmp = path.with_name(path.name + ".part")

@@ -18,7 +18,8 @@ exported to ``--out`` every 15 minutes and at the end: fly it with
 no plan, ORCA through the shield labels, looking as far ahead as a training run's teacher
 (`GeneralistConfig.teacher_horizon_s`). ``--teacher orca-shield`` runs the same fine-tune
 with ORCA through the shield labelling those families instead: the control, which tells the
-oracle's labels from the fine-tune itself.
+oracle's labels from the fine-tune itself. The JSON's ``oracle_labels``, ``oracle_seconds`` and
+``oracle_families`` are the teacher's, whichever ``--teacher`` labelled.
 
 Why a tool and not `train --generalist --teacher oracle`: the oracle replanned at every step of
 every world costs about 100 times ORCA through the shield (23 s against 0.23 s for one step of
@@ -107,7 +108,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--policy", default="generalist", help="the starting policy file")
     parser.add_argument("--minutes", type=float, default=60.0)
-    parser.add_argument("--families", default=HARD_FAMILIES, help="oracle-labelled (patterns)")
+    parser.add_argument("--families", default=HARD_FAMILIES, help="teacher-labelled (patterns)")
     parser.add_argument(
         "--teacher",
         default="oracle",
@@ -139,7 +140,7 @@ def main() -> None:
     hard = [any(fnmatch.fnmatchcase(w.family.name, p) for p in patterns) for w in worlds]
     if not any(hard):
         raise SystemExit(f"--families {args.families!r} names no family of the mixture")
-    oracle, own = Labels.create(ROWS, layout.size), Labels.create(ROWS, layout.size)
+    taught_rows, own = Labels.create(ROWS, layout.size), Labels.create(ROWS, layout.size)
     opt = torch.optim.Adam(net.parameters(), lr=LEARNING_RATE)
     start = last_export = time.monotonic()
     label_s = 0.0
@@ -160,26 +161,26 @@ def main() -> None:
         )
 
     while time.monotonic() - start < 60.0 * args.minutes:
-        for world, by_oracle in zip(worlds, hard, strict=True):
+        for world, by_teacher in zip(worlds, hard, strict=True):
             obs = world.obs
             student = act(net, obs)
             t0 = time.perf_counter()
             taught = (
                 teacher_actions(world, args.teacher, cfg.teacher_horizon_s)
-                if by_oracle
+                if by_teacher
                 else act(anchor, obs)
             )
-            label_s += time.perf_counter() - t0 if by_oracle else 0.0
+            label_s += time.perf_counter() - t0 if by_teacher else 0.0
             noise = rng.normal(0.0, TEACHER_NOISE, student.shape)
             flown = np.clip(student + noise, -1.0, 1.0).astype(np.float32)
             step, ended = advance_world(world, flown, cfg, goal, rng)
             kept = taught[step.acted].astype(np.float32)
-            (oracle if by_oracle else own).add(obs[step.acted], kept, np.ones_like(kept))
+            (taught_rows if by_teacher else own).add(obs[step.acted], kept, np.ones_like(kept))
             for row in ended:
                 episodes.setdefault(world.family.name, []).append(float(row["success"]))
         sweeps += 1
         for _ in range(UPDATES):
-            x1, y1, _ = oracle.sample(BATCH // 2, rng)
+            x1, y1, _ = taught_rows.sample(BATCH // 2, rng)
             x2, y2, _ = own.sample(BATCH // 2, rng)
             x = torch.from_numpy(np.concatenate([x1, x2]))
             y = torch.from_numpy(np.concatenate([y1, y2]))
@@ -200,7 +201,7 @@ def main() -> None:
         "minutes": (time.monotonic() - start) / 60.0,
         "sweeps": sweeps,
         "updates": updates,
-        "oracle_labels": oracle.count,
+        "oracle_labels": taught_rows.count,
         "anchor_labels": own.count,
         "oracle_seconds": label_s,
         "last_loss": loss,
@@ -212,7 +213,7 @@ def main() -> None:
         return
     print(
         f"{sweeps} steps of every world in {result['minutes']:.0f} min ({label_s:.0f} s of "
-        f"oracle), {updates} supervised steps; {oracle.count} oracle labels, {own.count} "
+        f"teacher), {updates} supervised steps; {taught_rows.count} teacher labels, {own.count} "
         f"anchor labels; last loss {loss:.4f}; wrote {args.out}"
     )
 
