@@ -229,48 +229,51 @@ def dagger_iteration(
     labels = dagger.labels
     beta = dagger_beta(cfg, book.fraction_done())
     flown: list[list[Any]] = [[] for _ in worlds]
-    for _ in range(cfg.ppo_rollout):
-        student = per_world(
-            actor_actions(nets.actor, joint_obs(worlds, labels.size), device), worlds
-        )
-        for k, (world, own) in enumerate(zip(worlds, student, strict=True)):
-            taught = teacher_actions(world, cfg.teacher, cfg.teacher_horizon_s)
-            pick = rng.random(own.shape) < beta
-            noise = rng.normal(0.0, TEACHER_NOISE, own.shape)
-            action = np.clip(np.where(pick, taught, own) + noise, -1.0, 1.0).astype(np.float32)
-            obs = world.obs
-            goal = goal_turn_rad(world.state, world.cfg) / world.cfg.uav.max_turn_rad
-            step, ended = advance_world(world, action, cfg, book.goal_value, rng)
-            weight = label_weights(taught, goal, cfg.dagger_turn_weight)
-            labels.add(obs[step.acted], taught[step.acted].astype(np.float32), weight[step.acted])
-            zeros = np.zeros_like(action)
-            flown[k].append((step, action, zeros, taught))
-            book.transitions += int(step.acted.sum())
-            recent += [{"family": world.family.name, **row} for row in ended]
+    with book.clock("simulator"):
+        for _ in range(cfg.ppo_rollout):
+            student = per_world(
+                actor_actions(nets.actor, joint_obs(worlds, labels.size), device), worlds
+            )
+            for k, (world, own) in enumerate(zip(worlds, student, strict=True)):
+                taught = teacher_actions(world, cfg.teacher, cfg.teacher_horizon_s)
+                pick = rng.random(own.shape) < beta
+                noise = rng.normal(0.0, TEACHER_NOISE, own.shape)
+                action = np.clip(np.where(pick, taught, own) + noise, -1.0, 1.0).astype(np.float32)
+                obs = world.obs
+                goal = goal_turn_rad(world.state, world.cfg) / world.cfg.uav.max_turn_rad
+                step, ended = advance_world(world, action, cfg, book.goal_value, rng)
+                weight = label_weights(taught, goal, cfg.dagger_turn_weight)
+                acted = step.acted
+                labels.add(obs[acted], taught[acted].astype(np.float32), weight[acted])
+                zeros = np.zeros_like(action)
+                flown[k].append((step, action, zeros, taught))
+                book.transitions += int(step.acted.sum())
+                recent += [{"family": world.family.name, **row} for row in ended]
     del recent[:-2000]
     book.iteration += 1
 
-    columns = rollout_columns(nets, flown, cfg, device)
-    obs_t = torch.from_numpy(columns["obs"]).to(device)
-    target_t = torch.from_numpy(columns["target"]).to(device)
-    value_loss = 0.0
-    for _ in range(cfg.ppo_epochs):
-        order = torch.from_numpy(rng.permutation(len(obs_t))).to(device)
-        for start in range(0, len(obs_t), cfg.ppo_minibatch):
-            idx = order[start : start + cfg.ppo_minibatch]
-            value_loss = value_update(nets, obs_t[idx], target_t[idx], cfg.grad_clip)
-    clone_loss = 0.0
-    for _ in range(cfg.dagger_updates):
-        obs, taught, weight = labels.sample(cfg.dagger_batch, rng)
-        clone_loss = clone_update(
-            nets.actor,
-            dagger.opt,
-            torch.from_numpy(obs).to(device),
-            torch.from_numpy(taught).to(device),
-            cfg.grad_clip,
-            torch.from_numpy(weight).to(device) if cfg.dagger_turn_weight > 0 else None,
-        )
-        book.updates += 1
+    with book.clock("learner"):
+        columns = rollout_columns(nets, flown, cfg, device)
+        obs_t = torch.from_numpy(columns["obs"]).to(device)
+        target_t = torch.from_numpy(columns["target"]).to(device)
+        value_loss = 0.0
+        for _ in range(cfg.ppo_epochs):
+            order = torch.from_numpy(rng.permutation(len(obs_t))).to(device)
+            for start in range(0, len(obs_t), cfg.ppo_minibatch):
+                idx = order[start : start + cfg.ppo_minibatch]
+                value_loss = value_update(nets, obs_t[idx], target_t[idx], cfg.grad_clip)
+        clone_loss = 0.0
+        for _ in range(cfg.dagger_updates):
+            obs, taught, weight = labels.sample(cfg.dagger_batch, rng)
+            clone_loss = clone_update(
+                nets.actor,
+                dagger.opt,
+                torch.from_numpy(obs).to(device),
+                torch.from_numpy(taught).to(device),
+                cfg.grad_clip,
+                torch.from_numpy(weight).to(device) if cfg.dagger_turn_weight > 0 else None,
+            )
+            book.updates += 1
     return {
         "losses/value": value_loss,
         "losses/clone": clone_loss,

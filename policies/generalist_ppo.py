@@ -14,11 +14,10 @@ passes of clipped-surrogate steps (Schulman et al. 2017) over the UAV transition
 from __future__ import annotations
 
 import math
-import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import torch
@@ -31,6 +30,9 @@ from policies.generalist_dagger import CHECKPOINT_PREFIX, Dagger, dagger_iterati
 from policies.train import load_checkpoint_tensors
 from sim.arrays import BoolArray
 from sim.observation import ObservationLayout
+
+if TYPE_CHECKING:
+    from policies.generalist_train import RunBook
 
 LOG_2PI = math.log(2.0 * math.pi)
 """log 2π, of the Gaussian's density."""
@@ -164,22 +166,12 @@ def train_generalist_ppo(
     progress: Callable[[dict[str, float]], None] | None = None,
 ) -> dict[str, Any]:
     """Train (or resume) the generalist with PPO; the run folder as TD3's."""
-    from policies.generalist_train import (
-        RunBook,
-        actor_actions,
-        advance_world,
-        bc_weight,
-        joint_obs,
-        per_world,
-        teacher_actions,
-    )
+    from policies.generalist_train import RunBook, bc_weight
 
     book = RunBook.open(cfg, out_dir, PPONets.create, resume=resume)
     nets: PPONets = book.nets
-    worlds, layout, device, rng = book.worlds, book.layout, book.device, book.rng
     recent: list[dict[str, Any]] = []
-    env_s = learn_s = 0.0
-    dagger = Dagger.create(cfg, layout.size, nets) if cfg.dagger_share() > 0 else None
+    dagger = Dagger.create(cfg, book.layout.size, nets) if cfg.dagger_share() > 0 else None
     if dagger is not None:
         # the labels so far live in last.safetensors while the phase lasts, so that a run
         # resumed inside it goes on with every label (a run resumed after it finds none)
@@ -204,85 +196,98 @@ def train_generalist_ppo(
             book.log(recent, scalars, progress, every=1)
             book.save_and_validate_if_due()
         while book.iteration < cfg.total_iterations and not book.out_of_time():
-            t0 = time.perf_counter()
-            # ---- fly every world ppo_rollout steps with the Gaussian policy
             std = float(torch.exp(nets.log_std.value.detach()))
-            log_std = float(nets.log_std.value.detach())
             bc = bc_weight(cfg, book.fraction_done())
-            flown: list[list[Any]] = [[] for _ in worlds]
-            for _ in range(cfg.ppo_rollout):
-                mean = actor_actions(nets.actor, joint_obs(worlds, layout.size), device)
-                noise = rng.standard_normal(mean.shape)
-                sample = (mean + std * noise).astype(np.float32)
-                # the behaviour policy's log density of its own sample, (sample − mean)/σ = noise
-                density = (-0.5 * noise * noise - log_std - 0.5 * LOG_2PI).astype(np.float32)
-                action = np.clip(sample, -1.0, 1.0)
-                for k, (world, a, u, lp) in enumerate(
-                    zip(
-                        worlds,
-                        per_world(action, worlds),
-                        per_world(sample, worlds),
-                        per_world(density, worlds),
-                        strict=True,
-                    )
-                ):
-                    # DAgger: the teacher labels the state the student flies from
-                    taught = (
-                        teacher_actions(world, cfg.teacher, cfg.teacher_horizon_s)
-                        if bc > 0
-                        else None
-                    )
-                    step, ended = advance_world(world, a, cfg, book.goal_value, rng)
-                    flown[k].append((step, u, lp, taught))
-                    book.transitions += int(step.acted.sum())
-                    recent += [{"family": world.family.name, **row} for row in ended]
-            recent = recent[-2000:]
+            with book.clock("simulator"):
+                flown = fly_rollout(book, bc, recent)
+            del recent[:-2000]
             book.iteration += 1
-            env_s += time.perf_counter() - t0
-
-            # ---- advantages per world, then the clipped-surrogate epochs over every UAV
-            t1 = time.perf_counter()
-            columns = rollout_columns(nets, flown, cfg, device)
-            losses: dict[str, float] = {}
-            count = len(columns["adv"])
-            adv = columns["adv"]
-            columns["adv"] = (adv - adv.mean()) / (adv.std() + 1e-8)
-            tensors = {k: torch.from_numpy(v).to(device) for k, v in columns.items()}
-            for _ in range(cfg.ppo_epochs):
-                order = torch.from_numpy(rng.permutation(count)).to(device)
-                for start in range(0, count, cfg.ppo_minibatch):
-                    idx = order[start : start + cfg.ppo_minibatch]
-                    batch = {k: v[idx] for k, v in tensors.items()}
-                    losses = ppo_update(
-                        nets,
-                        batch["obs"],
-                        batch["sample"],
-                        batch["log_prob"],
-                        batch["adv"],
-                        batch["target"],
-                        cfg,
-                        batch["teacher"],
-                        bc,
-                    )
-                    book.updates += 1
-            learn_s += time.perf_counter() - t1
-
+            with book.clock("learner"):
+                losses = learn_rollout(book, flown, bc)
             book.log(
-                recent,
-                {
-                    "charts/noise": std,
-                    "charts/bc_weight": bc,
-                    "perf/simulator_share": env_s / max(env_s + learn_s, 1e-9),
-                    **losses,
-                },
-                progress,
-                every=1,
+                recent, {"charts/noise": std, "charts/bc_weight": bc, **losses}, progress, every=1
             )
             book.save_and_validate_if_due()
     except KeyboardInterrupt:
         book.save_last()
         raise
     return book.finish()
+
+
+def fly_rollout(book: RunBook, bc: float, recent: list[dict[str, Any]]) -> list[list[Any]]:
+    """Fly every world ``ppo_rollout`` steps with the Gaussian policy.
+
+    Returns each world's steps as (step, sample, log density, teacher's label or None): the
+    teacher labels the state the student flies from while ``bc`` > 0 (DAgger inside PPO).
+    Finished episodes join ``recent``.
+    """
+    from policies.generalist_train import (
+        actor_actions,
+        advance_world,
+        joint_obs,
+        per_world,
+        teacher_actions,
+    )
+
+    cfg, worlds, rng = book.cfg, book.worlds, book.rng
+    std = float(torch.exp(book.nets.log_std.value.detach()))
+    log_std = float(book.nets.log_std.value.detach())
+    flown: list[list[Any]] = [[] for _ in worlds]
+    for _ in range(cfg.ppo_rollout):
+        mean = actor_actions(book.nets.actor, joint_obs(worlds, book.layout.size), book.device)
+        noise = rng.standard_normal(mean.shape)
+        sample = (mean + std * noise).astype(np.float32)
+        # the behaviour policy's log density of its own sample, (sample − mean)/σ = noise
+        density = (-0.5 * noise * noise - log_std - 0.5 * LOG_2PI).astype(np.float32)
+        action = np.clip(sample, -1.0, 1.0)
+        for k, (world, a, u, lp) in enumerate(
+            zip(
+                worlds,
+                per_world(action, worlds),
+                per_world(sample, worlds),
+                per_world(density, worlds),
+                strict=True,
+            )
+        ):
+            taught = teacher_actions(world, cfg.teacher, cfg.teacher_horizon_s) if bc > 0 else None
+            step, ended = advance_world(world, a, cfg, book.goal_value, rng)
+            flown[k].append((step, u, lp, taught))
+            book.transitions += int(step.acted.sum())
+            recent.extend({"family": world.family.name, **row} for row in ended)
+    return flown
+
+
+def learn_rollout(book: RunBook, flown: list[list[Any]], bc: float) -> dict[str, float]:
+    """Learn from one rollout; returns the last step's losses.
+
+    Advantages per world, then ``ppo_epochs`` clipped-surrogate passes over every UAV's
+    transitions of the rollout.
+    """
+    cfg, nets, device, rng = book.cfg, book.nets, book.device, book.rng
+    columns = rollout_columns(nets, flown, cfg, device)
+    losses: dict[str, float] = {}
+    count = len(columns["adv"])
+    adv = columns["adv"]
+    columns["adv"] = (adv - adv.mean()) / (adv.std() + 1e-8)
+    tensors = {k: torch.from_numpy(v).to(device) for k, v in columns.items()}
+    for _ in range(cfg.ppo_epochs):
+        order = torch.from_numpy(rng.permutation(count)).to(device)
+        for start in range(0, count, cfg.ppo_minibatch):
+            idx = order[start : start + cfg.ppo_minibatch]
+            batch = {k: v[idx] for k, v in tensors.items()}
+            losses = ppo_update(
+                nets,
+                batch["obs"],
+                batch["sample"],
+                batch["log_prob"],
+                batch["adv"],
+                batch["target"],
+                cfg,
+                batch["teacher"],
+                bc,
+            )
+            book.updates += 1
+    return losses
 
 
 def rollout_columns(

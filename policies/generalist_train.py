@@ -24,6 +24,7 @@ Run folder (``out``)::
                        validation and on Ctrl-C)
     best.safetensors   the networks of the best validation so far
     evals.jsonl        one line per validation: success per family on validation episodes
+                       (every ``eval_minutes``, and of the final networks at the run's end)
     events.*           TensorBoard scalars (when tensorboard is installed)
 
 The replay buffer is not saved; a resumed run refills it with the current policy first.
@@ -31,12 +32,13 @@ The replay buffer is not saved; a resumed run refills it with the current policy
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import fnmatch
 import json
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -54,6 +56,7 @@ from sim.arrays import BoolArray, FloatArray
 from sim.config import ScenarioConfig
 from sim.encounters import Family, draw_episodes, family_scenario
 from sim.env import episode_metrics
+from sim.errors import ConfigError
 from sim.evaluation import evaluation_seed
 from sim.observation import ObservationLayout
 from sim.oracle import oracle_actions
@@ -74,6 +77,11 @@ CHECKPOINT_MINUTES = 5.0
 
 VALIDATION_SEED = evaluation_seed(suite="training", offset=7_777)
 """Seed of the validation episodes: neither the training stream nor a suite's."""
+
+TIME_PARTS = ("simulator", "learner")
+"""Where a run's wall time is counted (`RunBook.clock`): flying the worlds, with the teacher's
+labels (on the CPU), and the networks' updates (on ``--device``). Validation and checkpoints
+count in neither."""
 
 
 def generalist_layout(cfg: GeneralistConfig, base: ScenarioConfig) -> ObservationLayout:
@@ -468,7 +476,10 @@ def resolve_device(name: str) -> str:
     if name == "auto":
         return "cuda" if torch.cuda.is_available() else "cpu"
     if name == "cuda" and not torch.cuda.is_available():
-        raise ValueError("device: cuda was asked for but torch sees no CUDA device")
+        raise ConfigError(
+            f"device: cuda was asked for but torch {torch.__version__} sees no CUDA device "
+            "(a CPU build of torch, or no driver): train with --device cpu, or auto"
+        )
     return name
 
 
@@ -499,6 +510,12 @@ class RunBook:
     start: float = 0.0
     last_eval: float = 0.0
     last_save: float = 0.0
+    validated_at: int = -1
+    """The iteration whose networks the last validation flew (-1: none yet)."""
+    seconds: dict[str, float] = dataclasses.field(
+        default_factory=lambda: dict.fromkeys(TIME_PARTS, 0.0)
+    )
+    """Wall seconds of this sitting spent in each of `TIME_PARTS` (`clock`)."""
     summary: dict[str, Any] = dataclasses.field(default_factory=dict)
     run_state: Callable[[], dict[str, torch.Tensor]] | None = None
     """More of the run to keep in ``last.safetensors`` (the DAgger phase's labels), if any."""
@@ -513,8 +530,8 @@ class RunBook:
         resume: bool,
     ) -> RunBook:
         """Start the run in ``out_dir`` (resuming ``last.safetensors`` if asked and there)."""
+        device = resolve_device(cfg.device)  # before anything is written
         out_dir.mkdir(parents=True, exist_ok=True)
-        device = resolve_device(cfg.device)
         torch.manual_seed(cfg.seed)
         rng = np.random.default_rng(cfg.seed)
         base = family_scenario(load_suite(cfg.suites[0]).families[0])
@@ -528,6 +545,7 @@ class RunBook:
             meta = load_checkpoint(last, nets)
             book.iteration, book.updates = int(meta["iteration"]), int(meta["updates"])
             book.best, book.elapsed_before = float(meta["best_success"]), float(meta["elapsed_s"])
+            book.validated_at = int(meta.get("validated_at", -1))
             book.resumed = book.iteration > 0
             book.rng = np.random.default_rng([cfg.seed, book.iteration])
             for world in worlds:  # new episodes: the stream goes on where the run left it
@@ -583,6 +601,7 @@ class RunBook:
                 "iteration": self.iteration,
                 "updates": self.updates,
                 "best_success": self.best,
+                "validated_at": self.validated_at,
                 "elapsed_s": self.elapsed(),
                 "layout": dataclasses.asdict(self.layout),
                 "hidden": self.cfg.hidden,
@@ -595,6 +614,19 @@ class RunBook:
         """``last.safetensors`` now, with the `run_state` there is."""
         extra = self.run_state() if self.run_state is not None else None
         self.checkpoint(self.out_dir / "last.safetensors", extra)
+
+    @contextlib.contextmanager
+    def clock(self, part: str) -> Iterator[None]:
+        """Count the wall time of the block to ``part`` of `TIME_PARTS`."""
+        start = time.perf_counter()
+        try:
+            yield
+        finally:
+            self.seconds[part] += time.perf_counter() - start
+
+    def simulator_share(self) -> float:
+        """The simulator's (and teacher's) share of the clocked time of this sitting."""
+        return self.seconds["simulator"] / max(sum(self.seconds.values()), 1e-9)
 
     def log(
         self,
@@ -613,6 +645,7 @@ class RunBook:
             "charts/collision_u2o": float(np.mean([float(r["collision_u2o"]) for r in recent])),
             "charts/transitions": float(self.transitions),
             "perf/elapsed_min": self.elapsed() / 60,
+            "perf/simulator_share": self.simulator_share(),
             **scalars,
         }
         if self.writer is not None:
@@ -635,6 +668,7 @@ class RunBook:
             return
         self.save_last()
         self.last_eval = time.monotonic()
+        self.validated_at = self.iteration
         result = validate(
             self.nets.actor, self.worlds, self.layout, self.cfg.eval_episodes, self.device
         )
@@ -651,9 +685,17 @@ class RunBook:
         self.summary["last_eval"] = record
 
     def finish(self) -> dict[str, Any]:
-        """Final checkpoints and the summary."""
-        self.save_last()
-        if not (self.out_dir / "best.safetensors").exists():
+        """Validate the final networks, then the final checkpoints and the summary.
+
+        The validation is skipped when the last one already flew these networks. Without it
+        the training after the last periodic validation would never be flown: up to
+        ``eval_minutes`` of a run's end, and every run shorter than ``eval_minutes``.
+        """
+        if self.validated_at != self.iteration:
+            self.save_and_validate_if_due(now=True)
+        else:
+            self.save_last()
+        if not (self.out_dir / "best.safetensors").exists():  # no ideal world to validate in
             self.checkpoint(self.out_dir / "best.safetensors")
         if self.writer is not None:
             self.writer.close()
@@ -666,6 +708,8 @@ class RunBook:
                 "transitions": self.transitions,
                 "best_success": self.best,
                 "elapsed_s": self.elapsed(),
+                "simulator_s": self.seconds["simulator"],
+                "learner_s": self.seconds["learner"],
                 "out": str(self.out_dir),
             }
         )
@@ -693,7 +737,6 @@ def train_generalist(
     buffer = AgentReplay(cfg.buffer_size, layout.size)
     warm = 0 if book.resumed else cfg.warmup_transitions
     recent: list[dict[str, Any]] = []
-    env_s = learn_s = 0.0
     if cfg.teacher != "none" and not book.resumed:
         scalars = learn_from_teacher(nets, worlds, buffer, cfg, book.goal_value, book.rng, device)
         warm = 0  # the clone explores from here
@@ -708,46 +751,41 @@ def train_generalist(
             frac = book.fraction_done()
             sigma = cfg.noise_start + (cfg.noise_end - cfg.noise_start) * frac
             rng = book.rng
-            t0 = time.perf_counter()
             # ---- act in every world (one actor call for all of them), store, restart
-            if warm > 0:
-                actions = [rng.uniform(-1, 1, w.obs.shape[:2]).astype(np.float32) for w in worlds]
-            else:
-                out = actor_actions(nets.actor, joint_obs(worlds, layout.size), device)
-                out += rng.normal(0.0, sigma, out.shape).astype(np.float32)
-                np.clip(out, -1.0, 1.0, out=out)
-                actions = per_world(out, worlds)
-            for world, act in zip(worlds, actions, strict=True):
-                transitions, ended = step_world(world, act, cfg, book.goal_value, rng)
-                buffer.add(**transitions)
-                count = len(transitions["obs"])
-                book.transitions += count
-                warm -= count
-                for row in ended:
-                    recent.append({"family": world.family.name, **row})
+            with book.clock("simulator"):
+                if warm > 0:
+                    actions = [
+                        rng.uniform(-1, 1, w.obs.shape[:2]).astype(np.float32) for w in worlds
+                    ]
+                else:
+                    out = actor_actions(nets.actor, joint_obs(worlds, layout.size), device)
+                    out += rng.normal(0.0, sigma, out.shape).astype(np.float32)
+                    np.clip(out, -1.0, 1.0, out=out)
+                    actions = per_world(out, worlds)
+                for world, act in zip(worlds, actions, strict=True):
+                    transitions, ended = step_world(world, act, cfg, book.goal_value, rng)
+                    buffer.add(**transitions)
+                    count = len(transitions["obs"])
+                    book.transitions += count
+                    warm -= count
+                    for row in ended:
+                        recent.append({"family": world.family.name, **row})
             recent = recent[-2000:]
             book.iteration += 1
-            env_s += time.perf_counter() - t0
 
             # ---- learn
             losses: dict[str, float] = {}
             if warm <= 0 and buffer.size >= cfg.batch_size:
-                t1 = time.perf_counter()
                 bc = bc_weight(cfg, frac)
-                for _ in range(cfg.updates_per_iteration):
-                    book.updates += 1
-                    batch = buffer.sample(cfg.batch_size, rng, device)
-                    update_actor = book.updates % cfg.policy_delay == 0
-                    losses |= td3_update(nets, batch, cfg, update_actor, bc)
-                learn_s += time.perf_counter() - t1
+                with book.clock("learner"):
+                    for _ in range(cfg.updates_per_iteration):
+                        book.updates += 1
+                        batch = buffer.sample(cfg.batch_size, rng, device)
+                        update_actor = book.updates % cfg.policy_delay == 0
+                        losses |= td3_update(nets, batch, cfg, update_actor, bc)
 
             # ---- log, checkpoint, validate
-            scalars = {
-                "charts/noise": sigma,
-                "perf/simulator_share": env_s / max(env_s + learn_s, 1e-9),
-                **losses,
-            }
-            book.log(recent, scalars, progress)
+            book.log(recent, {"charts/noise": sigma, **losses}, progress)
             book.save_and_validate_if_due()
     except KeyboardInterrupt:
         book.save_last()

@@ -85,14 +85,18 @@ def finish(p: argparse.ArgumentParser, handler: Handler, *, json_help: str = JSO
     p.set_defaults(handler=handler)
 
 
-def progress_bar(*, enabled: bool) -> Any:
-    """A rich progress bar of steps; its task, added by the caller, carries the total."""
+def progress_bar(*, enabled: bool, unit: str = "steps", digits: int = 0) -> Any:
+    """A rich progress bar counting ``unit``, shown with ``digits`` decimals.
+
+    Its task, added by the caller, carries the total.
+    """
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
+    count = f"{{task.completed:,.{digits}f}}/{{task.total:,.{digits}f}} {unit}"
     return Progress(
         TextColumn("{task.description}"),
         BarColumn(),
-        TextColumn("{task.completed}/{task.total} steps"),
+        TextColumn(count),
         TimeElapsedColumn(),
         disable=not enabled,
         transient=False,

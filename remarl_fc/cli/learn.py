@@ -454,7 +454,7 @@ def cmd_train_generalist(args: argparse.Namespace) -> int:
 
     out = Path(args.out or f"runs/generalist-s{args.seed}")
     cfg = resumed_generalist_config(args, out) if args.resume else generalist_config(args)
-    with progress_bar(enabled=not args.json) as progress:
+    with progress_bar(enabled=not args.json, unit="min", digits=1) as progress:
         task = progress.add_task("train", total=cfg.minutes)
 
         def report(scalars: dict[str, float]) -> None:
@@ -477,9 +477,22 @@ def cmd_train_generalist(args: argparse.Namespace) -> int:
         args,
         {"config": dataclasses.asdict(cfg), **summary},
         f"trained {summary['transitions']:,} UAV transitions in {summary['elapsed_s']:.0f} s; "
-        f"best validation success {summary['best_success']:.1%}; run folder {out}",
+        f"{validation_line(summary)}; run folder {out}",
     )
     return 0
+
+
+def validation_line(summary: dict[str, Any]) -> str:
+    """What a generalist run's validations showed: the best and the final networks' success."""
+    last, best = summary.get("last_eval"), summary["best_success"]
+    if last is None and best >= 0:  # a resumed run whose networks an earlier sitting flew
+        return f"best validation success {best:.1%}"
+    if last is None or not math.isfinite(last["success_mean"]):
+        return "not validated (no family flies the ideal world)"
+    return (
+        f"best validation success {summary['best_success']:.1%}, final "
+        f"{last['success_mean']:.1%} at {last['elapsed_s'] / 60:.1f} min"
+    )
 
 
 def cmd_eval(args: argparse.Namespace) -> int:

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import dataclasses
 import json
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -262,25 +264,27 @@ def test_replay_wraps_around():
     assert sorted(buffer.reward.tolist()) == [1, 1, 2, 2, 2]
 
 
+def tiny_td3(tmp_path: Path, **changes: Any) -> GeneralistConfig:
+    """A TD3 run of a few seconds on the tiny suite, counted in iterations (no budget)."""
+    settings: dict[str, Any] = {
+        "suites": (str(tiny_suite(tmp_path)),),
+        "learner": "td3",
+        "teacher": "none",
+        "agents_per_family": 4,
+        "hidden": 8,
+        "batch_size": 32,
+        "buffer_size": 5_000,
+        "warmup_transitions": 40,
+        "updates_per_iteration": 1,
+        "minutes": 0.0,
+        "eval_episodes": 2,
+        "device": "cpu",
+    }
+    return GeneralistConfig(**{**settings, **changes})
+
+
 def test_tiny_generalist_run_trains_checkpoints_and_resumes(tmp_path):
-    suite = tiny_suite(tmp_path)
-    cfg = GeneralistConfig(
-        suites=(str(suite),),
-        learner="td3",
-        teacher="none",
-        agents_per_family=4,
-        hidden=8,
-        batch_size=32,
-        buffer_size=5_000,
-        warmup_transitions=40,
-        updates_per_iteration=1,
-        minutes=0.0,
-        total_iterations=30,
-        eval_minutes=1e-6,
-        eval_episodes=2,
-        real_share=0.5,
-        device="cpu",
-    )
+    cfg = tiny_td3(tmp_path, total_iterations=30, eval_minutes=1e-6, real_share=0.5)
     out = tmp_path / "run"
     summary = train_generalist(cfg, out)
     assert summary["iterations"] == 30 and summary["updates"] > 0
@@ -293,6 +297,33 @@ def test_tiny_generalist_run_trains_checkpoints_and_resumes(tmp_path):
         GeneralistConfig(**{**cfg.__dict__, "total_iterations": 35}), out, resume=True
     )
     assert again["iterations"] == 35 and again["updates"] > summary["updates"]
+
+
+def test_a_run_ending_between_validations_validates_its_final_networks(tmp_path):
+    """The training after the last periodic validation is flown once at the end (and only
+    once: a resumed run with nothing left to train adds no validation of the same networks)."""
+    # no periodic validation falls inside the run
+    cfg = tiny_td3(tmp_path, total_iterations=6, eval_minutes=1e6)
+    out = tmp_path / "run"
+    summary = train_generalist(cfg, out)
+    evals = [json.loads(line) for line in (out / "evals.jsonl").read_text().splitlines()]
+    assert [e["iteration"] for e in evals] == [6]
+    assert summary["last_eval"]["iteration"] == 6
+    assert summary["best_success"] == evals[0]["success_mean"] >= 0
+    train_generalist(cfg, out, resume=True)
+    assert len((out / "evals.jsonl").read_text().splitlines()) == 1
+
+
+def test_the_summary_line_says_what_the_validations_showed():
+    from remarl_fc.cli.learn import validation_line
+
+    last = {"success_mean": 0.5, "elapsed_s": 90.0}
+    line = validation_line({"best_success": 0.75, "last_eval": last})
+    assert line == "best validation success 75.0%, final 50.0% at 1.5 min"
+    assert "not validated" in validation_line({"best_success": -1.0})
+    assert validation_line({"best_success": 0.25}) == "best validation success 25.0%"
+    nan = {"success_mean": float("nan"), "elapsed_s": 1.0}
+    assert "not validated" in validation_line({"best_success": -1.0, "last_eval": nan})
 
 
 def test_a_generalist_run_exports_a_policy_fly_can_load_for_any_n(tmp_path):
@@ -539,6 +570,17 @@ def test_a_generalist_flag_out_of_range_is_a_clear_error(tmp_path, capsys, flag,
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert f"train --generalist: {setting}" in err and "Traceback" not in err
+    assert not (tmp_path / "run").exists()  # nothing started, nothing written
+
+
+def test_cuda_asked_for_where_torch_sees_none_is_a_clear_error(tmp_path, capsys, monkeypatch):
+    from remarl_fc.cli import main
+
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
+    argv = ["train", "--generalist", "--device", "cuda", "--out", str(tmp_path / "run")]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert "sees no CUDA device" in err and "--device cpu" in err and "Traceback" not in err
     assert not (tmp_path / "run").exists()  # nothing started, nothing written
 
 

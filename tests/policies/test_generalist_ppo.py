@@ -190,6 +190,10 @@ def tiny_ppo_run(tmp_path, **changes):
     assert any(moved)
     assert summary["updates"] > 0 and summary["transitions"] > 0
     assert seen and "losses/policy" in seen[-1] and "charts/log_std" in seen[-1]
+    # where the time went: flying the worlds, and learning, each counted
+    assert summary["simulator_s"] > 0 and summary["learner_s"] > 0
+    share = summary["simulator_s"] / (summary["simulator_s"] + summary["learner_s"])
+    assert seen[-1]["perf/simulator_share"] == pytest.approx(share)
     if cfg.teacher == "none":  # no DAgger phase without a teacher, whatever dagger_fraction says
         assert cfg.dagger_fraction > 0 or "dagger_fraction" in changes
         assert not any("charts/dagger_beta" in row for row in seen)

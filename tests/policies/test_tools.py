@@ -97,3 +97,16 @@ def test_zoo_table_prints_a_row_per_scenario_policy_and_skips_the_generalists_su
     zoo = TOOLS.parent / "policies" / "zoo"
     scenarios = {p.name.removesuffix(".eval.json") for p in zoo.glob("*.eval.json")}
     assert len(rows) == len(scenarios - {"generalist"}) > 0
+
+
+def test_bench_train_runs_each_device_and_teacher_and_refuses_an_unknown_device():
+    result = run_tool(
+        "bench_train", "--devices", "cpu", "--teachers", "none,orca-shield", "--minutes", "0.02"
+    )
+    assert set(result) == {"none-cpu", "orca-shield-cpu"}
+    for row in result.values():
+        assert row["transitions_per_min"] > 0 and row["updates_per_min"] > 0
+        assert 0 < row["simulator_share"] < 1 and row["iterations"] >= 1
+        assert row["transitions_per_min_per_cpu"] == 1.0  # the CPU run is its own reference
+    done = tool("bench_train", "--devices", "gpu")
+    assert done.returncode == 2 and "--devices: unknown gpu" in done.stderr
