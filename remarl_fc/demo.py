@@ -8,8 +8,8 @@ closed-loop flights; the demo prints it.
 
 With ``vehicles`` (``remarl-fc demo --vehicles N``) the geometry is drawn instead of read
 from a scenario: N vehicles and M intruders of an encounter (`drawn_encounter`, the
-benchmark's generator `sim.encounters`), the same for the same seed, flown by the zoo's
-generalist policy where it is shipped (`demo_policy`).
+benchmark's generator `sim.encounters`), the same for the same seed. Either is flown by the
+zoo's generalist policy where it is shipped (`demo_policy`).
 """
 
 from __future__ import annotations
@@ -32,7 +32,7 @@ from remarl_fc.flight.mission import Geofence, Mission
 from remarl_fc.flight.runtime import SwarmRuntime
 from remarl_fc.flight.status import Status
 from remarl_fc.mavlink.codec import SigningConfig
-from remarl_fc.policy_io import load_policy, zoo_dir
+from remarl_fc.policy_io import GENERALIST_ZOO, load_policy, zoo_dir
 from remarl_fc.sitl.attacker import Attacker
 from remarl_fc.sitl.config import ARDUPILOT_QUICK_START, DEFAULT_HOME, Flavour, SitlConfig
 from remarl_fc.sitl.faults import Faults
@@ -118,10 +118,6 @@ def free_udp_port(host: str = "127.0.0.1") -> int:
 ROBUST_ZOO = "robust"
 """The zoo folder of the policies trained on fitted vehicles and ADS-B (`policies/zoo/robust`)."""
 
-GENERALIST_ZOO = "generalist"
-"""The zoo name of the generalist policy (`policies/zoo/generalist.safetensors`): one network
-for any number of vehicles."""
-
 DEMO_DISTRIBUTION = "crossing"
 """The encounter distribution of ``demo --vehicles`` (`sim.encounters.DISTRIBUTIONS`): the
 swarm flies its routes in formation, each intruder crosses one vehicle's route at 30–150°."""
@@ -140,14 +136,19 @@ MAX_DEMO_INTRUDERS = 8
 
 
 def demo_policy(scenario: str, vehicles: int | None = None) -> str:
-    """The policy the demo flies: on ``vehicles`` drawn vehicles, or else on a scenario.
+    """The policy the demo flies on ``scenario``, or on ``vehicles`` drawn vehicles.
 
-    With ``vehicles``: the zoo's generalist where it is shipped. Otherwise (and where it is
-    not), the zoo's robust policy of the scenario where there is one (the mock's vehicles
-    answer like real autopilots), else the zoo policy of the scenario.
+    The zoo's generalist where it is shipped (any number of vehicles). Where it is not, the
+    zoo's robust policy of the scenario where there is one (the mock's vehicles answer like
+    real autopilots), else the zoo policy of the scenario.
     """
-    if vehicles is not None and (zoo_dir() / f"{GENERALIST_ZOO}.safetensors").is_file():
+    if (zoo_dir() / f"{GENERALIST_ZOO}.safetensors").is_file():
         return GENERALIST_ZOO
+    return scenario_policy(scenario)
+
+
+def scenario_policy(scenario: str) -> str:
+    """The zoo's own policy of ``scenario``: the robust one where there is one, else its own."""
     robust = f"{ROBUST_ZOO}/{scenario}"
     return robust if (zoo_dir() / f"{robust}.safetensors").is_file() else scenario
 
@@ -282,7 +283,7 @@ async def fly_on_mock(
         )
         runtime = SwarmRuntime(fly, pol, spec, on_status=on_status)
         await _fly(fleet, runtime, during, speedup)
-    return MockFlight(runtime.summary(), fleet.summary())
+    return MockFlight({"policy": pol.summary(), **runtime.summary()}, fleet.summary())
 
 
 async def _fly(

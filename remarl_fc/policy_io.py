@@ -57,6 +57,7 @@ from sim.setnet import set_actor, set_critic
 __all__ = [
     "ACTOR_LAYERS",
     "CRITIC_LAYERS",
+    "GENERALIST_ZOO",
     "POLICY_SCHEMA",
     "Policy",
     "PolicyChecksumFailed",
@@ -67,6 +68,10 @@ __all__ = [
     "zoo_names",
 ]
 
+
+GENERALIST_ZOO = "generalist"
+"""The zoo name of the generalist policy (`policies/zoo/generalist.safetensors`): one network
+for any number of vehicles, the default policy of ``fly`` and ``demo``."""
 
 ZOO_SUBFOLDER_NAME = re.compile(r"[A-Za-z0-9_-]+/[A-Za-z0-9_-]+")
 """A zoo name inside one of the zoo's subfolders ("robust/3u2o"): one folder, one name, no
@@ -132,6 +137,16 @@ class Policy:
     def checksum(self) -> str:
         """The file's ``sha256:…`` checksum (what was verified at load; for logs)."""
         return str(self.meta.get(CHECKSUM_KEY, ""))
+
+    def summary(self) -> dict[str, Any]:
+        """What a flight's summary says of the policy it flew: name, checksum, range of N."""
+        low, high = self.uav_range
+        return {
+            "name": self.source,
+            "checksum": self.checksum,
+            "generalist": self.generalist,
+            "vehicles": [low, high],
+        }
 
     @property
     def generalist(self) -> bool:

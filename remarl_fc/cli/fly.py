@@ -25,6 +25,7 @@ from remarl_fc.cli.common import (
     finish,
     shield_from_args,
 )
+from remarl_fc.policy_io import GENERALIST_ZOO
 
 DEMO_SCENARIO = "3u2o"
 """The scenario ``demo`` flies when given neither ``--scenario`` nor ``--vehicles``."""
@@ -93,8 +94,9 @@ def add_parsers(sub: Any) -> None:
     )
     p.add_argument(
         "--policy",
-        required=True,
-        help="zoo name (e.g. 3u2o, or generalist: any number of vehicles) or .safetensors file",
+        default=GENERALIST_ZOO,
+        help=f"zoo name or .safetensors file (default {GENERALIST_ZOO}: any number of "
+        "vehicles; a scenario policy such as 3u2o flies its own number)",
     )
     p.add_argument("--mission", required=True, help="mission TOML (docs/examples/)")
     p.add_argument(
@@ -194,10 +196,9 @@ def add_parsers(sub: Any) -> None:
     p.add_argument(
         "--policy",
         default=None,
-        help="zoo name or .safetensors file (default: with --vehicles, the zoo's generalist "
-        "where it is shipped; else the zoo's robust policy of the scenario where there is one, "
-        "trained on fitted vehicles and ADS-B, e.g. robust/3u2o; else the zoo policy of the "
-        "scenario)",
+        help="zoo name or .safetensors file (default: the zoo's generalist where it is "
+        "shipped; else the zoo's robust policy of the scenario where there is one, trained on "
+        "fitted vehicles and ADS-B, e.g. robust/3u2o; else the zoo policy of the scenario)",
     )
     add_choice(p, "--flavour", FLAVOURS)
     p.add_argument("--speedup", type=float, default=2.0, help="simulated s per wall s")
@@ -305,7 +306,7 @@ def cmd_fly(args: argparse.Namespace) -> int:
         asyncio.run(main())
     except KeyboardInterrupt:
         print("interrupted: every controlled vehicle was told to hold", file=sys.stderr)
-    summary = runtime.summary()
+    summary = {"policy": policy.summary(), **runtime.summary()}
     print(json.dumps(summary) if args.json else _fly_text(summary))
     return fly_exit_status(summary)
 
@@ -347,7 +348,10 @@ def _make_bus(args: argparse.Namespace, cfg: Any) -> Any:
 def _fly_text(summary: dict[str, Any]) -> str:
     from remarl_fc.flight.shielding import summary_line
 
-    lines = [f"{summary['decisions']} decisions", summary_line(summary["shield"])]
+    lines = [
+        f"{summary['decisions']} decisions by {policy_line(summary['policy'])}",
+        summary_line(summary["shield"]),
+    ]
     for v in summary["vehicles"]:
         last = v["events"][-1][1] if v["events"] else ""
         trust = "" if v["trusted"] else f", telemetry untrusted: {v['untrusted']}"
@@ -359,6 +363,14 @@ def _fly_text(summary: dict[str, Any]) -> str:
     if not summary["link"]["signed"]:
         lines.append("the link was not signed")
     return "\n".join(lines)
+
+
+def policy_line(policy: dict[str, Any]) -> str:
+    """The policy a flight flew, as its summary gives it: name, range of N, checksum."""
+    low, high = policy["vehicles"]
+    count = f"{low} to {high} vehicles" if low != high else f"{low} vehicles"
+    checksum = policy["checksum"][:19] or "no checksum"
+    return f"policy {policy['name']} ({count}, {checksum})"
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
@@ -410,7 +422,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
             f"{overall['collisions_vehicle_vehicle']} between vehicles; closest approach "
             f"{overall['min_vehicle_intruder_m']} m to an intruder, "
             f"{overall['min_vehicle_vehicle_m']} m between vehicles (d_col {overall['d_col_m']} m)"
-            f"\n{summary_line(flight.runtime['shield'])}"
+            f"\nflown by {policy_line(flight.runtime['policy'])}; "
+            f"{summary_line(flight.runtime['shield'])}"
             f"\nwrote {figure['out']}"
         )
     return demo_exit_status(truth)

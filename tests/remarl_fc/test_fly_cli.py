@@ -29,9 +29,9 @@ def test_fly_the_example_mission_on_a_mock_in_another_process(tmp_path, capsys):
         stdout=subprocess.DEVNULL,
         stderr=subprocess.PIPE,
     )  # fmt: skip
-    try:
+    try:  # no --policy: the shipped generalist, fly's default
         status = main(
-            ["fly", "--connection", f"udpin:127.0.0.1:{port}", "--policy", "3u2o",
+            ["fly", "--connection", f"udpin:127.0.0.1:{port}",
              "--mission", str(MISSION), "--takeoff", "--log", str(tmp_path / "log"),
              "--speedup", "4", "--json"]
         )  # fmt: skip
@@ -40,6 +40,7 @@ def test_fly_the_example_mission_on_a_mock_in_another_process(tmp_path, capsys):
         _, err = mock.communicate(timeout=30)
     summary = json.loads(capsys.readouterr().out)
     assert status == 0, summary
+    assert summary["policy"]["name"] == "generalist", summary["policy"]
     assert [v["status"] for v in summary["vehicles"]] == ["reached"] * 3
     truth = json.loads(truth_file.read_text())
     assert truth["collisions_vehicle_intruder"] == 0 == truth["collisions_vehicle_vehicle"]
@@ -101,3 +102,18 @@ def test_demo_command(tmp_path, capsys):
     assert result["ground_truth"]["reached_targets"] == 3
     assert result["plot"]["intruders"] == 2 and out.stat().st_size > 10_000
     assert json.loads((tmp_path / "t.json").read_text())["finished"] is True
+
+
+def test_the_summary_names_the_policy_flown():
+    from remarl_fc.cli.fly import policy_line
+    from remarl_fc.policy_io import load_policy
+
+    shipped = load_policy("generalist").summary()
+    assert shipped["name"] == "generalist" and shipped["generalist"] is True
+    assert shipped["checksum"].startswith("sha256:") and shipped["vehicles"] == [1, 50]
+    line = policy_line(shipped)
+    assert line.startswith("policy generalist (1 to 50 vehicles, sha256:") and line.endswith(")")
+    scenario = load_policy("3u2o").summary()
+    assert scenario["vehicles"] == [3, 3] and scenario["generalist"] is False
+    assert policy_line(scenario).startswith("policy 3u2o (3 vehicles, sha256:")
+    assert "no checksum" in policy_line({**scenario, "checksum": ""})

@@ -25,7 +25,7 @@ from remarl_fc.errors import ConfigError, PolicySpecMismatch
 from remarl_fc.flight.control import ControlSpec
 from remarl_fc.flight.mission import VehicleCountMismatch
 from remarl_fc.frames import sim_to_ne
-from remarl_fc.policy_io import load_policy
+from remarl_fc.policy_io import Policy, load_policy
 from remarl_fc.sitl.config import SitlConfig
 from remarl_fc.sitl.fleet import SitlFleet
 from sim.config import ScenarioConfig
@@ -49,6 +49,8 @@ class StandInGeneralist:
 
     generalist = True
     uav_range = (1, 50)
+    checksum = ""  # written by no file
+    summary = Policy.summary  # what a flight's summary says of it, as of a loaded file
 
     def __init__(self, seed: int = 0, *, straight: bool = False, hidden: int = 8) -> None:
         self.source = f"stand-in generalist {seed}"
@@ -304,8 +306,7 @@ def test_demo_policy_switches_to_the_shipped_generalist(tmp_path, monkeypatch):
     (tmp_path / "robust" / "3u2o.safetensors").touch()
     assert demo_policy("3u2o", 5) == "robust/3u2o" == demo_policy("3u2o")
     (tmp_path / "generalist.safetensors").touch()
-    assert demo_policy("3u2o", 5) == "generalist"
-    assert demo_policy("3u2o") == "robust/3u2o"  # a scenario keeps its own
+    assert demo_policy("3u2o", 5) == "generalist" == demo_policy("3u2o")  # a scenario too
 
 
 def test_the_stand_in_is_the_policy_api():
@@ -315,3 +316,9 @@ def test_the_stand_in_is_the_policy_api():
     assert p.act(obs).shape == (2, 3)
     spec = ControlSpec.from_policy_meta(p.meta)
     assert spec == SPEC
+    assert p.summary() == {
+        "name": "stand-in generalist 0",
+        "checksum": "",
+        "generalist": True,
+        "vehicles": [1, 50],
+    }
