@@ -283,7 +283,7 @@ async def fly_on_mock(
         )
         runtime = SwarmRuntime(fly, pol, spec, on_status=on_status)
         await _fly(fleet, runtime, during, speedup)
-    return MockFlight({"policy": pol.summary(), **runtime.summary()}, fleet.summary())
+    return MockFlight(runtime.summary(), fleet.summary())
 
 
 async def _fly(

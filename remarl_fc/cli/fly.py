@@ -306,7 +306,7 @@ def cmd_fly(args: argparse.Namespace) -> int:
         asyncio.run(main())
     except KeyboardInterrupt:
         print("interrupted: every controlled vehicle was told to hold", file=sys.stderr)
-    summary = {"policy": policy.summary(), **runtime.summary()}
+    summary = runtime.summary()
     print(json.dumps(summary) if args.json else _fly_text(summary))
     return fly_exit_status(summary)
 

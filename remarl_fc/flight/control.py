@@ -76,6 +76,14 @@ class PolicyLike(Protocol):
         ...
 
 
+class FlownPolicy(PolicyLike, Protocol):
+    """What the runtime needs of a policy: the controller's, and what its summary says of it."""
+
+    def summary(self) -> dict[str, Any]:
+        """Name, checksum, generalist or not, range of N (`remarl_fc.policy_io.Policy.summary`)."""
+        ...
+
+
 @dataclass(frozen=True)
 class ControlSpec:
     """Constants of the controlled swarm, from the policy file.

@@ -35,7 +35,7 @@ from remarl_fc.flight.commands import Commander
 from remarl_fc.flight.config import Clock, FlyConfig, Member, bus_core, members_of
 from remarl_fc.flight.control import (
     ControlSpec,
-    PolicyLike,
+    FlownPolicy,
     SwarmController,
     obstacle_picture,
     swarm_picture,
@@ -99,7 +99,7 @@ class SwarmRuntime(StackOwner):
     def __init__(
         self,
         cfg: FlyConfig,
-        policy: PolicyLike,
+        policy: FlownPolicy,
         spec: ControlSpec,
         *,
         on_status: Callable[[str], None] | None = None,
@@ -468,6 +468,7 @@ class SwarmRuntime(StackOwner):
         traffic = self.traffic.stats()
         vehicles = vehicle_summaries(rows)
         return {
+            "policy": self.policy.summary(),
             "decisions": self.decisions,
             "setpoint_deadline_misses": self.setpoint_deadline_misses,
             "bus": self.bus.core.stats.as_dict(),

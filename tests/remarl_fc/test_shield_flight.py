@@ -40,6 +40,7 @@ from remarl_fc.flight.tracking import STATUSTEXT_MAX_CHARS
 from remarl_fc.flight.traffic import TrafficPicture
 from remarl_fc.frames import GeoPoint, ne_to_sim, sim_to_ne
 from remarl_fc.mavlink.consts import MsgId, Severity
+from remarl_fc.policy_io import Policy
 from remarl_fc.sitl.config import DEFAULT_HOME
 from remarl_fc.sitl.traffic import Traffic
 from sim.config import ScenarioConfig
@@ -70,6 +71,8 @@ class GoToTarget:
     generalist = True
     uav_range = (1, 50)
     source = "go-to-target stand-in"
+    checksum = ""  # written by no file
+    summary = Policy.summary  # what a flight's summary says of it, as of a loaded file
 
     def __init__(self) -> None:
         self.layout = LAYOUT
