@@ -247,7 +247,7 @@ def dagger_iteration(
                 labels.add(obs[acted], taught[acted].astype(np.float32), weight[acted])
                 zeros = np.zeros_like(action)
                 flown[k].append((step, action, zeros, taught))
-                book.transitions += int(step.acted.sum())
+                book.transitions += int(acted.sum())
                 recent += [{"family": world.family.name, **row} for row in ended]
     del recent[:-2000]
     book.iteration += 1

@@ -196,10 +196,9 @@ def train_generalist_ppo(
             book.log(recent, scalars, progress, every=1)
             book.save_and_validate_if_due()
         while book.iteration < cfg.total_iterations and not book.out_of_time():
-            std = float(torch.exp(nets.log_std.value.detach()))
             bc = bc_weight(cfg, book.fraction_done())
             with book.clock("simulator"):
-                flown = fly_rollout(book, bc, recent)
+                flown, std = fly_rollout(book, bc, recent)
             del recent[:-2000]
             book.iteration += 1
             with book.clock("learner"):
@@ -214,12 +213,14 @@ def train_generalist_ppo(
     return book.finish()
 
 
-def fly_rollout(book: RunBook, bc: float, recent: list[dict[str, Any]]) -> list[list[Any]]:
+def fly_rollout(
+    book: RunBook, bc: float, recent: list[dict[str, Any]]
+) -> tuple[list[list[Any]], float]:
     """Fly every world ``ppo_rollout`` steps with the Gaussian policy.
 
-    Returns each world's steps as (step, sample, log density, teacher's label or None): the
-    teacher labels the state the student flies from while ``bc`` > 0 (DAgger inside PPO).
-    Finished episodes join ``recent``.
+    Returns each world's steps as (step, sample, log density, teacher's label or None), and
+    the policy's σ: the teacher labels the state the student flies from while ``bc`` > 0
+    (DAgger inside PPO). Finished episodes join ``recent``.
     """
     from policies.generalist_train import (
         actor_actions,
@@ -254,7 +255,7 @@ def fly_rollout(book: RunBook, bc: float, recent: list[dict[str, Any]]) -> list[
             flown[k].append((step, u, lp, taught))
             book.transitions += int(step.acted.sum())
             recent.extend({"family": world.family.name, **row} for row in ended)
-    return flown
+    return flown, std
 
 
 def learn_rollout(book: RunBook, flown: list[list[Any]], bc: float) -> dict[str, float]:

@@ -135,8 +135,8 @@ MAX_DEMO_INTRUDERS = 8
 """The most intruders ``demo --vehicles`` draws (a generalist's: 0 to 8)."""
 
 
-def demo_policy(scenario: str, vehicles: int | None = None) -> str:
-    """The policy the demo flies on ``scenario``, or on ``vehicles`` drawn vehicles.
+def demo_policy(scenario: str) -> str:
+    """The policy the demo flies, on ``scenario`` or on drawn vehicles.
 
     The zoo's generalist where it is shipped (any number of vehicles). Where it is not, the
     zoo's robust policy of the scenario where there is one (the mock's vehicles answer like
@@ -235,7 +235,7 @@ async def fly_on_mock(
         PolicySpecMismatch: the policy cannot fly the scenario (or N vehicles: a
             `remarl_fc.flight.mission.VehicleCountMismatch` says what to do).
     """
-    pol = load_policy(policy or demo_policy(scenario, vehicles))
+    pol = load_policy(policy or demo_policy(scenario))
     spec = ControlSpec.from_policy_meta(pol.meta)
     episode: EpisodeStart | None = None
     if vehicles is None:
