@@ -231,13 +231,22 @@ class GeneralistConfig:
     teacher: str = "orca-shield"
     """A teacher to learn from: "orca-shield" (ORCA's actions through the safety shield, heading
     changes only: the strongest hand-written method of the suite, 87 % mean solvable success;
-    the shipped recipe) or "none" (from scratch). With PPO the run is DAgger first for its
+    the shipped recipe before the distillation), "oracle" (the oracle replanned at every step:
+    far stronger, about 100 times slower), "self-shield" (the ``init`` policy's own proposals
+    through the safety shield: what it flies behind the shield, distilled into it; docs/MODEL.md
+    §20) or "none" (from scratch). With PPO the run is DAgger first for its
     ``dagger_fraction`` (`policies.generalist_dagger`); then the teacher labels every state the
     student's own rollouts visit and the PPO loss gains α·(π − a_teacher)² on them. With TD3
     the run first collects ``teacher_transitions`` of the teacher's flights, clones it
     (``bc_updates`` supervised steps, the critics learning its values meanwhile), then
     fine-tunes with TD3 plus a behaviour-cloning term on the teacher's transitions (TD3+BC).
     Either way α falls from ``bc_weight`` to 0 over the run's first ``bc_fraction``."""
+
+    init: str = ""
+    """A generalist policy file to start from (a zoo name or a path; "": fresh networks): its
+    actor, and its critic as the value network (PPO). Its observation (range, aperture, rows),
+    hidden width and pooling must be the run's. The "self-shield" teacher's proposals are its
+    actor's, frozen as the run starts."""
 
     teacher_horizon_s: float = 20.0
     """τ_o of the ORCA teacher, seconds: how far ahead it checks its candidates against the
@@ -422,6 +431,17 @@ class GeneralistConfig:
         check(0 <= self.noise_end <= self.noise_start, "noise_end", "must be in [0, noise_start]")
         check(self.device in ("cpu", "cuda", "auto"), "device", 'must be "cpu", "cuda" or "auto"')
         check(self.teacher in TEACHERS, "teacher", f"must be one of {TEACHERS}")
+        check(
+            self.teacher != "self-shield" or bool(self.init),
+            "teacher",
+            '"self-shield" distils a policy behind the shield: name it with init',
+        )
+        check(not self.init or self.learner == "ppo", "init", "the ppo learner only")
+        check(
+            self.teacher != "self-shield" or self.learner == "ppo",
+            "teacher",
+            '"self-shield" labels in the DAgger phase: the ppo learner only',
+        )
         check(self.bc_weight >= 0, "bc_weight", "must be >= 0")
         check(0 < self.bc_fraction <= 1, "bc_fraction", "must be in (0, 1]")
         check_at_least(self, 0, "teacher_transitions", "bc_updates", "dagger_updates")

@@ -222,7 +222,6 @@ def dagger_iteration(
         advance_world,
         joint_obs,
         per_world,
-        teacher_actions,
     )
 
     cfg, nets, worlds, device, rng = book.cfg, book.nets, book.worlds, book.device, book.rng
@@ -235,7 +234,7 @@ def dagger_iteration(
                 actor_actions(nets.actor, joint_obs(worlds, labels.size), device), worlds
             )
             for k, (world, own) in enumerate(zip(worlds, student, strict=True)):
-                taught = teacher_actions(world, cfg.teacher, cfg.teacher_horizon_s)
+                taught = book.teach(world)
                 pick = rng.random(own.shape) < beta
                 noise = rng.normal(0.0, TEACHER_NOISE, own.shape)
                 action = np.clip(np.where(pick, taught, own) + noise, -1.0, 1.0).astype(np.float32)

@@ -227,7 +227,6 @@ def fly_rollout(
         advance_world,
         joint_obs,
         per_world,
-        teacher_actions,
     )
 
     cfg, worlds, rng = book.cfg, book.worlds, book.rng
@@ -250,7 +249,7 @@ def fly_rollout(
                 strict=True,
             )
         ):
-            taught = teacher_actions(world, cfg.teacher, cfg.teacher_horizon_s) if bc > 0 else None
+            taught = book.teach(world) if bc > 0 else None
             step, ended = advance_world(world, a, cfg, book.goal_value, rng)
             flown[k].append((step, u, lp, taught))
             book.transitions += int(step.acted.sum())

@@ -51,6 +51,7 @@ from torch import nn
 from policies.config import GeneralistConfig
 from policies.ddpg import soft_update
 from policies.generalist import AgentReplay, SetNet, TD3Nets, clone_step, td3_update
+from policies.generalist_init import init_states, keep_init
 from policies.train import load_checkpoint, reward_upper_bound, save_checkpoint, summary_writer
 from sim.arrays import BoolArray, FloatArray
 from sim.config import ScenarioConfig
@@ -369,7 +370,16 @@ def orca_shield_actions(
     ORCA looking ``horizon_s`` ahead at the intruders it senses with ``cfg``, then the safety
     shield, turning only.
     """
-    proposed = orca_actions(state, cfg, horizon_s=horizon_s)
+    return shielded(state, cfg, orca_actions(state, cfg, horizon_s=horizon_s))
+
+
+def shielded(
+    state: SwarmState, cfg: ScenarioConfig, proposed: NDArray[np.float32]
+) -> NDArray[np.float32]:
+    """Proposed actions (B, N) through the safety shield, turning only.
+
+    A teacher commands no speed: the default `ShieldConfig`, the vehicle of ``cfg``.
+    """
     vehicle = dataclasses.replace(vehicle_of(cfg), can_slow=False)
     return shield_state(ShieldConfig(mode="on"), cfg, state, proposed, vehicle).action
 
@@ -519,6 +529,8 @@ class RunBook:
     summary: dict[str, Any] = dataclasses.field(default_factory=dict)
     run_state: Callable[[], dict[str, torch.Tensor]] | None = None
     """More of the run to keep in ``last.safetensors`` (the DAgger phase's labels), if any."""
+    anchor: SetNet | None = None
+    """The "self-shield" teacher's proposer: the ``init`` policy's actor, frozen (`teach`)."""
 
     @classmethod
     def open(
@@ -540,6 +552,16 @@ class RunBook:
         nets = create(layout, cfg, device)
         goal_value = reward_upper_bound(base, "remarl") / (1.0 - cfg.gamma)
         book = cls(cfg, out_dir, nets, layout, worlds, device, rng, goal_value, False, None)
+        if cfg.init:  # the start's weights (a resumed run then loads its own over them)
+            kept = keep_init(cfg, out_dir, resume=resume)
+            actor_state, critic_state = init_states(cfg, layout, kept)
+            nets.actor.load_state_dict(actor_state)
+            if critic_state:
+                nets.value.load_state_dict(critic_state)
+            if cfg.teacher == "self-shield":
+                book.anchor = SetNet(layout, cfg.hidden, critic=False, pooling=cfg.pooling)
+                book.anchor.load_state_dict(actor_state)
+                book.anchor.to(device).requires_grad_(False)
         last = out_dir / "last.safetensors"
         if resume and last.exists():
             meta = load_checkpoint(last, nets)
@@ -571,6 +593,17 @@ class RunBook:
         book.writer = summary_writer(out_dir)
         book.start = book.last_eval = book.last_save = time.monotonic()
         return book
+
+    def teach(self, world: World) -> NDArray[np.float32]:
+        """The teacher's actions (B, N) at the world's state (`GeneralistConfig.teacher`).
+
+        "self-shield": the ``init`` policy's proposals at the world's observations, through the
+        safety shield (`shielded`); any other teacher: `teacher_actions`.
+        """
+        if self.anchor is not None:
+            proposed = actor_actions(self.anchor, world.obs, self.device)
+            return shielded(world.state, world.cfg, proposed)
+        return teacher_actions(world, self.cfg.teacher, self.cfg.teacher_horizon_s)
 
     def elapsed(self) -> float:
         """Seconds of the run, resumes included."""

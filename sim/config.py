@@ -25,10 +25,11 @@ TargetLayout = Literal["line", "formation"]
 SWARM_FIELDS = ("all", "formation")
 """Which worlds of a mixture keep the swarm's peak (`FieldConfig.swarm_peak`): "all", or only
 "formation" (the families that fly one formation)."""
-TEACHERS = ("none", "orca-shield", "oracle")
+TEACHERS = ("none", "orca-shield", "oracle", "self-shield")
 """What a generalist may learn from besides its reward: nothing, ORCA's actions through the
-safety shield, or the oracle replanned at every step (`policies.config.GeneralistConfig.teacher`);
-here so that the command line can list them without importing the training side."""
+safety shield, the oracle replanned at every step, or the policy the run starts from through
+the safety shield (`policies.config.GeneralistConfig.teacher`); here so that the command line
+can list them without importing the training side."""
 SensorModel = Literal["exact", "adsb"]
 Arrival = Literal["hover", "leave"]
 

@@ -51,6 +51,7 @@ from policies.generalist_train import (
     advance_world,
     generalist_layout,
     make_worlds,
+    shielded,
     teacher_actions,
     with_layout,
 )
@@ -79,6 +80,10 @@ LEARNING_RATE = 3e-4
 
 ROWS = 1_000_000
 """Labels kept of each kind (the oldest dropped first)."""
+
+SELF_SHIELD = "self-shield"
+"""The teacher that is the starting policy itself, its proposals through the safety shield
+(`policies.generalist_train.shielded`): what the policy flies behind the shield, distilled."""
 
 EXPORT_MINUTES = 15.0
 """Minutes between exports of the actor."""
@@ -112,9 +117,14 @@ def main() -> None:
     parser.add_argument(
         "--teacher",
         default="oracle",
-        choices=[t for t in TEACHERS if t != "none"],
+        choices=[*(t for t in TEACHERS if t != "none"), SELF_SHIELD],
         help="who labels those families (orca-shield: the same fine-tune with the recipe's "
-        "teacher, the control)",
+        "teacher, the control; self-shield: the starting policy through the safety shield)",
+    )
+    parser.add_argument(
+        "--moving",
+        action="store_true",
+        help="self-shield: the proposals are the student's as it learns, not the start's",
     )
     parser.add_argument("--seed", type=int, default=13, help="not the training runs' seeds")
     parser.add_argument("--out", type=Path, required=True, help="the tuned policy file")
@@ -165,11 +175,12 @@ def main() -> None:
             obs = world.obs
             student = act(net, obs)
             t0 = time.perf_counter()
-            taught = (
-                teacher_actions(world, args.teacher, cfg.teacher_horizon_s)
-                if by_teacher
-                else act(anchor, obs)
-            )
+            taught = act(anchor, obs)
+            if by_teacher and args.teacher == SELF_SHIELD:
+                proposed = student if args.moving else taught
+                taught = shielded(world.state, world.cfg, proposed)
+            elif by_teacher:
+                taught = teacher_actions(world, args.teacher, cfg.teacher_horizon_s)
             label_s += time.perf_counter() - t0 if by_teacher else 0.0
             noise = rng.normal(0.0, TEACHER_NOISE, student.shape)
             flown = np.clip(student + noise, -1.0, 1.0).astype(np.float32)
@@ -180,8 +191,9 @@ def main() -> None:
                 episodes.setdefault(world.family.name, []).append(float(row["success"]))
         sweeps += 1
         for _ in range(UPDATES):
-            x1, y1, _ = taught_rows.sample(BATCH // 2, rng)
-            x2, y2, _ = own.sample(BATCH // 2, rng)
+            half = BATCH // 2 if own.count else BATCH  # every family taught: no anchor rows
+            x1, y1, _ = taught_rows.sample(half, rng)
+            x2, y2, _ = own.sample(BATCH - half, rng) if own.count else (x1[:0], y1[:0], None)
             x = torch.from_numpy(np.concatenate([x1, x2]))
             y = torch.from_numpy(np.concatenate([y1, y2]))
             loss = clone_update(net, opt, x, y, cfg.grad_clip)

@@ -158,7 +158,22 @@ def add_train(sub: Any) -> None:
         help="generalist: learn from ORCA through the shield as well (orca-shield, default; "
         "PPO: DAgger, then the teacher labels the states the policy's own rollouts visit; TD3: "
         "clone, then TD3+BC), from the oracle replanned at every step (oracle: far stronger, "
-        "about 100 times slower to label, docs/MODEL.md §20) or from scratch (none)",
+        "about 100 times slower to label, docs/MODEL.md §20), from the --init policy behind "
+        "the safety shield (self-shield: distils what it flies behind the shield) or from "
+        "scratch (none)",
+    )
+    p.add_argument(
+        "--dagger-lr",
+        type=float,
+        metavar="LR",
+        help="generalist: Adam's learning rate of DAgger's supervised steps (default 1e-3, "
+        "for fresh networks; 3e-4 distils a started policy, docs/MODEL.md §20)",
+    )
+    p.add_argument(
+        "--init",
+        metavar="POLICY",
+        help="generalist, PPO: start from this policy file's networks (a zoo name or a "
+        ".safetensors path; it must see as the run does); the run keeps a copy",
     )
     p.add_argument(
         "--bc-weight",
@@ -431,9 +446,11 @@ def generalist_flags(args: argparse.Namespace) -> dict[str, Any]:
         "pooling": args.pooling,
         "ppo_min_std": args.ppo_min_std,
         "teacher": args.teacher,
+        "init": args.init,
         "bc_weight": args.bc_weight,
         "bc_fraction": args.bc_fraction,
         "dagger_fraction": args.dagger_fraction,
+        "dagger_lr": args.dagger_lr,
         "separation_horizon_s": args.separation_horizon,
         "separation_weight": args.separation_weight,
         "sensing_range_m": args.sensing_range,

@@ -561,6 +561,9 @@ def test_a_bad_family_weight_flag_says_what_to_write(text):
         ("--teacher-horizon", "1", "teacher_horizon_s"),
         ("--turn-weight", "-2", "dagger_turn_weight"),
         ("--max-neighbours", "-1", "max_neighbours"),
+        ("--dagger-lr", "0", "dagger_lr"),
+        ("--teacher", "self-shield", "teacher"),
+        ("--init generalist --learner", "td3", "init"),
     ],
 )
 def test_a_generalist_flag_out_of_range_is_a_clear_error(tmp_path, capsys, flag, value, setting):
@@ -602,6 +605,7 @@ def test_train_generalist_flags_reach_the_config(tmp_path, monkeypatch):
     argv += ["--teacher", "orca-shield", "--bc-weight", "1.5", "--bc-fraction", "0.8"]
     argv += ["--dagger-fraction", "0.25", "--sensing-range", "300", "--sensing-aperture", "360"]
     argv += ["--teacher-horizon", "14", "--turn-weight", "6", "--max-neighbours", "12"]
+    argv += ["--init", "generalist", "--dagger-lr", "3e-4"]
     assert main([*argv, "--out", str(tmp_path / "run")]) == 0
     ((cfg, out, resume),) = seen
     assert cfg.swarm_field == "formation" and cfg.family_weights == (("swarms-*", 2.0),)
@@ -612,6 +616,7 @@ def test_train_generalist_flags_reach_the_config(tmp_path, monkeypatch):
     assert (cfg.sensing_range_m, cfg.sensing_aperture_deg) == (300.0, 360.0)
     assert cfg.teacher_horizon_s == 14.0 and cfg.dagger_turn_weight == 6.0
     assert cfg.max_neighbours == 12
+    assert cfg.init == "generalist" and cfg.dagger_lr == 3e-4
     assert cfg.minutes == 2 and cfg.seed == 4 and out == tmp_path / "run" and not resume
     assert GeneralistConfig().swarm_field == "all"  # the paper's reward unless asked
     seen.clear()

@@ -1,0 +1,112 @@
+"""Start a generalist run from a policy file (`GeneralistConfig.init`).
+
+A shipped generalist (`policies/zoo/generalist.safetensors`) or any exported one holds the
+actor and, for PPO, the value network as its critic (`policies.export.export_generalist`): the
+``state_dict`` of each `policies.generalist.SetNet` under ``actor.`` and ``critic.``. This
+module reads such a file back into a run's networks. The file is verified as the flight path
+verifies it (`sim.policy_file.verify_policy`: schema, checksum, shapes, finite weights), and it
+must see what the run's worlds show: the same version-2 observation (range, aperture, rows),
+hidden width and pooling, else the weights would read other columns than they learned.
+
+What it is for: the "self-shield" teacher (`policies.generalist_train.RunBook.teach`), which
+distils the policy a run starts from, flown behind the safety shield, back into it.
+"""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from policies.config import GeneralistConfig
+from sim.errors import ConfigError
+from sim.observation import ObservationLayout
+from sim.policy_file import PolicyFileError, read_policy_file, verify_policy
+from sim.policy_metadata import network_of, observation_layout, pooling_of
+
+
+def init_path(name: str) -> Path:
+    """The file of ``init``: a path (it holds "/" or ends in .safetensors) or a zoo name.
+
+    Raises:
+        ConfigError: no such file.
+    """
+    if "/" in name or name.endswith(".safetensors"):
+        path = Path(name)
+    else:
+        path = Path(__file__).parent / "zoo" / f"{name}.safetensors"
+    if not path.is_file():
+        raise ConfigError(
+            f"train --generalist --init {name}: no such policy file ({path}); name a zoo "
+            "policy (generalist) or an exported .safetensors file"
+        )
+    return path
+
+
+INIT_FILE = "init.safetensors"
+"""The copy of ``init`` a run folder keeps: a resumed run starts from what it started from,
+even if the zoo's file of that name was replaced since (by the run's own result, say)."""
+
+
+def keep_init(cfg: GeneralistConfig, out_dir: Path, *, resume: bool) -> Path:
+    """The run's copy of ``cfg.init`` in ``out_dir`` (made now unless resuming with one).
+
+    Raises:
+        ConfigError: no such file.
+    """
+    kept = out_dir / INIT_FILE
+    if resume and kept.is_file():
+        return kept
+    partial = kept.with_suffix(".partial")
+    shutil.copyfile(init_path(cfg.init), partial)
+    partial.replace(kept)  # whole or not at all
+    return kept
+
+
+def init_states(
+    cfg: GeneralistConfig, layout: ObservationLayout, path: Path
+) -> tuple[dict[str, torch.Tensor], dict[str, torch.Tensor]]:
+    """(actor, critic) ``state_dict``s of the policy file ``path`` (the run's ``init``).
+
+    The critic is empty if the file has none.
+
+    Raises:
+        ConfigError: the file fails verification, is not a generalist, or sees, thinks or pools
+            otherwise than the run (each named, with what to pass).
+    """
+    where = f"train --generalist --init {cfg.init}"
+    try:
+        tensors, _, meta = read_policy_file(path)
+        meta = verify_policy(tensors, meta)
+    except PolicyFileError as exc:
+        raise ConfigError(f"{where}: {path} is not a valid policy file: {exc}") from exc
+    if network_of(meta) != "set":
+        raise ConfigError(f"{where}: {path} is a per-slot zoo policy, not a generalist")
+    theirs = observation_layout(meta)
+    clash = [
+        f"{name} {getattr(theirs, name)!r} (the run's: {getattr(layout, name)!r})"
+        for name in ("max_neighbours", "max_obstacles", "range_m", "aperture_rad", "speed_m_s")
+        if getattr(theirs, name) != getattr(layout, name)
+    ]
+    if int(meta["hidden"]) != cfg.hidden:
+        clash.append(f"hidden {meta['hidden']} (the run's: {cfg.hidden})")
+    if pooling_of(meta) != cfg.pooling:
+        clash.append(f"pooling {pooling_of(meta)!r} (the run's: {cfg.pooling!r})")
+    if clash or theirs != layout:
+        detail = "; ".join(clash) or f"observation {theirs} (the run's: {layout})"
+        raise ConfigError(
+            f"{where}: the policy does not see what the run shows: {detail}. Pass the run "
+            "the policy's settings (--sensing-range, --sensing-aperture, --max-neighbours, "
+            "--pooling)"
+        )
+
+    def state(prefix: str) -> dict[str, torch.Tensor]:
+        return {
+            key[len(prefix) + 1 :]: torch.from_numpy(np.array(value, dtype=np.float32))
+            for key, value in tensors.items()
+            if key.startswith(f"{prefix}.")
+        }
+
+    return state("actor"), state("critic")

@@ -1,0 +1,137 @@
+"""A generalist run started from a policy file, and the "self-shield" teacher it enables."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+import torch
+from tiny_policy import tiny_suite
+
+from policies.config import GeneralistConfig
+from policies.generalist_init import INIT_FILE
+from policies.generalist_ppo import PPONets
+from policies.generalist_train import (
+    RunBook,
+    export_generalist_run,
+    shielded,
+    train_generalist,
+)
+from policies.train import load_checkpoint
+from remarl_fc.policy_io import load_policy
+from sim.errors import ConfigError
+
+
+def tiny_cfg(tmp_path, **changes) -> GeneralistConfig:
+    """A 2-iteration PPO run of the tiny suite (from scratch unless ``changes`` say otherwise)."""
+    settings = {
+        "suites": (str(tiny_suite(tmp_path)),),
+        "learner": "ppo",
+        "agents_per_family": 4,
+        "hidden": 8,
+        "ppo_rollout": 3,
+        "ppo_epochs": 1,
+        "ppo_minibatch": 8,
+        "dagger_updates": 2,
+        "dagger_batch": 16,
+        "minutes": 0.0,
+        "total_iterations": 2,
+        "eval_minutes": 1e6,
+        "eval_episodes": 2,
+        "real_share": 0.5,
+        "device": "cpu",
+        "teacher": "none",
+        **changes,
+    }
+    return GeneralistConfig(**settings)
+
+
+@pytest.fixture(scope="module")
+def start_policy(tmp_path_factory):
+    """A policy file exported from a tiny run: what the runs below start from."""
+    tmp_path = tmp_path_factory.mktemp("start")
+    out = tmp_path / "run"
+    train_generalist(tiny_cfg(tmp_path), out)
+    path = tmp_path / "start.safetensors"
+    export_generalist_run(out, path, checkpoint="last")
+    return path
+
+
+def test_a_run_from_a_policy_file_starts_from_its_actor_and_value_network(tmp_path, start_policy):
+    cfg = tiny_cfg(tmp_path, init=str(start_policy), dagger_updates=0, total_iterations=1)
+    book = RunBook.open(cfg, tmp_path / "run", PPONets.create, resume=False)
+    policy = load_policy(str(start_policy))
+    obs = np.random.default_rng(0).normal(size=(7, book.layout.size)).astype(np.float32)
+    with torch.no_grad():
+        ours = book.nets.actor(torch.from_numpy(obs)).numpy()
+    np.testing.assert_allclose(ours, policy.act(obs), atol=1e-5)
+    critic = {k: torch.from_numpy(np.asarray(w)) for k, (w, _) in policy.critic.items()}
+    for name, weight in critic.items():
+        assert torch.equal(getattr(book.nets.value, name).weight, weight)
+    assert (tmp_path / "run" / INIT_FILE).read_bytes() == start_policy.read_bytes()
+
+
+def test_the_self_shield_teacher_is_the_start_policy_through_the_shield(tmp_path, start_policy):
+    cfg = tiny_cfg(tmp_path, init=str(start_policy), teacher="self-shield", dagger_fraction=1.0)
+    book = RunBook.open(cfg, tmp_path / "run", PPONets.create, resume=False)
+    policy = load_policy(str(start_policy))
+    with torch.no_grad():  # the student moves; the teacher's proposals stay the start's
+        for p in book.nets.actor.parameters():
+            p.add_(0.5)
+    for world in book.worlds:
+        proposed = policy.act(world.obs).astype(np.float32)
+        expected = shielded(world.state, world.cfg, proposed)
+        np.testing.assert_allclose(book.teach(world), expected, atol=1e-5)
+
+
+def test_a_self_shield_run_learns_resumes_and_keeps_its_start(tmp_path, start_policy):
+    own = tmp_path / "mine.safetensors"  # a copy the test may destroy
+    own.write_bytes(start_policy.read_bytes())
+    cfg = tiny_cfg(tmp_path, init=str(own), teacher="self-shield", dagger_fraction=1.0)
+    out = tmp_path / "run"
+    summary = train_generalist(cfg, out)
+    assert summary["iterations"] == 2 and summary["teacher"] == "self-shield"
+    first = load_policy(str(own))
+    trained = PPONets.create(first.layout, cfg, "cpu")
+    load_checkpoint(out / "last.safetensors", trained)
+    moved = [
+        not torch.equal(getattr(trained.actor, name).weight, torch.from_numpy(np.asarray(w)))
+        for name, (w, _) in first.actor.items()
+    ]
+    assert any(moved)  # DAgger stepped the actor away from its start toward the labels
+    own.write_bytes(b"not a policy any more")  # the run kept its own copy
+    again = train_generalist(dataclasses.replace(cfg, total_iterations=3), out, resume=True)
+    assert again["iterations"] == 3
+
+
+def test_the_self_shield_teacher_needs_a_policy_to_start_from():
+    with pytest.raises(ValueError, match="init"):
+        GeneralistConfig(teacher="self-shield")
+    with pytest.raises(ValueError, match="ppo"):
+        GeneralistConfig(teacher="self-shield", init="generalist", learner="td3")
+
+
+def test_a_start_that_sees_otherwise_than_the_run_is_refused_with_what_to_pass(
+    tmp_path, start_policy
+):
+    cfg = tiny_cfg(tmp_path, init=str(start_policy), max_neighbours=3)
+    with pytest.raises(ConfigError, match=r"max_neighbours 6 \(the run's: 3\).*--max-neighbours"):
+        RunBook.open(cfg, tmp_path / "run", PPONets.create, resume=False)
+
+
+@pytest.mark.parametrize(
+    ("name", "content", "match"),
+    [
+        ("missing.safetensors", None, "no such policy file"),
+        ("corrupt.safetensors", b"\x00garbage", "not a valid policy file"),
+        ("3u2o", None, "per-slot zoo policy"),
+    ],
+)
+def test_a_bad_start_is_a_clear_error(tmp_path, name, content, match):
+    if content is not None:
+        (tmp_path / name).write_bytes(content)
+    init = str(tmp_path / name) if name.endswith(".safetensors") else name
+    cfg = tiny_cfg(tmp_path, init=init)
+    with pytest.raises(ConfigError, match=match):
+        RunBook.open(cfg, tmp_path / "run", PPONets.create, resume=False)
