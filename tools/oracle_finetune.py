@@ -1,7 +1,8 @@
 """Does the oracle teach the generalist what ORCA could not? DAgger on the oracle, measured.
 
     OMP_NUM_THREADS=1 python tools/oracle_finetune.py [--policy generalist] [--minutes 60]
-        [--families 'beyond-20u4o,dense-*,...'] [--teacher oracle|orca-shield] [--seed 13]
+        [--families 'beyond-20u4o,dense-*,...'] [--teacher oracle|orca-shield|self-shield]
+        [--moving] [--seed 13]
         --out tuned.safetensors [--json]
 
 Starts from a generalist policy file (the shipped one by default) and runs DAgger (Ross,
@@ -18,8 +19,12 @@ exported to ``--out`` every 15 minutes and at the end: fly it with
 no plan, ORCA through the shield labels, looking as far ahead as a training run's teacher
 (`GeneralistConfig.teacher_horizon_s`). ``--teacher orca-shield`` runs the same fine-tune
 with ORCA through the shield labelling those families instead: the control, which tells the
-oracle's labels from the fine-tune itself. The JSON's ``oracle_labels``, ``oracle_seconds`` and
-``oracle_families`` are the teacher's, whichever ``--teacher`` labelled.
+oracle's labels from the fine-tune itself. ``--teacher self-shield`` labels with the starting
+policy's own proposals through the safety shield (what it flies behind the shield; with
+``--moving``, the student's proposals as it learns): the one-off measurement behind
+``remarl-fc train --generalist --init POLICY --teacher self-shield``, which runs it as a
+training run (docs/MODEL.md §20, "Distilling the shield"). The JSON's ``oracle_labels``,
+``oracle_seconds`` and ``oracle_families`` are the teacher's, whichever ``--teacher`` labelled.
 
 Why a tool and not `train --generalist --teacher oracle`: the oracle replanned at every step of
 every world costs about 100 times ORCA through the shield (23 s against 0.23 s for one step of
