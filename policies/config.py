@@ -231,7 +231,7 @@ class GeneralistConfig:
     teacher: str = "orca-shield"
     """A teacher to learn from: "orca-shield" (ORCA's actions through the safety shield, heading
     changes only: the strongest hand-written method of the suite, 87 % mean solvable success;
-    the shipped recipe before the distillation), "oracle" (the oracle replanned at every step:
+    the shipped recipe), "oracle" (the oracle replanned at every step:
     far stronger, about 100 times slower), "self-shield" (the ``init`` policy's own proposals
     through the safety shield: what it flies behind the shield, distilled into it; docs/MODEL.md
     §20) or "none" (from scratch). With PPO the run is DAgger first for its

@@ -54,7 +54,7 @@ from policies.generalist import AgentReplay, SetNet, TD3Nets, clone_step, td3_up
 from policies.generalist_init import init_states, keep_init
 from policies.train import load_checkpoint, reward_upper_bound, save_checkpoint, summary_writer
 from sim.arrays import BoolArray, FloatArray
-from sim.config import ScenarioConfig
+from sim.config import STATE_TEACHERS, ScenarioConfig
 from sim.encounters import Family, draw_episodes, family_scenario
 from sim.env import episode_metrics
 from sim.errors import ConfigError
@@ -353,6 +353,8 @@ def teacher_plan(
     state, replanned at every step (`sim.oracle.oracle_actions`), and ORCA through the shield
     in the environments where it finds no plan.
     """
+    if teacher not in STATE_TEACHERS:
+        raise ValueError(f"teacher {teacher!r} does not label from the state alone (RunBook.teach)")
     if teacher == "oracle":
         planned_actions, planned = oracle_actions(state, cfg)
         if planned.all():

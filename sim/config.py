@@ -30,6 +30,9 @@ TEACHERS = ("none", "orca-shield", "oracle", "self-shield")
 safety shield, the oracle replanned at every step, or the policy the run starts from through
 the safety shield (`policies.config.GeneralistConfig.teacher`); here so that the command line
 can list them without importing the training side."""
+STATE_TEACHERS = ("orca-shield", "oracle")
+"""The teachers that label from the simulator's state alone ("self-shield" needs the policy it
+distils: `policies.generalist_train.RunBook.teach`)."""
 SensorModel = Literal["exact", "adsb"]
 Arrival = Literal["hover", "leave"]
 

@@ -26,7 +26,10 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-from sim.config import TEACHERS
+from sim.config import STATE_TEACHERS
+
+RUN_TEACHERS = ("none", *STATE_TEACHERS)
+"""The teachers a run of this benchmark can start with (no policy to distil)."""
 
 DEVICES = ("cpu", "cuda")
 """The devices a run can learn on (``train --generalist --device``)."""
@@ -98,7 +101,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--devices", default="cpu,cuda", help="comma-separated: cpu, cuda")
     parser.add_argument(
-        "--teachers", default="none,orca-shield", help=f"comma-separated, of {TEACHERS}"
+        "--teachers", default="none,orca-shield", help=f"comma-separated, of {RUN_TEACHERS}"
     )
     parser.add_argument("--minutes", type=float, default=4.0, help="budget of every run")
     parser.add_argument("--seed", type=int, default=1)
@@ -107,7 +110,10 @@ def main() -> None:
     args = parser.parse_args()
     devices = args.devices.split(",")
     teachers = args.teachers.split(",")
-    for value, known, flag in ((devices, DEVICES, "--devices"), (teachers, TEACHERS, "--teachers")):
+    for value, known, flag in (
+        (devices, DEVICES, "--devices"),
+        (teachers, RUN_TEACHERS, "--teachers"),
+    ):
         unknown = sorted(set(value) - set(known))
         if unknown:
             parser.error(f"{flag}: unknown {', '.join(unknown)}; choose from {', '.join(known)}")

@@ -51,7 +51,7 @@ from policies.generalist_train import (
     with_layout,
 )
 from policies.train import reward_upper_bound
-from sim.config import TEACHERS
+from sim.config import STATE_TEACHERS
 from sim.encounters import family_scenario
 from sim.orca import goal_turn_rad
 from sim.suite import load_suite
@@ -179,7 +179,7 @@ def main() -> None:
     parser.add_argument(
         "--teacher",
         default="orca-shield",
-        choices=[t for t in TEACHERS if t != "none"],
+        choices=list(STATE_TEACHERS),
         help="who flies",
     )
     parser.add_argument("--families", default="*", help="patterns of the families flown")

@@ -62,7 +62,7 @@ from policies.generalist_train import (
 )
 from policies.train import reward_upper_bound
 from remarl_fc.policy_io import load_policy
-from sim.config import TEACHERS
+from sim.config import STATE_TEACHERS
 from sim.encounters import family_scenario
 from sim.suite import load_suite
 
@@ -122,7 +122,7 @@ def main() -> None:
     parser.add_argument(
         "--teacher",
         default="oracle",
-        choices=[*(t for t in TEACHERS if t != "none"), SELF_SHIELD],
+        choices=[*STATE_TEACHERS, SELF_SHIELD],
         help="who labels those families (orca-shield: the same fine-tune with the recipe's "
         "teacher, the control; self-shield: the starting policy through the safety shield)",
     )

@@ -34,7 +34,7 @@ from numpy.typing import NDArray
 from policies.config import GeneralistConfig
 from policies.generalist_train import generalist_layout, teacher_plan, with_layout
 from remarl_fc.offline.suite import fly_episodes, success_summary
-from sim.config import TEACHERS, ScenarioConfig
+from sim.config import STATE_TEACHERS, ScenarioConfig
 from sim.encounters import Family, sample_family
 from sim.state import SwarmState
 from sim.suite import Suite, family_labels, load_suite
@@ -71,7 +71,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument(
         "--teacher",
         default="orca-shield",
-        choices=[t for t in TEACHERS if t != "none"],
+        choices=list(STATE_TEACHERS),
         help="ORCA through the shield, or the oracle replanned at every step (~100 times slower)",
     )
     p.add_argument("--sensing-range", type=float, default=GeneralistConfig.sensing_range_m)

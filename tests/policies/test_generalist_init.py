@@ -105,6 +105,13 @@ def test_a_self_shield_run_learns_resumes_and_keeps_its_start(tmp_path, start_po
     assert again["iterations"] == 3
 
 
+def test_the_state_teachers_refuse_self_shield_which_needs_its_policy():
+    from policies.generalist_train import teacher_plan
+
+    with pytest.raises(ValueError, match="RunBook.teach"):
+        teacher_plan(None, None, "self-shield")
+
+
 def test_the_self_shield_teacher_needs_a_policy_to_start_from():
     with pytest.raises(ValueError, match="init"):
         GeneralistConfig(teacher="self-shield")
