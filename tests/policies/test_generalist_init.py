@@ -108,7 +108,7 @@ def test_a_self_shield_run_learns_resumes_and_keeps_its_start(tmp_path, start_po
 def test_the_state_teachers_refuse_self_shield_which_needs_its_policy():
     from policies.generalist_train import teacher_plan
 
-    with pytest.raises(ValueError, match="RunBook.teach"):
+    with pytest.raises(ValueError, match=r"RunBook\.teach"):
         teacher_plan(None, None, "self-shield")
 
 
