@@ -437,11 +437,6 @@ class GeneralistConfig:
             '"self-shield" distils a policy behind the shield: name it with init',
         )
         check(not self.init or self.learner == "ppo", "init", "the ppo learner only")
-        check(
-            self.teacher != "self-shield" or self.learner == "ppo",
-            "teacher",
-            '"self-shield" labels in the DAgger phase: the ppo learner only',
-        )
         check(self.bc_weight >= 0, "bc_weight", "must be >= 0")
         check(0 < self.bc_fraction <= 1, "bc_fraction", "must be in (0, 1]")
         check_at_least(self, 0, "teacher_transitions", "bc_updates", "dagger_updates")

@@ -85,6 +85,19 @@ def test_the_self_shield_teacher_is_the_start_policy_through_the_shield(tmp_path
         np.testing.assert_allclose(book.teach(world), expected, atol=1e-5)
 
 
+def test_the_self_shield_labels_go_through_the_shield(tmp_path, start_policy, monkeypatch):
+    """Where the shield would turn nothing, the test above cannot tell it was asked: a shield
+    that marks what it returns shows every label passed through it."""
+    import policies.generalist_train as generalist_train
+
+    monkeypatch.setattr(generalist_train, "shielded", lambda state, cfg, proposed: proposed + 7)
+    cfg = tiny_cfg(tmp_path, init=str(start_policy), teacher="self-shield", dagger_fraction=1.0)
+    book = RunBook.open(cfg, tmp_path / "run", PPONets.create, resume=False)
+    policy = load_policy(str(start_policy))
+    for world in book.worlds:
+        np.testing.assert_allclose(book.teach(world), policy.act(world.obs) + 7, atol=1e-5)
+
+
 def test_a_self_shield_run_learns_resumes_and_keeps_its_start(tmp_path, start_policy):
     own = tmp_path / "mine.safetensors"  # a copy the test may destroy
     own.write_bytes(start_policy.read_bytes())
@@ -115,7 +128,7 @@ def test_the_state_teachers_refuse_self_shield_which_needs_its_policy():
 def test_the_self_shield_teacher_needs_a_policy_to_start_from():
     with pytest.raises(ValueError, match="init"):
         GeneralistConfig(teacher="self-shield")
-    with pytest.raises(ValueError, match="ppo"):
+    with pytest.raises(ValueError, match="init: the ppo learner only"):
         GeneralistConfig(teacher="self-shield", init="generalist", learner="td3")
 
 
