@@ -104,9 +104,9 @@ def progress_bar(*, enabled: bool, unit: str = "steps", digits: int = 0) -> Any:
 
 
 def add_shield_flags(p: Any, default: str) -> None:
-    """Add ``--shield off|monitor|on`` (default ``default``), its horizon and its margin.
+    """Add ``--shield off|monitor|on`` (default ``default``), its horizon, margin and passes.
 
-    The defaults of the horizon and margin are `sim.shield.ShieldConfig`'s.
+    The defaults of the horizon, margin and passes are `sim.shield.ShieldConfig`'s.
     """
     from sim.shield import SHIELD_MODES, ShieldConfig
 
@@ -130,6 +130,13 @@ def add_shield_flags(p: Any, default: str) -> None:
         default=base.margin_m,
         help=f"clearance the shield keeps beyond d_col, metres (default {base.margin_m:g})",
     )
+    p.add_argument(
+        "--shield-passes",
+        type=int,
+        default=base.passes,
+        help="decisions per step: each pass after the first also keeps clear of the turns the "
+        f"earlier ones gave the neighbours (default {base.passes})",
+    )
 
 
 def shield_from_args(args: argparse.Namespace) -> Any:
@@ -138,7 +145,10 @@ def shield_from_args(args: argparse.Namespace) -> Any:
 
     try:
         return ShieldConfig(
-            mode=args.shield, horizon_s=args.shield_horizon, margin_m=args.shield_margin
+            mode=args.shield,
+            horizon_s=args.shield_horizon,
+            margin_m=args.shield_margin,
+            passes=args.shield_passes,
         )
     except ValueError as exc:
         raise ConfigError(f"--shield: {exc}") from exc

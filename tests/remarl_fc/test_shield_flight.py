@@ -399,6 +399,8 @@ def test_bad_shield_settings_are_refused(command, capsys):
             "docs/examples/mission-3u2o.toml"] if command == "fly" else ["demo"]  # fmt: skip
     assert main([*base, "--shield-horizon", "-1"]) == 2
     assert "--shield" in capsys.readouterr().err
+    assert main([*base, "--shield-passes", "0"]) == 2
+    assert "passes must be >= 1" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         main([*base, "--shield", "sometimes"])
 

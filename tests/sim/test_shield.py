@@ -255,3 +255,73 @@ def test_shield_times_are_the_predictions_time_points(
         assert times[-2] == neighbour_s
         np.testing.assert_array_equal(np.delete(times, -2), time_points(dt_s, horizon_s, CHORDS))
         assert split == pytest.approx((neighbour_s - dt_s) / (horizon_s - dt_s))
+
+
+def final_conflicts(cfg, swarm, decision):
+    """UAV pairs (env, i, j) whose flown decisions come within d_col inside the neighbour
+    horizon (dense simulation of both)."""
+    b, n = decision.action.shape
+    t = np.linspace(0.0, cfg.horizon_s, DENSE + 1)
+    ahead = t <= cfg.neighbour_horizon_s
+    out = set()
+    for e in range(b):
+        paths = [
+            dense_path(
+                swarm.pos_m[e, i],
+                swarm.heading_rad[e, i],
+                decision.action[e, i],
+                decision.speed_m_s[e, i],
+                cfg.horizon_s,
+            )[0]
+            for i in range(n)
+        ]
+        for i in range(n):
+            for j in range(i + 1, n):
+                gap = np.hypot(*(paths[i] - paths[j]).T)[ahead].min()
+                if gap < VEHICLE.d_col_m:
+                    out.add((e, i, j))
+    return out
+
+
+def test_the_second_pass_keeps_uavs_from_turning_into_each_others_turns():
+    """One pass checks each UAV against its neighbours' proposals; where both turn, their
+    turns can meet. The second checks against the turns too: the pair of this world (found
+    among random ones) collides after one pass and not after two, and over 20 random worlds
+    of 16 environments the second pass leaves fewer pairs in conflict and adds none."""
+    total = {1: 0, 2: 0}
+    for seed in range(20):
+        rng = np.random.default_rng(seed)
+        swarm, threats = random_world(rng, 16, 3, 2)
+        prop = rng.uniform(-1, 1, (16, 3))
+        found = {}
+        for passes in (1, 2):
+            cfg = ShieldConfig(mode="on", passes=passes)
+            found[passes] = final_conflicts(cfg, swarm, shield(cfg, VEHICLE, swarm, threats, prop))
+            total[passes] += len(found[passes])
+        if seed == 4:
+            assert (6, 0, 2) in found[1] and (6, 0, 2) not in found[2]
+    assert total[2] < total[1]
+
+
+def test_a_second_pass_changes_nothing_where_the_first_changed_nothing():
+    """Environments where the first pass turned no UAV keep its decisions, while the second
+    pass runs for the others of the batch."""
+    rng = np.random.default_rng(3)
+    swarm, _ = random_world(rng, 16, 3, 0)
+    none = Threats(
+        np.zeros((16, 0, 2)), np.zeros((16, 0, 2)), np.zeros((16, 0), bool), np.zeros((16, 0))
+    )
+    prop = rng.uniform(-1, 1, (16, 3))
+    one = shield(ShieldConfig(mode="on", passes=1), VEHICLE, swarm, none, prop)
+    keep = ~one.intervened.any(axis=-1)
+    assert keep.any() and not keep.all()
+    two = shield(ShieldConfig(mode="on", passes=2), VEHICLE, swarm, none, prop)
+    for field in ("action", "speed_m_s", "intervened"):
+        np.testing.assert_array_equal(getattr(one, field)[keep], getattr(two, field)[keep])
+    for field in ("flown_cpa_m", "proposed_cpa_m"):  # float32 sums over other batch shapes
+        np.testing.assert_allclose(getattr(one, field)[keep], getattr(two, field)[keep], 1e-6)
+
+
+def test_passes_must_be_at_least_one():
+    with pytest.raises(ValueError, match="passes must be >= 1"):
+        ShieldConfig(passes=0)
