@@ -1,6 +1,7 @@
 """Evaluate a generalist run on the standard suite and ship it to the zoo with its results.
 
     python tools/ship_generalist.py runs/generalist-s1 [--checkpoint best] [--workers 1]
+        [--recipe "how the run's start was made, for a run started with --init"]
 
 Exports the run's checkpoint to a temporary policy file, flies it on every family of the
 standard suite with and without the safety shield (`remarl-fc eval --suite standard --policy
@@ -50,6 +51,12 @@ def main() -> None:
     parser.add_argument("run", help="the --out folder of remarl-fc train --generalist")
     parser.add_argument("--checkpoint", default="best", choices=["best", "last"])
     parser.add_argument("--workers", type=int, default=1)
+    parser.add_argument(
+        "--recipe",
+        default=None,
+        help="the commands behind the run, recorded with its results (a run started with "
+        "--init records only its last step)",
+    )
     args = parser.parse_args()
     keep_freed_memory()
     run = Path(args.run)
@@ -96,6 +103,7 @@ def main() -> None:
         "suite_version": suite.version,
         "seed": suite.seed,
         "checkpoint": args.checkpoint,
+        "recipe": args.recipe,
         "training": {  # a key a run's config.json predates: not recorded (None), since
             # defaults change (the teacher and DAgger became the default after the first runs)
             k: config.get(k)
