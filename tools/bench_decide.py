@@ -7,7 +7,7 @@ workload timed beside it (`remarl_fc.bench.decide.reference_workload`): the deci
 to it compares across days, on a machine whose speed varies from one session to the next.
 
     OMP_NUM_THREADS=1 python tools/bench_decide.py [--scenario 50u8o] [--samples 2000] [--json]
-        [--pooling max-attention]
+        [--pooling max-attention] [--shield-passes 1]
 """
 
 from __future__ import annotations
@@ -21,6 +21,7 @@ from remarl_fc.bench.decide import (
     SHIPPED_NEIGHBOURS,
     bench_decide,
 )
+from sim.shield import ShieldConfig
 
 
 def main() -> None:
@@ -40,6 +41,9 @@ def main() -> None:
         choices=("max-mean", "max-attention"),
         help="the random generalist's pooling (a --policy file says its own)",
     )
+    parser.add_argument(
+        "--shield-passes", type=int, default=ShieldConfig().passes, help="the shield's passes"
+    )
     parser.add_argument("--json", action="store_true", help="print the result as JSON")
     args = parser.parse_args()
     result = bench_decide(
@@ -50,6 +54,7 @@ def main() -> None:
         intruders=args.intruders,
         policy_name=args.policy,
         pooling=args.pooling,
+        shield_passes=args.shield_passes,
     )
     if args.json:
         print(json.dumps(result, indent=2))

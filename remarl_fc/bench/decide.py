@@ -150,6 +150,7 @@ def bench_decide(
     seed: int = 0,
     policy_name: str | None = None,
     pooling: str = "max-mean",
+    shield_passes: int = ShieldConfig().passes,
 ) -> dict[str, Any]:
     """Median and p99 (ms) of one decision (observations + actor) for one swarm.
 
@@ -159,7 +160,8 @@ def bench_decide(
 
     Also each part alone: ``observe_*`` (the version-2 observations of every UAV), ``act_*``
     (the actor on them), ``shield_*`` (the safety shield on the actor's proposals, mode on,
-    `sim.shield.shield_state`), and ``shielded_decision_*`` (all three). Decisions cycle over
+    `sim.shield.shield_state`, ``shield_passes`` passes), and ``shielded_decision_*`` (all
+    three). Decisions cycle over
     the states of one straight episode and their crowded copies. ``reference_*``: the
     `reference_workload` timed after each decision, and ``decision_per_reference`` the ratio
     of the medians, which compares across machines and days where the milliseconds do not.
@@ -185,7 +187,7 @@ def bench_decide(
     decide, observe, act = np.empty(samples), np.empty(samples), np.empty(samples)
     guard, reference = np.empty(samples), np.empty(samples)
     workload = reference_workload(seed)
-    shield_cfg = ShieldConfig(mode="on")
+    shield_cfg = ShieldConfig(mode="on", passes=shield_passes)
     vehicle = vehicle_of(cfg)
     sensed = interventions = 0
     for k in range(samples):
@@ -216,6 +218,7 @@ def bench_decide(
         "states": len(states),
         "most_intruders_in_one_observation": sensed,
         "samples": samples,
+        "shield_passes": shield_passes,
         **_percentiles(decide, "decision"),
         **_percentiles(observe, "observe"),
         **_percentiles(act, "act"),
