@@ -100,8 +100,8 @@ class ShieldConfig:
     checks against the proposals alone, and two UAVs that both turn away from each other's
     proposal may turn into each other. Measured behind the generalist on eight crowded
     families (200 episodes each): two passes took UAV–UAV collisions from 4.5 to 0 % of 20u4o's
-    episodes, 28 to 3 % of 50u8o's, 3.5 to 0 % of two lines of five; a third pass changed
-    nothing (docs/MODEL.md)."""
+    episodes, 28 to 4.5 % of 50u8o's, 3.5 to 1 % of two lines of five; a third pass changed
+    nothing measurable (docs/MODEL.md §21)."""
 
     def __post_init__(self) -> None:
         if self.mode not in SHIELD_MODES:
@@ -251,7 +251,8 @@ class Commitment:
 
     Attributes:
         action: its heading change. first_m_s: its speed over the coming step (its committed
-        speed after it). only: the UAVs it counts for (the others' is a copy of another).
+        speed after it). only: the UAVs for which it is a new arc to check; for the others it
+        repeats one already checked and adds no pair.
     """
 
     action: FloatArray

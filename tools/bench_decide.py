@@ -4,7 +4,8 @@
 64, k = 6 neighbour rows, m = 8 intruder rows); see `remarl_fc.bench.decide`. Prints the median
 and p99 of a decision and of each part, in milliseconds, and of a fixed numpy reference
 workload timed beside it (`remarl_fc.bench.decide.reference_workload`): the decision's ratio
-to it compares across days, on a machine whose speed varies from one session to the next.
+to it moves less across days than the milliseconds, on a machine whose speed varies from one
+session to the next (it moves too: docs/RESULTS.md).
 
     OMP_NUM_THREADS=1 python tools/bench_decide.py [--scenario 50u8o] [--samples 2000] [--json]
         [--pooling max-attention] [--shield-passes 1]
@@ -80,7 +81,7 @@ def main() -> None:
         )
     print(
         f"decision / reference workload (medians): {result['decision_per_reference']:.2f} "
-        "(compares across machines and days)"
+        "(moves less across machines and days than the milliseconds)"
     )
 
 

@@ -287,7 +287,7 @@ def test_the_second_pass_keeps_uavs_from_turning_into_each_others_turns():
     """One pass checks each UAV against its neighbours' proposals; where both turn, their
     turns can meet. The second checks against the turns too: the pair of this world (found
     among random ones) collides after one pass and not after two, and over 20 random worlds
-    of 16 environments the second pass leaves fewer pairs in conflict and adds none."""
+    of 16 environments the second pass leaves fewer pairs in conflict."""
     total = {1: 0, 2: 0}
     for seed in range(20):
         rng = np.random.default_rng(seed)
