@@ -225,12 +225,14 @@ def shield(
     arcs = [Commitment(prop, swarm.speed_m_s, np.ones((b, n), dtype=bool))]
     decision = _decide(cfg, vehicle, swarm, threats, prop, arcs)
     for _ in range(cfg.passes - 1):
-        turn = decision.shield_action.astype(np.float64)
+        # compared in float32, the decision's own precision: a passing float64 proposal comes
+        # back rounded, and is no change
+        turn = decision.shield_action
         first = np.where(swarm.deciding, decision.shield_speed_m_s, swarm.speed_m_s)
-        changed = swarm.deciding & ((turn != prop) | (first != swarm.speed_m_s))
+        changed = swarm.deciding & ((turn != prop.astype(np.float32)) | (first != swarm.speed_m_s))
         if not changed.any():
             break
-        arcs.append(Commitment(turn, first, changed))
+        arcs.append(Commitment(turn.astype(np.float64), first, changed))
         earlier, decision = decision, _decide(cfg, vehicle, swarm, threats, prop, arcs)
         # where nothing passes every arc but something passed the earlier ones, the earlier
         # decision stands: a pass never gives up a decision that keeps clear of the proposals

@@ -325,3 +325,21 @@ def test_a_second_pass_changes_nothing_where_the_first_changed_nothing():
 def test_passes_must_be_at_least_one():
     with pytest.raises(ValueError, match="passes must be >= 1"):
         ShieldConfig(passes=0)
+
+
+def test_the_second_pass_is_skipped_where_the_first_passed_every_float64_proposal(monkeypatch):
+    """A passing proposal comes back as float32: that rounding is no change, and no second
+    pass runs (nor any arc is added) for it."""
+    import sim.shield as shield_module
+
+    calls = []
+    real = shield_module._decide
+    monkeypatch.setattr(shield_module, "_decide", lambda *a: calls.append(len(a[-1])) or real(*a))
+    rng = np.random.default_rng(5)
+    swarm, _ = random_world(rng, 4, 1, 0)  # one UAV each, nothing around: every proposal passes
+    none = Threats(
+        np.zeros((4, 0, 2)), np.zeros((4, 0, 2)), np.zeros((4, 0), bool), np.zeros((4, 0))
+    )
+    prop = rng.uniform(-1, 1, (4, 1))  # float64, not float32-exact
+    d = shield(ShieldConfig(mode="on", passes=2), VEHICLE, swarm, none, prop)
+    assert not d.intervened.any() and calls == [1]
