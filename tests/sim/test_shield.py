@@ -168,6 +168,31 @@ def test_a_head_on_intruder_is_avoided_by_the_nearest_turn():
     assert not away.intervened[0, 0] and away.action[0, 0] == 1.0
 
 
+def test_the_default_look_ahead_sees_a_head_on_conflict_past_ten_seconds():
+    """An intruder 300 m ahead closing head-on at 15 m/s meets the 5 m/s UAV in 15 s: a 10 s
+    look-ahead lets the straight proposal pass (the conflict lies past it, and two steps later
+    no turn clears it), the default 25 s turns now."""
+    swarm = Swarm(
+        pos_m=np.zeros((1, 1, 2)),
+        heading_rad=np.zeros((1, 1)),
+        target_m=np.array([[[1e4, 0.0]]]),
+        deciding=np.ones((1, 1), bool),
+        present=np.ones((1, 1), bool),
+        speed_m_s=np.full((1, 1), 5.0),
+    )
+    threats = Threats(
+        np.array([[[300.0, 0.0]]]), np.array([[[-15.0, 0.0]]]), np.ones((1, 1), bool),
+        np.zeros((1, 1)),
+    )  # fmt: skip
+    short = shield(
+        ShieldConfig(mode="on", horizon_s=10.0), VEHICLE, swarm, threats, np.zeros((1, 1))
+    )
+    default = shield(ShieldConfig(mode="on"), VEHICLE, swarm, threats, np.zeros((1, 1)))
+    assert not short.intervened[0, 0] and math.isinf(short.proposed_cpa_m[0, 0])
+    assert default.intervened[0, 0] and default.proposed_cpa_m[0, 0] < 1.0
+    assert default.flown_cpa_m[0, 0] >= VEHICLE.d_col_m + ShieldConfig().margin_m - 1e-6
+
+
 def test_boxed_in_multirotor_slows_down_and_a_fixed_speed_uav_takes_the_best_clearance():
     # Intruders converging from ahead and both sides: no heading at full speed passes.
     swarm = Swarm(
