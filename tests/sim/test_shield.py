@@ -144,8 +144,9 @@ def test_where_some_admissible_action_keeps_separation_the_shielded_one_does(see
                 assert flown >= -0.5, (e, i, flown, best)
 
 
-def test_a_head_on_intruder_is_avoided_by_the_nearest_turn():
-    swarm = Swarm(
+def lone_uav() -> Swarm:
+    """One UAV at the origin heading east at 5 m/s, its target far ahead."""
+    return Swarm(
         pos_m=np.zeros((1, 1, 2)),
         heading_rad=np.zeros((1, 1)),
         target_m=np.array([[[1e4, 0.0]]]),
@@ -153,6 +154,10 @@ def test_a_head_on_intruder_is_avoided_by_the_nearest_turn():
         present=np.ones((1, 1), bool),
         speed_m_s=np.full((1, 1), 5.0),
     )
+
+
+def test_a_head_on_intruder_is_avoided_by_the_nearest_turn():
+    swarm = lone_uav()
     threats = Threats(
         np.array([[[100.0, 0.0]]]),
         np.array([[[-5.0, 0.0]]]),
@@ -172,14 +177,7 @@ def test_the_default_look_ahead_sees_a_head_on_conflict_past_ten_seconds():
     """An intruder 300 m ahead closing head-on at 15 m/s meets the 5 m/s UAV in 15 s: a 10 s
     look-ahead lets the straight proposal pass (the conflict lies past it, and two steps later
     no turn clears it), the default 25 s turns now."""
-    swarm = Swarm(
-        pos_m=np.zeros((1, 1, 2)),
-        heading_rad=np.zeros((1, 1)),
-        target_m=np.array([[[1e4, 0.0]]]),
-        deciding=np.ones((1, 1), bool),
-        present=np.ones((1, 1), bool),
-        speed_m_s=np.full((1, 1), 5.0),
-    )
+    swarm = lone_uav()
     threats = Threats(
         np.array([[[300.0, 0.0]]]), np.array([[[-15.0, 0.0]]]), np.ones((1, 1), bool),
         np.zeros((1, 1)),
@@ -195,14 +193,7 @@ def test_the_default_look_ahead_sees_a_head_on_conflict_past_ten_seconds():
 
 def test_boxed_in_multirotor_slows_down_and_a_fixed_speed_uav_takes_the_best_clearance():
     # Intruders converging from ahead and both sides: no heading at full speed passes.
-    swarm = Swarm(
-        pos_m=np.zeros((1, 1, 2)),
-        heading_rad=np.zeros((1, 1)),
-        target_m=np.array([[[1e4, 0.0]]]),
-        deciding=np.ones((1, 1), bool),
-        present=np.ones((1, 1), bool),
-        speed_m_s=np.full((1, 1), 5.0),
-    )
+    swarm = lone_uav()
     pos = np.array([[[70.0, 0.0], [45.0, 45.0], [45.0, -45.0], [0.0, 70.0], [0.0, -70.0]]])
     vel = -0.06 * pos  # all closing on the UAV
     threats = Threats(pos, vel, np.ones((1, 5), bool), np.zeros((1, 5)))
@@ -221,14 +212,7 @@ def test_boxed_in_multirotor_slows_down_and_a_fixed_speed_uav_takes_the_best_cle
 
 
 def test_uncertainty_of_old_reports_widens_what_is_required():
-    swarm = Swarm(
-        pos_m=np.zeros((1, 1, 2)),
-        heading_rad=np.zeros((1, 1)),
-        target_m=np.array([[[1e4, 0.0]]]),
-        deciding=np.ones((1, 1), bool),
-        present=np.ones((1, 1), bool),
-        speed_m_s=np.full((1, 1), 5.0),
-    )
+    swarm = lone_uav()
     # An intruder passing 26 m abeam: clear with a fresh report, not with a 10 s old one.
     pos, vel = np.array([[[60.0, 26.0]]]), np.array([[[-5.0, 0.0]]])
     fresh = Threats(pos, vel, np.ones((1, 1), bool), np.zeros((1, 1)))
