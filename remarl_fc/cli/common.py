@@ -122,7 +122,15 @@ def add_shield_flags(p: Any, default: str) -> None:
         "--shield-horizon",
         type=float,
         default=base.horizon_s,
-        help=f"shield look-ahead, seconds (default {base.horizon_s:g})",
+        help=f"shield look-ahead against exactly sensed intruders (the simulator's), seconds "
+        f"(default {base.horizon_s:g})",
+    )
+    p.add_argument(
+        "--shield-track-horizon",
+        type=float,
+        default=base.track_horizon_s,
+        help="shield look-ahead against tracked intruders (ADS-B reports: every intruder of "
+        f"fly), seconds (default {base.track_horizon_s:g})",
     )
     p.add_argument(
         "--shield-margin",
@@ -147,6 +155,7 @@ def shield_from_args(args: argparse.Namespace) -> Any:
         return ShieldConfig(
             mode=args.shield,
             horizon_s=args.shield_horizon,
+            track_horizon_s=args.shield_track_horizon,
             margin_m=args.shield_margin,
             passes=args.shield_passes,
         )

@@ -469,9 +469,11 @@ def test_the_teacher_turns_for_an_intruder_as_far_ahead_as_its_horizon_reaches()
     state.obstacle_pos_m[0, 0] = state.pos_m[0, 0] + 170.0 * ahead
     state.obstacle_vel_m_s[0, 0] = -state.obstacle_speed_m_s[0, 0] * ahead
     world = World(None, cfg, False, sim, state, sim.observe(state).flat(), 1)  # type: ignore[arg-type]
+    assert orca_actions(state, cfg, horizon_s=10.0)[0, 0] == 0.0  # not yet in ORCA's view
     assert orca_actions(state, cfg, horizon_s=20.0)[0, 0] != 0.0  # ORCA alone turns at 20 s
-    assert teacher_actions(world, "orca-shield", horizon_s=10.0)[0, 0] == 0.0  # not yet in view
     assert teacher_actions(world, "orca-shield", horizon_s=20.0)[0, 0] != 0.0  # already turning
+    # behind ORCA the shield looks 25 s ahead of an exactly sensed intruder: it turns too
+    assert teacher_actions(world, "orca-shield", horizon_s=10.0)[0, 0] != 0.0
 
 
 def test_the_oracle_teacher_flies_its_plans_and_orca_through_the_shield_where_it_has_none(

@@ -136,10 +136,10 @@ def test_off_computes_nothing():
 
 
 def test_an_old_report_widens_the_clearance_the_shield_keeps():
-    """An intruder passing 36 m abeam in 7.5 s: clear of d_col + margin + the uncertainty of a
-    fresh report over the 25 s look-ahead (21 + 0.5 × 25 m, required of the whole straight
-    part); a 10 s old report adds 0.5 m/s × 10 s more, and the shield acts."""
-    passing = (np.array([[36.0, 150.0]]), np.array([[0.0, -10.0]]))
+    """An intruder passing 27 m abeam in 7.5 s: clear of d_col + margin + the uncertainty of a
+    fresh report over 7.5 s (21 + 0.5 × 7.5 m); a 10 s old report adds 0.5 m/s × 10 s more,
+    and the shield acts."""
+    passing = (np.array([[27.0, 150.0]]), np.array([[0.0, -10.0]]))
     fresh = head_on_controller("on").decide(
         0.0, np.zeros((1, 2)), *passing, obstacle_age_s=np.array([MIN_REPORT_AGE_S])
     )

@@ -3,6 +3,7 @@ watches. Checked against an independent dense simulation of the predicted motion
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -176,7 +177,8 @@ def test_a_head_on_intruder_is_avoided_by_the_nearest_turn():
 def test_the_default_look_ahead_sees_a_head_on_conflict_past_ten_seconds():
     """An intruder 300 m ahead closing head-on at 15 m/s meets the 5 m/s UAV in 15 s: a 10 s
     look-ahead lets the straight proposal pass (the conflict lies past it, and two steps later
-    no turn clears it), the default 25 s turns now."""
+    no turn clears it), the default 25 s turns now; a tracked intruder (ADS-B) is checked over
+    the shorter track horizon."""
     swarm = lone_uav()
     threats = Threats(
         np.array([[[300.0, 0.0]]]), np.array([[[-15.0, 0.0]]]), np.ones((1, 1), bool),
@@ -189,6 +191,12 @@ def test_the_default_look_ahead_sees_a_head_on_conflict_past_ten_seconds():
     assert not short.intervened[0, 0] and math.isinf(short.proposed_cpa_m[0, 0])
     assert default.intervened[0, 0] and default.proposed_cpa_m[0, 0] < 1.0
     assert default.flown_cpa_m[0, 0] >= VEHICLE.d_col_m + ShieldConfig().margin_m - 1e-6
+    # the same intruder known from a report 0.5 s old: checked over the track horizon (10 s)
+    tracked = dataclasses.replace(threats, intruder_age_s=np.full((1, 1), 0.5))
+    cfg = ShieldConfig(mode="on")
+    assert not shield(cfg, VEHICLE, swarm, tracked, np.zeros((1, 1))).intervened[0, 0]
+    longer = dataclasses.replace(cfg, track_horizon_s=25.0)
+    assert shield(longer, VEHICLE, swarm, tracked, np.zeros((1, 1))).intervened[0, 0]
 
 
 def test_boxed_in_multirotor_slows_down_and_a_fixed_speed_uav_takes_the_best_clearance():
@@ -244,6 +252,8 @@ def test_bad_settings_are_refused():
         ShieldConfig(headings=4)
     with pytest.raises(ValueError, match="horizon"):
         ShieldConfig(horizon_s=0.0)
+    with pytest.raises(ValueError, match="track_horizon_s"):
+        ShieldConfig(track_horizon_s=0.0)
 
 
 @pytest.mark.parametrize(
@@ -257,13 +267,27 @@ def test_shield_times_are_the_predictions_time_points(
     from sim.prediction import time_points
     from sim.shield import CHORDS, _times
 
-    times, split = _times(dt_s, horizon_s, neighbour_s)
-    if split is None:
+    times, split = _times(dt_s, horizon_s, (neighbour_s,))
+    if not split:
         np.testing.assert_array_equal(times, time_points(dt_s, horizon_s, CHORDS))
     else:
         assert times[-2] == neighbour_s
         np.testing.assert_array_equal(np.delete(times, -2), time_points(dt_s, horizon_s, CHORDS))
-        assert split == pytest.approx((neighbour_s - dt_s) / (horizon_s - dt_s))
+        assert split == [pytest.approx((neighbour_s - dt_s) / (horizon_s - dt_s))]
+
+
+def test_two_cuts_split_the_straight_part_in_order_and_interpolate_it_exactly():
+    """The neighbour and the track horizons both cut the straight part; the displacements at
+    the cuts lie on the straight line, the time flown from the arc's end."""
+    from sim.prediction import displacements
+    from sim.shield import CHORDS, _at_times, _times
+
+    times, split = _times(2.0, 25.0, (10.0, 4.0, 30.0))
+    np.testing.assert_array_equal(times[CHORDS:], [2.0, 4.0, 10.0, 25.0])
+    xy = displacements(np.array([0.3]), np.array([[0.5]]), 1.0, 2.0, 25.0, CHORDS)
+    x, y = _at_times(xy, split)
+    run = np.hypot(x[..., CHORDS:] - x[..., CHORDS, None], y[..., CHORDS:] - y[..., CHORDS, None])
+    np.testing.assert_allclose(run[0, 0], times[CHORDS:] - 2.0, atol=1e-9)
 
 
 def final_conflicts(cfg, swarm, decision):
