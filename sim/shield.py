@@ -62,10 +62,10 @@ class ShieldConfig:
     """Look-ahead of the checks against exactly sensed intruders, seconds (12.5 decision steps
     at the paper's 2 s; tracked ones: ``track_horizon_s``). A candidate that passes over a
     short look-ahead may only have pushed the conflict past it, and a few steps later nothing
-    the turn-limited UAV can fly passes. Measured behind the
-    generalist on the standard suite (200 episodes a family, two passes), 10 → 15 → 20 → 25 →
-    30 s: mean success 92.8 → 93.4 → 93.8 → 94.0 → 94.0 %, 50u8o 55 → 62 → 69 → 72 → 71 %,
-    20u4o 94 → 97 → 98 → 98 → 98.5 %, no family lower (docs/MODEL.md §21)."""
+    the turn-limited UAV can fly passes. Measured behind the generalist on the standard suite
+    (200 episodes a family, two passes), 10 → 15 → 20 → 25 → 30 s: mean success 92.8 → 93.4 →
+    93.8 → 94.0 → 94.0 %, 50u8o 55 → 62 → 69 → 72 → 71 %, 20u4o 94 → 97 → 98 → 98 → 98.5 %, no
+    family lower (docs/MODEL.md §21)."""
 
     track_horizon_s: float = 10.0
     """Look-ahead of the checks against tracked intruders (a report of some age: ADS-B), seconds,
