@@ -444,6 +444,17 @@ def _time_first(xy: tuple[FloatArray, FloatArray]) -> tuple[Float32Array, Float3
     return x, y
 
 
+def _checked(times: FloatArray, until_s: float | FloatArray) -> BoolArray:
+    """The segments that start before ``until_s``, (P − 1, 1, 1) or against its shape.
+
+    ``until_s``: a look-ahead, one per threat where an array; past it nothing is required.
+    """
+    until = np.asarray(until_s)
+    starts = times[:-1].reshape(-1, *([1] * max(until.ndim, 2)))
+    out: BoolArray = starts < until - 1e-9
+    return out
+
+
 def required_m(cfg: ShieldConfig, vehicle: Vehicle) -> float:
     """The separation every check requires before uncertainty: d_col + margin, metres."""
     return vehicle.d_col_m + cfg.margin_m
@@ -602,7 +613,7 @@ def _threat_paths(
         # sensing (age 0, the simulator's paper world) has none; past the track horizon
         # nothing is required of a tracked intruder (−inf: never binding)
         growth = np.where(tracked, cfg.track_growth_m_s, 0.0) * (age + times[1:, None, None])
-        beyond = tracked & (times[:-1, None, None] >= ahead_s - 1e-9)
+        beyond = tracked & ~_checked(times, ahead_s)
         needs.append(np.where(beyond, -np.inf, required + growth))
     others = min(cfg.neighbours, n - 1)
     if others > 0:  # the nearest present UAVs within reach, on their committed arcs
@@ -614,7 +625,7 @@ def _threat_paths(
         idx = np.argpartition(dist, others - 1, axis=-1)[..., :others]  # (B, N, J)
         near = np.take_along_axis(dist, idx, -1) <= both
         # past the neighbour horizon nothing is required (−inf: never binding)
-        ahead = times[:-1] < cfg.neighbour_horizon_s - 1e-9
+        ahead = _checked(times, cfg.neighbour_horizon_s)[:, 0, 0]
         need = np.broadcast_to(np.where(ahead, required, -np.inf)[:, None, None], (p - 1, b, n))
         for k, (arc, unit) in enumerate(committed):  # threats M + k·N + j: arc k of UAV j
             counts = np.take_along_axis(np.broadcast_to(arc.only[:, None], dist.shape), idx, -1)
