@@ -348,6 +348,14 @@ class GeneralistConfig:
     """Share of families flown in the real world (fitted ArduCopter/PX4 responses randomised
     per UAV, ADS-B intruders, GPS noise) rather than the paper's ideal one."""
 
+    teacher_truth: bool = False
+    """The teacher reads the true state in the real-world families (`SwarmState.exactly_sensed`:
+    the intruders where they are, not their ADS-B tracks, and no GPS error) — a privileged
+    teacher, which the student, seeing its own noisy observation, imitates as far as it can.
+    False: its safety shield reads what the UAVs sense, as the shield does in flight (ORCA
+    itself reads the true positions either way). The ideal-world families are the same
+    either way."""
+
     minutes: float = 60.0
     """Wall-clock budget of the run (resumes count the time already spent): the shipped
     generalist's run, whose best validation came at 45.7 minutes (docs/MODEL.md §20)."""

@@ -334,10 +334,18 @@ states a little off its own path, so the clone learns to come back to it."""
 
 
 def teacher_actions(
-    world: World, teacher: str, horizon_s: float = ORCA_HORIZON_S
+    world: World, teacher: str, horizon_s: float = ORCA_HORIZON_S, *, truth: bool = False
 ) -> NDArray[np.float32]:
-    """The teacher's actions (B, N) in a world (`GeneralistConfig.teacher`): `teacher_plan`."""
-    return teacher_plan(world.state, world.cfg, teacher, horizon_s)
+    """The teacher's actions (B, N) in a world (`GeneralistConfig.teacher`): `teacher_plan`.
+
+    On the world's true state if ``truth`` (`GeneralistConfig.teacher_truth`).
+    """
+    return teacher_plan(teacher_state(world, truth), world.cfg, teacher, horizon_s)
+
+
+def teacher_state(world: World, truth: bool) -> SwarmState:
+    """The state a teacher reads: the world's, or its truth (`SwarmState.exactly_sensed`)."""
+    return world.state.exactly_sensed() if truth else world.state
 
 
 def teacher_plan(
@@ -410,7 +418,9 @@ def learn_from_teacher(
     collected, episodes = 0, []
     while collected < cfg.teacher_transitions:
         for world in worlds:
-            taught = teacher_actions(world, cfg.teacher, cfg.teacher_horizon_s)
+            taught = teacher_actions(
+                world, cfg.teacher, cfg.teacher_horizon_s, truth=cfg.teacher_truth
+            )
             flown = np.clip(taught + rng.normal(0.0, TEACHER_NOISE, taught.shape), -1.0, 1.0)
             transitions, ended = step_world(
                 world, flown.astype(np.float32), cfg, goal_value, rng, teacher=taught
@@ -604,8 +614,9 @@ class RunBook:
         """
         if self.anchor is not None:
             proposed = actor_actions(self.anchor, world.obs, self.device)
-            return shielded(world.state, world.cfg, proposed)
-        return teacher_actions(world, self.cfg.teacher, self.cfg.teacher_horizon_s)
+            return shielded(teacher_state(world, self.cfg.teacher_truth), world.cfg, proposed)
+        cfg = self.cfg
+        return teacher_actions(world, cfg.teacher, cfg.teacher_horizon_s, truth=cfg.teacher_truth)
 
     def elapsed(self) -> float:
         """Seconds of the run, resumes included."""

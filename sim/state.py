@@ -144,6 +144,16 @@ class SwarmState:
         hover: BoolArray = self.reached & running
         return hover
 
+    def exactly_sensed(self) -> SwarmState:
+        """This state as exact sensors would report it (itself where sensing is exact).
+
+        The true intruders, no ADS-B tracks, and the true positions, no GPS error: what a
+        privileged teacher reads (`policies.config.GeneralistConfig.teacher_truth`).
+        """
+        if self.tracks is None and not self.gps_error_m.any():
+            return self
+        return self.evolve(tracks=None, gps_error_m=np.zeros_like(self.gps_error_m))
+
     @property
     def obstacle_visible(self) -> BoolArray:
         """(B, M) obstacles that can be sensed now (not hidden as a late pop-up)."""

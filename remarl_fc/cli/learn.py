@@ -163,6 +163,21 @@ def add_train(sub: Any) -> None:
         "scratch (none)",
     )
     p.add_argument(
+        "--teacher-truth",
+        action="store_true",
+        default=None,
+        help="generalist: the teacher reads the true state in the real-world families (the "
+        "intruders where they are, no GPS error), not what the UAVs sense: a privileged "
+        "teacher (default: its shield reads the UAVs' ADS-B tracks, as in flight)",
+    )
+    p.add_argument(
+        "--real-share",
+        type=float,
+        metavar="F",
+        help="generalist: share of the families flown in the real world (fitted "
+        "ArduCopter/PX4 responses, ADS-B intruders, GPS noise; default 0.35)",
+    )
+    p.add_argument(
         "--dagger-lr",
         type=float,
         metavar="LR",
@@ -457,6 +472,8 @@ def generalist_flags(args: argparse.Namespace) -> dict[str, Any]:
         "sensing_aperture_deg": args.sensing_aperture,
         "max_neighbours": args.max_neighbours,
         "teacher_horizon_s": args.teacher_horizon,
+        "teacher_truth": args.teacher_truth,
+        "real_share": args.real_share,
         "dagger_turn_weight": args.turn_weight,
         "seed": args.seed or None,
     }

@@ -448,6 +448,31 @@ def test_the_teacher_is_orca_through_the_shield():
     assert not np.array_equal(actions, np.zeros_like(actions))  # not a constant stand-in
 
 
+def test_a_privileged_teacher_reads_the_truth_where_the_uavs_sense_adsb():
+    from policies.generalist_train import World, teacher_actions, with_layout
+    from sim.orca import orca_actions
+    from sim.scenarios import REAL_WORLD, load_scenario
+    from sim.shield import ShieldConfig, shield_state, vehicle_of
+    from sim.swarm import SwarmSim
+
+    cfg = with_layout(load_scenario("3u2o", **REAL_WORLD), LAYOUT)
+    sim, rng = SwarmSim(cfg), np.random.default_rng(2)
+    state = sim.initial_state(rng, 32)
+    for _ in range(4):  # the first reports are in; the intruders are still ahead
+        state, _ = sim.step(state, np.zeros((32, 3), np.float32), rng)
+    world = World(None, cfg, True, sim, state, sim.observe(state).flat(), 32)  # type: ignore[arg-type]
+    straight_only = dataclasses.replace(vehicle_of(cfg), can_slow=False)
+
+    def through_shield(seen):
+        orca = orca_actions(state, cfg)
+        return shield_state(ShieldConfig(mode="on"), cfg, seen, orca, straight_only)
+
+    sensed, truth = through_shield(state), through_shield(state.exactly_sensed())
+    np.testing.assert_array_equal(teacher_actions(world, "orca-shield"), sensed.action)
+    np.testing.assert_array_equal(teacher_actions(world, "orca-shield", truth=True), truth.action)
+    assert not np.array_equal(sensed.action, truth.action)  # the tracks' noise moves its turns
+
+
 def test_the_teacher_turns_for_an_intruder_as_far_ahead_as_its_horizon_reaches():
     from policies.generalist_train import World, teacher_actions, with_layout
     from sim.orca import orca_actions
@@ -564,6 +589,7 @@ def test_a_bad_family_weight_flag_says_what_to_write(text):
         ("--turn-weight", "-2", "dagger_turn_weight"),
         ("--max-neighbours", "-1", "max_neighbours"),
         ("--dagger-lr", "0", "dagger_lr"),
+        ("--real-share", "1.5", "real_share"),
         ("--teacher", "self-shield", "teacher"),
         ("--init generalist --learner", "td3", "init"),
     ],
@@ -607,7 +633,8 @@ def test_train_generalist_flags_reach_the_config(tmp_path, monkeypatch):
     argv += ["--teacher", "orca-shield", "--bc-weight", "1.5", "--bc-fraction", "0.8"]
     argv += ["--dagger-fraction", "0.25", "--sensing-range", "300", "--sensing-aperture", "360"]
     argv += ["--teacher-horizon", "14", "--turn-weight", "6", "--max-neighbours", "12"]
-    argv += ["--init", "generalist", "--dagger-lr", "3e-4"]
+    argv += ["--init", "generalist", "--dagger-lr", "3e-4", "--teacher-truth"]
+    argv += ["--real-share", "0.5"]
     assert main([*argv, "--out", str(tmp_path / "run")]) == 0
     ((cfg, out, resume),) = seen
     assert cfg.swarm_field == "formation" and cfg.family_weights == (("swarms-*", 2.0),)
@@ -619,6 +646,7 @@ def test_train_generalist_flags_reach_the_config(tmp_path, monkeypatch):
     assert cfg.teacher_horizon_s == 14.0 and cfg.dagger_turn_weight == 6.0
     assert cfg.max_neighbours == 12
     assert cfg.init == "generalist" and cfg.dagger_lr == 3e-4
+    assert cfg.teacher_truth and cfg.real_share == 0.5
     assert cfg.minutes == 2 and cfg.seed == 4 and out == tmp_path / "run" and not resume
     assert GeneralistConfig().swarm_field == "all"  # the paper's reward unless asked
     seen.clear()

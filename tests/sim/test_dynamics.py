@@ -185,6 +185,25 @@ def test_adsb_sensing_shows_late_noisy_intruders_and_is_seeded():
     assert valid.mean() > 0.8 and np.median(err) < 30.0 and err.max() < 120.0
 
 
+def test_exactly_sensed_is_the_truth_behind_the_adsb_picture():
+    exact_cfg, adsb_cfg = load_scenario("3u1o"), load_scenario("3u1o", sensors={"model": "adsb"})
+    sim, rng = SwarmSim(adsb_cfg, scored=False), np.random.default_rng(7)
+    state = sim.initial_state(rng, 16)
+    for _ in range(4):
+        state, _ = sim.step(state, np.zeros((16, 3)), rng)
+    truth = state.exactly_sensed()
+    assert state.tracks is not None and np.abs(state.gps_error_m).max() > 0
+    assert truth.tracks is None and not truth.gps_error_m.any()
+    assert truth.pos_m is state.pos_m and truth.obstacle_pos_m is state.obstacle_pos_m
+    assert state.tracks is not None and state.gps_error_m.any()  # the state itself is unchanged
+    # seen through exact sensors: the intruder rows are the truth, the ADS-B rows are not
+    exact_sim = SwarmSim(exact_cfg, scored=False)
+    np.testing.assert_array_equal(sim.observe(truth).rows, exact_sim.observe(truth).rows)
+    assert not np.allclose(sim.observe(state).rows, sim.observe(truth).rows)
+    exact_state = exact_sim.initial_state(np.random.default_rng(7), 2)
+    assert exact_state.exactly_sensed() is exact_state
+
+
 def test_perfect_adsb_is_exact_sensing_up_to_the_report_lag():
     perfect = {
         "model": "adsb",
