@@ -356,7 +356,8 @@ def teacher_plan(
     "orca-shield": ORCA through the shield. Heading changes only (the policy commands no
     speed), and ORCA reads the simulator's state, the true positions even where the UAVs'
     sensors are ADS-B: a privileged teacher, which the student, seeing only its observation,
-    imitates as far as it can. ``horizon_s`` is its τ_o against the intruders
+    imitates as far as it can. The shield reads what ``state`` says the UAVs sense (its ADS-B
+    tracks, if any; `SwarmState.exactly_sensed` is the truth). ``horizon_s`` is its τ_o against the intruders
     (`GeneralistConfig.teacher_horizon_s`). "oracle": the oracle's plan from the current
     state, replanned at every step (`sim.oracle.oracle_actions`), and ORCA through the shield
     in the environments where it finds no plan.
