@@ -110,3 +110,17 @@ def test_bench_train_runs_each_device_and_teacher_and_refuses_an_unknown_device(
         assert row["transitions_per_min_per_cpu"] == 1.0  # the CPU run is its own reference
     done = tool("bench_train", "--devices", "gpu")
     assert done.returncode == 2 and "--devices: unknown gpu" in done.stderr
+
+
+def test_adsb_error_table_flies_each_variant_on_the_same_episodes(tmp_path):
+    out = tmp_path / "adsb.json"
+    done = tool("adsb_error_table", "--scenarios", "3u2o", "--episodes", "4", "--json", str(out))
+    assert done.returncode == 0, done.stderr
+    rows = [line for line in done.stdout.splitlines() if line.startswith("| ") and "%" in line]
+    results = json.loads(out.read_text())
+    assert len(rows) == len(results) == 7
+    by_variant = {r["variant"]: r for r in results}
+    assert by_variant["as flown"]["adsb"] == {}
+    assert by_variant["neither error"]["adsb"] == {"adsb_epu_m": [0.0, 0.0], "adsb_nacv_m_s": 0.0}
+    assert {r["seed"] for r in results} == {results[0]["seed"]}  # the same episodes in every row
+    assert all(r["scenario"] == "3u2o" and r["episodes"] == 4 for r in results)
