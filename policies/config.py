@@ -348,6 +348,12 @@ class GeneralistConfig:
     """Share of families flown in the real world (fitted ArduCopter/PX4 responses randomised
     per UAV, ADS-B intruders, GPS noise) rather than the paper's ideal one."""
 
+    real_error_tau_s: tuple[float, float] = (0.0, 0.0)
+    """In the real-world families, the range of the ADS-B report errors' correlation time,
+    seconds (`sim.config.SensorConfig.adsb_error_tau_s`, drawn per intruder): (0, 0) draws every
+    report's error afresh, as the evaluations' real world does; a real GNSS error wanders over
+    minutes, and a policy flies steady offsets worse than jumping ones (docs/MODEL.md §18)."""
+
     teacher_truth: bool = False
     """The teacher reads the true state in the real-world families (`SwarmState.exactly_sensed`:
     the intruders where they are, not their ADS-B tracks, and no GPS error) — a privileged
@@ -386,6 +392,8 @@ class GeneralistConfig:
             check(getattr(self, name) > 0, name, "must be > 0")
         check(0 < self.gamma < 1, "gamma", "must be in (0, 1)")
         check(0.0 <= self.real_share <= 1.0, "real_share", "must be in [0, 1]")
+        lo, hi = self.real_error_tau_s
+        check(0.0 <= lo <= hi and math.isfinite(hi), "real_error_tau_s", "must be 0 <= low <= high")
         check(self.learner in ("td3", "ppo"), "learner", 'must be "td3" or "ppo"')
         check(self.pooling in POOLINGS, "pooling", f"must be one of {POOLINGS}")
         check(
@@ -511,6 +519,8 @@ def resumed_config(
     values["suites"] = tuple(values.get("suites", GeneralistConfig.suites))
     weights = values.get("family_weights", ())
     values["family_weights"] = tuple((str(p), float(w)) for p, w in weights)
+    tau = values.get("real_error_tau_s", GeneralistConfig.real_error_tau_s)
+    values["real_error_tau_s"] = (float(tau[0]), float(tau[1]))
     if minutes is not None and minutes != values.get("minutes", GeneralistConfig.minutes):
         first = values.get("schedule_minutes") or values.get("minutes", GeneralistConfig.minutes)
         values["schedule_minutes"], values["minutes"] = first, minutes

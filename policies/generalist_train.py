@@ -202,6 +202,15 @@ def swarm_peak(cfg: GeneralistConfig, family: Family) -> bool:
     )
 
 
+def real_world(cfg: GeneralistConfig) -> dict[str, Any]:
+    """The overrides of a real-world family (`REAL_WORLD`, errors as the run says).
+
+    Its ADS-B errors are correlated over `GeneralistConfig.real_error_tau_s`.
+    """
+    sensors = {**REAL_WORLD["sensors"], "adsb_error_tau_s": list(cfg.real_error_tau_s)}
+    return {**REAL_WORLD, "sensors": sensors}
+
+
 def make_worlds(
     cfg: GeneralistConfig, layout: ObservationLayout, rng: np.random.Generator
 ) -> list[World]:
@@ -211,7 +220,7 @@ def make_worlds(
     for family in families:
         real = bool(rng.random() < cfg.real_share)
         if real:
-            family = dataclasses.replace(family, overrides={**family.overrides, **REAL_WORLD})
+            family = dataclasses.replace(family, overrides={**family.overrides, **real_world(cfg)})
         scenario = with_layout(family_scenario(family), layout)
         if not swarm_peak(cfg, family):
             field = dataclasses.replace(scenario.field, swarm_peak=False)
@@ -357,10 +366,10 @@ def teacher_plan(
     speed), and ORCA reads the simulator's state, the true positions even where the UAVs'
     sensors are ADS-B: a privileged teacher, which the student, seeing only its observation,
     imitates as far as it can. The shield reads what ``state`` says the UAVs sense (its ADS-B
-    tracks, if any; `SwarmState.exactly_sensed` is the truth). ``horizon_s`` is its τ_o against the intruders
-    (`GeneralistConfig.teacher_horizon_s`). "oracle": the oracle's plan from the current
-    state, replanned at every step (`sim.oracle.oracle_actions`), and ORCA through the shield
-    in the environments where it finds no plan.
+    tracks, if any; `SwarmState.exactly_sensed` is the truth). ``horizon_s`` is its τ_o
+    against the intruders (`GeneralistConfig.teacher_horizon_s`). "oracle": the oracle's plan
+    from the current state, replanned at every step (`sim.oracle.oracle_actions`), and ORCA
+    through the shield in the environments where it finds no plan.
     """
     if teacher not in STATE_TEACHERS:
         raise ValueError(f"teacher {teacher!r} does not label from the state alone (RunBook.teach)")

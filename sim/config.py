@@ -505,6 +505,13 @@ class SensorConfig:
     adsb_drop_probability: float = 0.1
     """Probability that a report is lost (garbled, out of range, receiver busy)."""
 
+    adsb_error_tau_s: tuple[float, float] = (0.0, 0.0)
+    """Correlation time range of an intruder's report errors, seconds, drawn per intruder:
+    position and velocity errors are a first-order Gauss–Markov process, ρ = exp(−Δt/τ) between
+    the reports taken, with the same σ. 0: drawn afresh for every report (the default). A real
+    transponder's GNSS error wanders over minutes, so successive reports share most of it: a
+    track off by a steady few metres rather than one that jumps (docs/MODEL.md §18)."""
+
     gps_sigma_m: float = 1.0
     """One-sigma GPS error per horizontal axis of every UAV position, metres (consumer GNSS
     with SBAS, about 1.5 m 95%), re-drawn at every decision."""
@@ -515,7 +522,7 @@ class SensorConfig:
             "model",
             f"must be one of {', '.join(SENSOR_MODELS)}, got {self.model!r}",
         )
-        _range(self, "adsb_latency_s", "adsb_epu_m")
+        _range(self, "adsb_latency_s", "adsb_epu_m", "adsb_error_tau_s")
         _range(self, "adsb_rate_hz", minimum=1e-3)
         _non_negative(self, "adsb_nacv_m_s", "gps_sigma_m")
         _require(

@@ -123,12 +123,16 @@ class AdsbTracks:
         latency_s: (B, M) transmission to arrival, s.
         pos_sigma_m: (B, M) position error σ per axis, m (EPU / 2.448).
         vel_sigma_m_s: (B, M) velocity error σ per axis, m/s (NACv / 2.448).
+        error_tau_s: (B, M) correlation time of the report errors, s (0: independent).
         last_index: (B, M) k of the newest report that has arrived, lost or not (whole
             numbers as float64, so −inf can mean none): each report's loss is drawn once.
         t_valid_s: (B, M) time of validity t_k of the report held, s.
         t_report_s: (B, M) its time as the tracker takes it (`report_time` of its arrival), s.
         pos_m: (B, M, 2) its position (at ``t_valid_s``, with its error), m.
         vel_m_s: (B, M, 2) its velocity (with its error), m/s.
+        pos_err_m: (B, M, 2) that position's error, m (0 before the first report): what the
+            next report's error is correlated with (`SensorConfig.adsb_error_tau_s`).
+        vel_err_m_s: (B, M, 2) that velocity's error, m/s (likewise).
     """
 
     period_s: FloatArray
@@ -136,35 +140,45 @@ class AdsbTracks:
     latency_s: FloatArray
     pos_sigma_m: FloatArray
     vel_sigma_m_s: FloatArray
+    error_tau_s: FloatArray
     last_index: FloatArray
     t_valid_s: FloatArray
     t_report_s: FloatArray
     pos_m: FloatArray
     vel_m_s: FloatArray
+    pos_err_m: FloatArray
+    vel_err_m_s: FloatArray
 
     @classmethod
     def fresh(cls, b: int, m: int, cfg: SensorConfig, rng: np.random.Generator) -> AdsbTracks:
         """New tracks holding no report; rate, phase, latency and EPU drawn per intruder.
 
-        Rate, latency and EPU are uniform in their `SensorConfig` ranges; the phase is uniform
-        in [0, period). Draws, in order: rate, phase, latency, EPU, each (b, m).
+        Rate, latency, EPU and the errors' correlation time are uniform in their
+        `SensorConfig` ranges; the phase is uniform in [0, period). Draws, in order: rate,
+        phase, latency, EPU, each (b, m), then the correlation time where its range is not a
+        single value (so that a fixed one leaves the stream of the others as it was).
         """
         rate = rng.uniform(*cfg.adsb_rate_hz, size=(b, m))
         period = 1.0 / rate
         phase = period * rng.random((b, m))  # [0, period)
         latency = rng.uniform(*cfg.adsb_latency_s, size=(b, m))
         epu = rng.uniform(*cfg.adsb_epu_m, size=(b, m))
+        lo, hi = cfg.adsb_error_tau_s
+        tau = rng.uniform(lo, hi, size=(b, m)) if hi > lo else np.full((b, m), lo)
         return cls(
             period_s=period,
             phase_s=phase,
             latency_s=latency,
             pos_sigma_m=epu / POSITION_95_TO_SIGMA,
             vel_sigma_m_s=np.full((b, m), cfg.adsb_nacv_m_s / POSITION_95_TO_SIGMA),
+            error_tau_s=tau,
             last_index=np.full((b, m), -math.inf),
             t_valid_s=np.full((b, m), -math.inf),
             t_report_s=np.full((b, m), -math.inf),
             pos_m=np.full((b, m, 2), math.nan),
             vel_m_s=np.full((b, m, 2), math.nan),
+            pos_err_m=np.zeros((b, m, 2)),
+            vel_err_m_s=np.zeros((b, m, 2)),
         )
 
 
@@ -243,9 +257,11 @@ def update(
     age = np.subtract(now_s, t_k)
     age[~take] = 0.0
     pos_err *= tracks.pos_sigma_m[..., np.newaxis]
+    vel_err *= tracks.vel_sigma_m_s[..., np.newaxis]
+    if cfg.adsb_error_tau_s[1] > 0.0:
+        pos_err, vel_err = _correlated(tracks, take, t_k, pos_err, vel_err)
     pos = true_pos - true_vel * age[..., np.newaxis]
     pos += pos_err
-    vel_err *= tracks.vel_sigma_m_s[..., np.newaxis]
     vel = true_vel + vel_err
     keep = take[..., np.newaxis]
     reported = t_k + latency
@@ -255,12 +271,40 @@ def update(
         latency_s=latency,
         pos_sigma_m=tracks.pos_sigma_m,
         vel_sigma_m_s=tracks.vel_sigma_m_s,
+        error_tau_s=tracks.error_tau_s,
         last_index=np.where(count > 0, newest, tracks.last_index),
         t_valid_s=t_k,
         t_report_s=np.where(take, report_time(reported, ADSB_TSLC_S), tracks.t_report_s),
         pos_m=np.where(keep, pos, tracks.pos_m),
         vel_m_s=np.where(keep, vel, tracks.vel_m_s),
+        pos_err_m=np.where(keep, pos_err, tracks.pos_err_m),
+        vel_err_m_s=np.where(keep, vel_err, tracks.vel_err_m_s),
     )
+
+
+def _correlated(
+    tracks: AdsbTracks,
+    take: BoolArray,
+    t_k: FloatArray,
+    pos_fresh: FloatArray,
+    vel_fresh: FloatArray,
+) -> tuple[FloatArray, FloatArray]:
+    """The errors of the reports taken, each a first-order Gauss–Markov step from the held one's.
+
+    ``e = ρ·e_held + √(1 − ρ²)·e_fresh`` with ``ρ = exp(−(t_k − t_held)/τ)``, ``e_fresh`` the
+    fresh draw at the report's σ: the error keeps that σ (stationary), successive reports Δt
+    apart correlate by exp(−Δt/τ), and the first report's error is its fresh draw (ρ = 0), as
+    is every error of an intruder whose τ is 0.
+    """
+    held = np.isfinite(tracks.t_valid_s) & (tracks.error_tau_s > 0.0)  # (B, M)
+    since = np.where(held, tracks.t_valid_s, 0.0)  # −inf before the first report
+    gap = np.where(take & held, t_k - since, math.inf)
+    tau = np.where(held, tracks.error_tau_s, 1.0)
+    rho = np.exp(-gap / tau)[..., np.newaxis]
+    keep = np.sqrt(1.0 - rho * rho)
+    pos: FloatArray = rho * tracks.pos_err_m + keep * pos_fresh
+    vel: FloatArray = rho * tracks.vel_err_m_s + keep * vel_fresh
+    return pos, vel
 
 
 def picture(

@@ -11,6 +11,8 @@ part of the simulated ADS-B report taken away at a time (`sim.config.SensorConfi
   drawn afresh for every report; 0.2–1.5 s latency; 10 % of the reports lost);
 * no position error, no velocity error, neither: EPU, NACv or both 0;
 * half the errors: EPU 5–15 m, NACv 1.5 m/s;
+* the errors correlated over 10 s or 60 s (`SensorConfig.adsb_error_tau_s`: the same σ,
+  successive reports sharing most of their error, as a real GNSS error does);
 * no latency; no loss.
 
 Each row flies the same episodes (`remarl-fc eval`'s evaluation seeds). Prints a markdown table
@@ -35,6 +37,8 @@ VARIANTS: dict[str, dict[str, Any]] = {
     "no velocity error": {"adsb_nacv_m_s": 0.0},
     "neither error": {"adsb_epu_m": [0.0, 0.0], "adsb_nacv_m_s": 0.0},
     "half the errors": {"adsb_epu_m": [5.0, 15.0], "adsb_nacv_m_s": 1.5},
+    "errors correlated over 10 s": {"adsb_error_tau_s": [10.0, 10.0]},
+    "errors correlated over 60 s": {"adsb_error_tau_s": [60.0, 60.0]},
     "no latency": {"adsb_latency_s": [0.0, 0.0]},
     "no loss": {"adsb_drop_probability": 0.0},
 }

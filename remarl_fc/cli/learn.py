@@ -178,6 +178,15 @@ def add_train(sub: Any) -> None:
         "ArduCopter/PX4 responses, ADS-B intruders, GPS noise; default 0.35)",
     )
     p.add_argument(
+        "--real-error-tau",
+        type=float,
+        nargs=2,
+        metavar=("LOW", "HIGH"),
+        help="generalist: in the real-world families, the range of the ADS-B report errors' "
+        "correlation time, seconds, drawn per intruder (default 0 0: every report's error "
+        "drawn afresh)",
+    )
+    p.add_argument(
         "--dagger-lr",
         type=float,
         metavar="LR",
@@ -474,6 +483,7 @@ def generalist_flags(args: argparse.Namespace) -> dict[str, Any]:
         "teacher_horizon_s": args.teacher_horizon,
         "teacher_truth": args.teacher_truth,
         "real_share": args.real_share,
+        "real_error_tau_s": tuple(args.real_error_tau) if args.real_error_tau else None,
         "dagger_turn_weight": args.turn_weight,
         "seed": args.seed or None,
     }

@@ -283,6 +283,20 @@ def tiny_td3(tmp_path: Path, **changes: Any) -> GeneralistConfig:
     return GeneralistConfig(**{**settings, **changes})
 
 
+def test_real_world_families_draw_their_adsb_errors_correlation_time_from_the_run(tmp_path):
+    from policies.generalist_train import generalist_layout, make_worlds
+    from sim.encounters import family_scenario
+    from sim.suite import load_suite
+
+    for tau in ((0.0, 0.0), (10.0, 120.0)):
+        cfg = tiny_td3(tmp_path, real_share=1.0, real_error_tau_s=tau)
+        base = family_scenario(load_suite(cfg.suites[0]).families[0])
+        worlds = make_worlds(cfg, generalist_layout(cfg, base), np.random.default_rng(0))
+        assert worlds and all(w.real for w in worlds)
+        assert {w.cfg.sensors.model for w in worlds} == {"adsb"}
+        assert {w.cfg.sensors.adsb_error_tau_s for w in worlds} == {tau}
+
+
 def test_tiny_generalist_run_trains_checkpoints_and_resumes(tmp_path):
     cfg = tiny_td3(tmp_path, total_iterations=30, eval_minutes=1e-6, real_share=0.5)
     out = tmp_path / "run"
@@ -590,6 +604,7 @@ def test_a_bad_family_weight_flag_says_what_to_write(text):
         ("--max-neighbours", "-1", "max_neighbours"),
         ("--dagger-lr", "0", "dagger_lr"),
         ("--real-share", "1.5", "real_share"),
+        ("--real-error-tau 30", "10", "real_error_tau_s"),
         ("--teacher", "self-shield", "teacher"),
         ("--init generalist --learner", "td3", "init"),
     ],
@@ -634,7 +649,7 @@ def test_train_generalist_flags_reach_the_config(tmp_path, monkeypatch):
     argv += ["--dagger-fraction", "0.25", "--sensing-range", "300", "--sensing-aperture", "360"]
     argv += ["--teacher-horizon", "14", "--turn-weight", "6", "--max-neighbours", "12"]
     argv += ["--init", "generalist", "--dagger-lr", "3e-4", "--teacher-truth"]
-    argv += ["--real-share", "0.5"]
+    argv += ["--real-share", "0.5", "--real-error-tau", "10", "120"]
     assert main([*argv, "--out", str(tmp_path / "run")]) == 0
     ((cfg, out, resume),) = seen
     assert cfg.swarm_field == "formation" and cfg.family_weights == (("swarms-*", 2.0),)
@@ -646,7 +661,7 @@ def test_train_generalist_flags_reach_the_config(tmp_path, monkeypatch):
     assert cfg.teacher_horizon_s == 14.0 and cfg.dagger_turn_weight == 6.0
     assert cfg.max_neighbours == 12
     assert cfg.init == "generalist" and cfg.dagger_lr == 3e-4
-    assert cfg.teacher_truth and cfg.real_share == 0.5
+    assert cfg.teacher_truth and cfg.real_share == 0.5 and cfg.real_error_tau_s == (10.0, 120.0)
     assert cfg.minutes == 2 and cfg.seed == 4 and out == tmp_path / "run" and not resume
     assert GeneralistConfig().swarm_field == "all"  # the paper's reward unless asked
     seen.clear()

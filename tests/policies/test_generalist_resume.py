@@ -18,7 +18,13 @@ def stored(cfg: GeneralistConfig) -> dict:
 
 def test_a_resumed_run_keeps_its_stored_settings_not_todays_defaults():
     run = GeneralistConfig(
-        teacher="none", seed=3, minutes=45, family_weights=(("swarms-*", 2.0),), hidden=32
+        teacher="none",
+        seed=3,
+        minutes=45,
+        family_weights=(("swarms-*", 2.0),),
+        hidden=32,
+        real_error_tau_s=(10.0, 120.0),
+        teacher_truth=True,
     )
     assert run != GeneralistConfig(seed=3)  # the defaults moved on since it started
     assert resumed_config(stored(run)) == run

@@ -185,6 +185,15 @@ def test_adsb_sensing_shows_late_noisy_intruders_and_is_seeded():
     assert valid.mean() > 0.8 and np.median(err) < 30.0 and err.max() < 120.0
 
 
+def test_correlated_adsb_errors_load_from_a_scenario_and_a_negative_time_is_refused():
+    cfg = load_scenario("3u2o", sensors={"model": "adsb", "adsb_error_tau_s": [10.0, 60.0]})
+    assert cfg.sensors.adsb_error_tau_s == (10.0, 60.0)
+    assert load_scenario("3u2o").sensors.adsb_error_tau_s == (0.0, 0.0)  # afresh unless asked
+    with pytest.raises(ScenarioError) as err:
+        load_scenario("3u2o", sensors={"model": "adsb", "adsb_error_tau_s": [-1.0, 5.0]})
+    assert err.value.key == "sensors.adsb_error_tau_s"
+
+
 def test_exactly_sensed_is_the_truth_behind_the_adsb_picture():
     exact_cfg, adsb_cfg = load_scenario("3u1o"), load_scenario("3u1o", sensors={"model": "adsb"})
     sim, rng = SwarmSim(adsb_cfg, scored=False), np.random.default_rng(7)

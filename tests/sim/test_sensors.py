@@ -187,6 +187,37 @@ def test_errors_have_the_stated_95_percent_radius():
         assert within == pytest.approx(0.95, abs=0.005)
 
 
+@pytest.mark.parametrize("tau_s", [0.0, 8.0, 60.0])
+def test_report_errors_correlate_over_their_stated_time_and_keep_their_sigma(tau_s):
+    epu_m, nacv_m_s, count, period_s = 20.0, 3.0, 20_000, 1.0
+    cfg = SensorConfig(
+        model="adsb",
+        adsb_rate_hz=(1.0 / period_s, 1.0 / period_s),
+        adsb_latency_s=(0.0, 0.0),
+        adsb_epu_m=(epu_m, epu_m),
+        adsb_nacv_m_s=nacv_m_s,
+        adsb_drop_probability=0.0,
+        adsb_error_tau_s=(tau_s, tau_s),
+    )
+    rng = np.random.default_rng(3)
+    true_at, vel = straight(count, 1, rng)
+    tracks = AdsbTracks.fresh(count, 1, cfg, rng)
+    errors = []  # (report, count, 2): one report per update, a period apart
+    for now in np.arange(1.0, 12.0, period_s):
+        tracks = update(tracks, true_at(now), vel, now, np.zeros((count, 1)), cfg, rng)
+        truth_then = true_at(tracks.t_valid_s[..., None])
+        pos_err = (tracks.pos_m - truth_then)[:, 0]
+        np.testing.assert_allclose(pos_err, tracks.pos_err_m[:, 0], atol=1e-9)  # as held
+        np.testing.assert_allclose(tracks.vel_m_s - vel, tracks.vel_err_m_s, atol=1e-12)
+        errors.append(pos_err)
+    series = np.stack(errors)
+    sigma = epu_m / POSITION_95_TO_SIGMA
+    np.testing.assert_allclose(series.std(axis=1), sigma, rtol=0.03)  # stationary, each report
+    lag1 = np.mean(series[1:] * series[:-1]) / np.mean(series[1:] ** 2)
+    expected = math.exp(-period_s / tau_s) if tau_s else 0.0
+    assert lag1 == pytest.approx(expected, abs=0.01)
+
+
 @pytest.mark.parametrize("p", [0.1, 0.5])
 def test_losses_have_the_stated_probability(p):
     """One update per report: a fraction p is lost; three at once: all lost with p³."""
@@ -282,6 +313,13 @@ def test_fresh_draws_within_the_configured_ranges():
     assert np.all((epu >= cfg.adsb_epu_m[0] - 1e-9) & (epu <= cfg.adsb_epu_m[1] + 1e-9))
     np.testing.assert_allclose(tracks.vel_sigma_m_s, cfg.adsb_nacv_m_s / 2.448)
     assert math.sqrt(-2 * math.log(0.05)) == pytest.approx(POSITION_95_TO_SIGMA, abs=1e-3)
+    assert not tracks.error_tau_s.any()  # errors drawn afresh by default
+    ranged = dataclasses.replace(cfg, adsb_error_tau_s=(10.0, 60.0))
+    mixed = AdsbTracks.fresh(50, 6, ranged, np.random.default_rng(6))
+    assert np.all((mixed.error_tau_s >= 10.0) & (mixed.error_tau_s <= 60.0))
+    assert mixed.error_tau_s.std() > 5.0  # drawn per intruder
+    # drawn after the others: the rest of the tracks is the default's, draw for draw
+    np.testing.assert_array_equal(mixed.pos_sigma_m, tracks.pos_sigma_m)
 
 
 def merge(old, new, mask):
