@@ -2,12 +2,16 @@
 
     python tools/ship_generalist.py runs/generalist-s1 [--checkpoint best] [--workers 1]
         [--recipe "how the run's start was made, for a run started with --init"]
+        [--name generalist | robust/generalist] [--real-world-episodes 300]
 
 Exports the run's checkpoint to a temporary policy file, flies it on every family of the
 standard suite with and without the safety shield (`remarl-fc eval --suite standard --policy
-FILE --shield on`), writes ``policies/zoo/generalist.eval.json`` (per family: success over all
-and over the solvable episodes, collisions, interventions; with and without the shield), and
-exports ``policies/zoo/generalist.safetensors`` again with the suite means in its metadata.
+FILE --shield on`) and on the eight paper scenarios in the real world (`remarl-fc eval
+--scenario S --dynamics arducopter --sensors adsb --arrival hover --shield on`, the episodes
+flown without the shield too), writes ``policies/zoo/NAME.eval.json`` (per family: success
+over all and over the solvable episodes, collisions, interventions; with and without the
+shield; per real-world scenario: success and collisions, with and without the shield), and
+exports ``policies/zoo/NAME.safetensors`` again with the suite means in its metadata.
 """
 
 from __future__ import annotations
@@ -20,11 +24,13 @@ from pathlib import Path
 from typing import Any
 
 from policies.generalist_train import export_generalist_run
+from remarl_fc.offline.evaluate import evaluate_policy, world_overrides
 from remarl_fc.offline.suite import MethodSpec, evaluate_suite
 from remarl_fc.policy_io import zoo_dir
+from sim.evaluation import evaluation_seed
 from sim.heap import keep_freed_memory
 from sim.shield import ShieldConfig
-from sim.suite import load_suite
+from sim.suite import Suite, load_suite
 
 KEPT = (
     "uavs",
@@ -46,6 +52,54 @@ def _mean(values: list[float]) -> float:
     return sum(finite) / len(finite) if finite else math.nan
 
 
+REAL_WORLD_KEPT = ("success_rate", "collision_rate_u2o", "collision_rate_u2u")
+"""What the eval file keeps of each real-world scenario, with and without the shield."""
+
+TRAINING_KEPT = (
+    "learner",
+    "suites",
+    "minutes",
+    "seed",
+    "init",
+    "teacher",
+    "teacher_truth",
+    "teacher_horizon_s",
+    "real_share",
+    "real_error_tau_s",
+    "bc_weight",
+    "bc_fraction",
+    "dagger_fraction",
+    "dagger_beta",
+    "dagger_updates",
+    "dagger_lr",
+    "hidden",
+    "pooling",
+    "family_weights",
+    "swarm_field",
+    "separation_horizon_s",
+    "separation_weight",
+    "ppo_min_std",
+)
+"""The run's settings the eval file records."""
+
+
+def real_world(policy: Path, episodes: int, suite: Suite) -> dict[str, dict[str, Any]]:
+    """Each paper scenario (the suite's paper-* families) flown in the real world, behind the
+    shield and without it."""
+    world = world_overrides("arducopter", "adsb", "hover")
+    out: dict[str, dict[str, Any]] = {}
+    paper = [f.name.removeprefix("paper-") for f in suite.families if f.name.startswith("paper-")]
+    for scenario in paper:
+        _, r = evaluate_policy(
+            str(policy), scenario, episodes, evaluation_seed(), world, ShieldConfig(mode="on")
+        )
+        out[scenario] = {k: r[f"{k}_unshielded"] for k in REAL_WORLD_KEPT} | {
+            "episodes": r["episodes"],
+            "shielded": {k: r[k] for k in REAL_WORLD_KEPT},
+        }
+    return out
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("run", help="the --out folder of remarl-fc train --generalist")
@@ -56,6 +110,15 @@ def main() -> None:
         default=None,
         help="the commands behind the run, recorded with its results (a run started with "
         "--init records only its last step)",
+    )
+    parser.add_argument(
+        "--name", default="generalist", help="the zoo name it ships as (default generalist)"
+    )
+    parser.add_argument(
+        "--real-world-episodes",
+        type=int,
+        default=300,
+        help="episodes of each paper scenario in the real world (0: none)",
     )
     args = parser.parse_args()
     keep_freed_memory()
@@ -70,6 +133,8 @@ def main() -> None:
             workers=args.workers,
             shield=ShieldConfig(mode="on"),
         )
+        episodes = args.real_world_episodes
+        flown = real_world(policy, episodes, suite) if episodes else {}
     raw = run / f"suite-{args.checkpoint}.json"  # kept beside the run, whatever happens next
     raw.write_text(json.dumps({"results": results}, indent=1, default=float))
     families: dict[str, dict[str, Any]] = {}
@@ -96,42 +161,30 @@ def main() -> None:
             [f["shielded"]["success_rate_solvable"] for f in families.values()]
         ),
     }
+    if flown:
+        metrics["real_world_success_rate"] = _mean([r["success_rate"] for r in flown.values()])
     config = json.loads((run / "config.json").read_text())["generalist"]
     report = {
-        "policy": "generalist (policies/zoo/generalist.safetensors)",
+        "policy": f"{args.name} (policies/zoo/{args.name}.safetensors)",
         "suite": suite.name,
         "suite_version": suite.version,
         "seed": suite.seed,
         "checkpoint": args.checkpoint,
         "recipe": args.recipe,
-        "training": {  # a key a run's config.json predates: not recorded (None), since
-            # defaults change (the teacher and DAgger became the default after the first runs)
-            k: config.get(k)
-            for k in (
-                "learner",
-                "suites",
-                "minutes",
-                "seed",
-                "teacher",
-                "bc_weight",
-                "bc_fraction",
-                "dagger_fraction",
-                "dagger_beta",
-                "dagger_updates",
-                "dagger_lr",
-                "hidden",
-                "pooling",
-                "family_weights",
-                "swarm_field",
-                "separation_horizon_s",
-                "separation_weight",
-                "ppo_min_std",
-            )
-        },
+        # a key a run's config.json predates: not recorded (None), since defaults change (the
+        # teacher and DAgger became the default after the first runs)
+        "training": {k: config.get(k) for k in TRAINING_KEPT},
         **metrics,
         "families": families,
+        "real_world": {
+            "world": "fitted ArduCopter response, ADS-B intruders, GPS noise, arrived UAVs "
+            "hover (remarl-fc eval --scenario S --dynamics arducopter --sensors adsb "
+            "--arrival hover)",
+            "seed": evaluation_seed(),
+            "scenarios": flown,
+        },
     }
-    out = zoo_dir() / "generalist"
+    out = zoo_dir() / args.name
     out.with_suffix(".eval.json").write_text(json.dumps(report, indent=2, default=float) + "\n")
     export_generalist_run(
         run, out.with_suffix(".safetensors"), checkpoint=args.checkpoint, metrics=metrics

@@ -29,7 +29,7 @@ def test_zoo_names_are_scenarios():
     assert set(zoo_names()) - set(GENERALISTS) <= set(scenario_names())
 
 
-@pytest.mark.parametrize("name", GENERALISTS)
+@pytest.mark.parametrize("name", [*GENERALISTS, "robust/generalist"])
 def test_a_zoo_generalist_flies_any_swarm_and_carries_its_suite_results(name):
     from sim.swarm import SwarmSim
 
@@ -46,6 +46,18 @@ def test_a_zoo_generalist_flies_any_swarm_and_carries_its_suite_results(name):
     assert report["suite"] == "standard" and len(report["families"]) >= 38
     assert all(f["episodes"] >= 200 for f in report["families"].values())
     assert report["success_rate"] == pytest.approx(policy.meta["metrics"]["success_rate"])
+
+
+def test_the_robust_generalist_carries_its_real_world_results():
+    policy = load_policy("robust/generalist")
+    report = json.loads((zoo_dir() / "robust" / "generalist.eval.json").read_text())
+    flown = report["real_world"]["scenarios"]
+    assert set(flown) == {"2u1o", "3u1o", "3u2o", "5u1o", "5u2o", "7u1o", "7u2o", "10u1o"}
+    assert all(r["episodes"] >= 300 and "shielded" in r for r in flown.values())
+    mean = np.mean([r["success_rate"] for r in flown.values()])
+    assert mean == pytest.approx(report["real_world_success_rate"])
+    assert mean == pytest.approx(policy.meta["metrics"]["real_world_success_rate"])
+    assert report["training"]["teacher_truth"] is True  # what makes it the robust one
 
 
 def test_the_robust_3u2o_policy_carries_the_world_it_was_trained_in():
