@@ -151,7 +151,7 @@ class AdsbTracks:
 
     @classmethod
     def fresh(cls, b: int, m: int, cfg: SensorConfig, rng: np.random.Generator) -> AdsbTracks:
-        """New tracks holding no report; rate, phase, latency and EPU drawn per intruder.
+        """New tracks holding no report; rate, phase, latency, EPU and τ drawn per intruder.
 
         Rate, latency, EPU and the errors' correlation time are uniform in their
         `SensorConfig` ranges; the phase is uniform in [0, period). Draws, in order: rate,
