@@ -184,6 +184,16 @@ class Threats:
     intruder_known: BoolArray
     intruder_age_s: FloatArray
 
+    @property
+    def tracked(self) -> BoolArray:
+        """(B, M) intruders known from a report of some age (ADS-B tracks), not sensed exactly.
+
+        They are checked over ``track_horizon_s``, their clearance growing with
+        ``track_growth_m_s``.
+        """
+        out: BoolArray = self.intruder_known & (self.intruder_age_s > 0)
+        return out
+
 
 @dataclass(frozen=True)
 class Swarm:
@@ -295,7 +305,7 @@ def _decide(
     full = np.full((b, n), cruise)
     dt, horizon = vehicle.dt_s, max(cfg.horizon_s, vehicle.dt_s)
     # tracked intruders are checked over their own, shorter look-ahead (a cut where it ends)
-    tracked = bool((threats.intruder_known & (threats.intruder_age_s > 0)).any())
+    tracked = bool(threats.tracked.any())
     cuts = (cfg.neighbour_horizon_s, cfg.track_horizon_s) if tracked else (cfg.neighbour_horizon_s,)
     times, split = _times(dt, horizon, cuts)  # (P,)
     a_max = vehicle.max_turn_rad
@@ -598,7 +608,7 @@ def _threat_paths(
         dist = np.hypot(rel[..., 0], rel[..., 1])
         speed = np.hypot(w[..., 0], w[..., 1])  # (B, M)
         age = threats.intruder_age_s
-        tracked = age > 0
+        tracked = threats.tracked  # the unknown are masked out below either way
         ahead_s = np.where(tracked, min(cfg.track_horizon_s, horizon), horizon)  # (B, M)
         grow = np.where(tracked, cfg.track_growth_m_s, 0.0) * (age + ahead_s)
         reach = (vehicle.cruise_m_s + speed + cfg.track_growth_m_s) * ahead_s + required + grow

@@ -26,7 +26,7 @@ import json
 from pathlib import Path
 from typing import Any
 
-from remarl_fc.offline.evaluate import evaluate_policy, world_overrides
+from remarl_fc.offline.evaluate import REAL_WORLD_FLOWN, evaluate_policy, world_overrides
 from sim.evaluation import evaluation_seed
 from sim.heap import keep_freed_memory
 from sim.shield import ShieldConfig
@@ -62,7 +62,7 @@ def main() -> None:
     print("| ADS-B | " + " | ".join(args.scenarios) + " | mean |")
     print("|---|" + "---:|" * (len(args.scenarios) + 1))
     for variant, sensors in VARIANTS.items():
-        overrides = world_overrides("arducopter", "adsb", "hover")
+        overrides = world_overrides(*REAL_WORLD_FLOWN)
         overrides["sensors"] = {"model": "adsb", **sensors}
         cells, total = [], 0.0
         for scenario in args.scenarios:

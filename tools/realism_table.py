@@ -20,7 +20,7 @@ import argparse
 import json
 from pathlib import Path
 
-from remarl_fc.offline.evaluate import evaluate_policy, world_overrides
+from remarl_fc.offline.evaluate import REAL_WORLD_FLOWN, evaluate_policy, world_overrides
 from remarl_fc.policy_io import zoo_names
 from sim.evaluation import evaluation_seed
 from sim.heap import keep_freed_memory
@@ -30,7 +30,7 @@ WORLDS: dict[str, tuple[str, str, str]] = {
     "ideal": ("ideal", "exact", "hover"),
     "arducopter": ("arducopter", "exact", "hover"),
     "px4": ("px4", "exact", "hover"),
-    "arducopter + adsb": ("arducopter", "adsb", "hover"),
+    "arducopter + adsb": REAL_WORLD_FLOWN,
     "px4 + adsb": ("px4", "adsb", "hover"),
 }
 """Column name → (dynamics, sensors, arrival)."""

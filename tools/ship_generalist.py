@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from policies.generalist_train import export_generalist_run
-from remarl_fc.offline.evaluate import evaluate_policy, world_overrides
+from remarl_fc.offline.evaluate import REAL_WORLD_FLOWN, evaluate_policy, world_overrides
 from remarl_fc.offline.suite import MethodSpec, evaluate_suite
 from remarl_fc.policy_io import zoo_dir
 from sim.evaluation import evaluation_seed
@@ -86,7 +86,7 @@ TRAINING_KEPT = (
 def real_world(policy: Path, episodes: int, suite: Suite) -> dict[str, dict[str, Any]]:
     """Each paper scenario (the suite's paper-* families) flown in the real world, behind the
     shield and without it."""
-    world = world_overrides("arducopter", "adsb", "hover")
+    world = world_overrides(*REAL_WORLD_FLOWN)
     out: dict[str, dict[str, Any]] = {}
     paper = [f.name.removeprefix("paper-") for f in suite.families if f.name.startswith("paper-")]
     for scenario in paper:

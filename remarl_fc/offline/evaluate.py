@@ -91,6 +91,13 @@ class RecordingAct:
         return self.act.policy.act(obs)
 
 
+REAL_WORLD_FLOWN: tuple[str, str, str] = ("arducopter", "adsb", "hover")
+"""(dynamics, sensors, arrival) of the real world policies are evaluated in (docs/RESULTS.md,
+"Real vehicles and sensors"): the fitted ArduCopter response, ADS-B intruders with GPS noise,
+arrived UAVs hovering (`world_overrides`, ``eval --dynamics arducopter --sensors adsb
+--arrival hover``)."""
+
+
 def world_overrides(
     dynamics: str | None = None, sensors: str | None = None, arrival: str | None = None
 ) -> dict[str, Any]:

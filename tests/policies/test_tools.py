@@ -124,3 +124,5 @@ def test_adsb_error_table_flies_each_variant_on_the_same_episodes(tmp_path):
     assert by_variant["neither error"]["adsb"] == {"adsb_epu_m": [0.0, 0.0], "adsb_nacv_m_s": 0.0}
     assert {r["seed"] for r in results} == {results[0]["seed"]}  # the same episodes in every row
     assert all(r["scenario"] == "3u2o" and r["episodes"] == 4 for r in results)
+    # each variant's sensors were flown: without the errors the same episodes fly otherwise
+    assert by_variant["neither error"]["energy_rad"] != by_variant["as flown"]["energy_rad"]
