@@ -516,6 +516,17 @@ class SensorConfig:
     """One-sigma GPS error per horizontal axis of every UAV position, metres (consumer GNSS
     with SBAS, about 1.5 m 95%), re-drawn at every decision."""
 
+    adsb_filter: bool = False
+    """Whether each ADS-B track fuses its reports in a constant-velocity Kalman filter
+    (`sim.sensors.fuse`) rather than holding the newest one alone. The runtime's tracker does
+    the same with the same setting (docs/MODEL.md §18, "A track filter")."""
+
+    adsb_filter_accel_m_s2: float = 2.0
+    """White acceleration σ the track filter allows for, per axis, m/s²: an aircraft at 40 m/s
+    in a standard-rate turn (3°/s) accelerates 2.1 m/s² sideways. Smaller trusts straight
+    flight more (smoother tracks, later in a turn); the innovation gate
+    (`sim.sensors.FILTER_GATE`) restarts a track whose report the filter did not expect."""
+
     def __post_init__(self) -> None:
         _require(
             self.model in SENSOR_MODELS,
@@ -524,7 +535,7 @@ class SensorConfig:
         )
         _range(self, "adsb_latency_s", "adsb_epu_m", "adsb_error_tau_s")
         _range(self, "adsb_rate_hz", minimum=1e-3)
-        _non_negative(self, "adsb_nacv_m_s", "gps_sigma_m")
+        _non_negative(self, "adsb_nacv_m_s", "gps_sigma_m", "adsb_filter_accel_m_s2")
         _require(
             0.0 <= self.adsb_drop_probability < 1.0,
             "adsb_drop_probability",

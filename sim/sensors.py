@@ -15,7 +15,9 @@ random phase; each report reaches the runtime after its own latency, or is lost.
 report that arrived replaces the one held; between reports the track is extrapolated. Like the
 runtime, the tracker does not know the latency: it stamps a report with its receive time less
 `ADSB_TSLC_S`, so the picture lags the truth by about the intruder's speed times its latency,
-as in flight. `docs/MODEL.md` gives the numbers and what the model leaves out.
+as in flight. With `SensorConfig.adsb_filter` a track fuses its reports instead (`fuse`: a
+constant-velocity Kalman filter, the runtime's too). `docs/MODEL.md` gives the numbers and what
+the model leaves out.
 """
 
 from __future__ import annotations
@@ -109,6 +111,118 @@ def gps_error(shape: tuple[int, ...], sigma_m: float, rng: np.random.Generator) 
     return error
 
 
+FILTER_GATE = 18.47
+"""Innovation gate of the track filter: the χ² value (4 degrees of freedom: a report's position
+and velocity, two axes each) that a report the filter expected exceeds once in 1,000. A report
+beyond it — an aircraft that turned harder than `SensorConfig.adsb_filter_accel_m_s2` allows,
+or a jump — restarts the track from that report alone rather than being averaged away."""
+
+
+MIN_REPORT_VARIANCE = 1e-6
+"""Floor of the report variances the track filter assumes (m², (m/s)²): a configuration of
+exact reports (EPU and NACv 0) fuses them as near-exact instead of dividing by zero."""
+
+
+@dataclass(frozen=True)
+class TrackNoise:
+    """What the track filter assumes of the reports and of the aircraft (`fuse`).
+
+    Attributes:
+        pos_var_m2: variance of a report's position error per axis, m².
+        vel_var_m2_s2: variance of a report's velocity error per axis, (m/s)².
+        accel_var_m2_s4: white acceleration variance per axis, (m/s²)².
+    """
+
+    pos_var_m2: float
+    vel_var_m2_s2: float
+    accel_var_m2_s4: float
+
+    @classmethod
+    def of(cls, cfg: SensorConfig) -> TrackNoise:
+        """The noise ``cfg`` describes: the middle of its EPU range, its NACv, its acceleration.
+
+        The runtime cannot know a report's EPU (ADSB_VEHICLE carries no NACp), so the filter
+        assumes the middle of the configured range for every aircraft, in flight and here.
+        """
+        pos_sigma = 0.5 * (cfg.adsb_epu_m[0] + cfg.adsb_epu_m[1]) / POSITION_95_TO_SIGMA
+        vel_sigma = cfg.adsb_nacv_m_s / POSITION_95_TO_SIGMA
+        return cls(
+            max(pos_sigma**2, MIN_REPORT_VARIANCE),
+            max(vel_sigma**2, MIN_REPORT_VARIANCE),
+            cfg.adsb_filter_accel_m_s2**2,
+        )
+
+
+def fuse(
+    pos: FloatArray,
+    vel: FloatArray,
+    cov: FloatArray,
+    t: float | FloatArray,
+    z_pos: FloatArray,
+    z_vel: FloatArray,
+    t_z: float | FloatArray,
+    noise: TrackNoise,
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """One report fused into a track: a constant-velocity Kalman filter, per axis.
+
+    The track (``pos``, ``vel`` (..., 2) at time ``t`` (...), covariance ``cov`` (..., 3) =
+    (P_pp, P_pv, P_vv), alike on both axes) is predicted to the report's time ``t_z`` (never
+    backwards) with white acceleration, then corrected by the report's position and velocity
+    (``z_pos``, ``z_vel``). A track that holds nothing to fuse — no report yet (t −inf or
+    NaN position), or one no longer fresh at ``t_z`` (`is_fresh`) — starts from the report, as
+    does one whose report fails the innovation gate (`FILTER_GATE`). Returns the new
+    (pos, vel, cov, t), t the later of ``t`` and ``t_z``. Elementwise: the simulator calls it on
+    (B, M) tracks, the runtime on one track.
+
+    >>> noise = TrackNoise(pos_var_m2=1.0, vel_var_m2_s2=1.0, accel_var_m2_s4=0.0)
+    >>> p, v, c, t = fuse(np.zeros(2), np.zeros(2), np.array([1.0, 0.0, 1.0]), 0.0,
+    ...                   np.array([2.0, 0.0]), np.zeros(2), 0.0, noise)
+    >>> p.tolist(), c.tolist()
+    ([1.0, 0.0], [0.5, 0.0, 0.5])
+    """
+    t_z = np.asarray(t_z, dtype=np.float64)
+    t0 = np.asarray(t, dtype=np.float64)
+    held = np.isfinite(t0) & np.isfinite(pos).all(axis=-1) & is_fresh(t0, t_z)
+    dt = np.where(held, np.maximum(0.0, t_z - np.where(held, t0, 0.0)), 0.0)[..., np.newaxis]
+    # predict: x' = F x, P' = F P Fᵀ + Q (F = [[1, dt], [0, 1]], Q of white acceleration)
+    q = noise.accel_var_m2_s4
+    ppp, ppv, pvv = cov[..., 0:1], cov[..., 1:2], cov[..., 2:3]
+    dt2 = dt * dt
+    ppp = ppp + 2.0 * dt * ppv + dt2 * pvv + q * dt2 * dt2 / 4.0
+    ppv = ppv + dt * pvv + q * dt2 * dt / 2.0
+    pvv = pvv + q * dt2
+    p_pred = pos + vel * dt
+    # correct with z = (position, velocity): S = P' + R, K = P' S⁻¹
+    spp, svv = ppp + noise.pos_var_m2, pvv + noise.vel_var_m2_s2
+    det = spp * svv - ppv * ppv
+    yp, yv = z_pos - p_pred, z_vel - vel  # (..., 2) innovations
+    # yᵀ S⁻¹ y summed over both axes: the χ² of the report
+    d2 = ((svv * yp * yp - 2.0 * ppv * yp * yv + spp * yv * yv) / det).sum(axis=-1)
+    kpp = (ppp * svv - ppv * ppv) / det
+    kpv = (ppv * spp - ppp * ppv) / det
+    kvp = (ppv * svv - pvv * ppv) / det
+    kvv = (pvv * spp - ppv * ppv) / det
+    new_pos = p_pred + kpp * yp + kpv * yv
+    new_vel = vel + kvp * yp + kvv * yv
+    new_cov = np.concatenate(
+        [
+            (1.0 - kpp) * ppp - kpv * ppv,
+            (1.0 - kpp) * ppv - kpv * pvv,
+            (1.0 - kvv) * pvv - kvp * ppv,
+        ],
+        axis=-1,
+    )
+    fused = held & (d2 <= FILTER_GATE)
+    keep = fused[..., np.newaxis]
+    start = np.broadcast_to([noise.pos_var_m2, 0.0, noise.vel_var_m2_s2], new_cov.shape)
+    return (
+        np.where(keep, new_pos, z_pos),
+        np.where(keep, new_vel, z_vel),
+        np.where(keep, new_cov, start),
+        np.where(fused, np.maximum(t0, t_z), t_z),
+    )
+
+
 @dataclass(frozen=True)
 class AdsbTracks:
     """ADS-B of M intruders in B environments, and the report each UAV's tracker holds.
@@ -128,8 +242,11 @@ class AdsbTracks:
             numbers as float64, so −inf can mean none): each report's loss is drawn once.
         t_valid_s: (B, M) time of validity t_k of the report held, s.
         t_report_s: (B, M) its time as the tracker takes it (`report_time` of its arrival), s.
-        pos_m: (B, M, 2) its position (at ``t_valid_s``, with its error), m.
-        vel_m_s: (B, M, 2) its velocity (with its error), m/s.
+        pos_m: (B, M, 2) its position (at ``t_valid_s``, with its error), m; with the track
+            filter (`SensorConfig.adsb_filter`), the filter's position at ``t_report_s``.
+        vel_m_s: (B, M, 2) its velocity (with its error), m/s; or the filter's.
+        cov: (B, M, 3) the track filter's covariance per axis (P_pp m², P_pv m²/s, P_vv
+            (m/s)²; `fuse`); zeros without the filter.
         pos_err_m: (B, M, 2) that position's error, m (0 before the first report): what the
             next report's error is correlated with (`SensorConfig.adsb_error_tau_s`).
         vel_err_m_s: (B, M, 2) that velocity's error, m/s (likewise).
@@ -146,6 +263,7 @@ class AdsbTracks:
     t_report_s: FloatArray
     pos_m: FloatArray
     vel_m_s: FloatArray
+    cov: FloatArray
     pos_err_m: FloatArray
     vel_err_m_s: FloatArray
 
@@ -177,6 +295,7 @@ class AdsbTracks:
             t_report_s=np.full((b, m), -math.inf),
             pos_m=np.full((b, m, 2), math.nan),
             vel_m_s=np.full((b, m, 2), math.nan),
+            cov=np.zeros((b, m, 3)),
             pos_err_m=np.zeros((b, m, 2)),
             vel_err_m_s=np.zeros((b, m, 2)),
         )
@@ -218,7 +337,8 @@ def update(
         visible_since_s: (B, M) when each intruder starts transmitting, s: reports before it
             do not exist (0 from the episode start, later for a pop-up, +inf never, −inf for one
             that has been transmitting all along).
-        cfg: the sensor model (``adsb_drop_probability`` is used here).
+        cfg: the sensor model (``adsb_drop_probability``, the errors' correlation and the
+            track filter are used here).
         rng: draws the losses (B, M) and the errors (B, M, 2) twice, always, in that order.
 
     Returns:
@@ -265,6 +385,14 @@ def update(
     vel = true_vel + vel_err
     keep = take[..., np.newaxis]
     reported = t_k + latency
+    t_report = np.where(take, report_time(reported, ADSB_TSLC_S), tracks.t_report_s)
+    cov = tracks.cov
+    if cfg.adsb_filter:
+        pos, vel, fused_cov, _ = fuse(
+            tracks.pos_m, tracks.vel_m_s, cov, tracks.t_report_s, pos, vel, t_report,
+            TrackNoise.of(cfg),
+        )  # fmt: skip
+        cov = np.where(keep, fused_cov, cov)
     return AdsbTracks(
         period_s=period,
         phase_s=phase,
@@ -274,9 +402,10 @@ def update(
         error_tau_s=tracks.error_tau_s,
         last_index=np.where(count > 0, newest, tracks.last_index),
         t_valid_s=t_k,
-        t_report_s=np.where(take, report_time(reported, ADSB_TSLC_S), tracks.t_report_s),
+        t_report_s=t_report,
         pos_m=np.where(keep, pos, tracks.pos_m),
         vel_m_s=np.where(keep, vel, tracks.vel_m_s),
+        cov=cov,
         pos_err_m=np.where(keep, pos_err, tracks.pos_err_m),
         vel_err_m_s=np.where(keep, vel_err, tracks.vel_err_m_s),
     )

@@ -13,7 +13,9 @@ part of the simulated ADS-B report taken away at a time (`sim.config.SensorConfi
 * half the errors: EPU 5–15 m, NACv 1.5 m/s;
 * the errors correlated over 10 s or 60 s (`SensorConfig.adsb_error_tau_s`: the same σ,
   successive reports sharing most of their error, as a real GNSS error does);
-* no latency; no loss.
+* no latency; no loss;
+* the tracks filtered (`SensorConfig.adsb_filter`, `fly --track-filter on`), with the errors
+  as flown and correlated over 60 s.
 
 Each row flies the same episodes (`remarl-fc eval`'s evaluation seeds). Prints a markdown table
 of success rates, with the UAV–intruder and UAV–UAV collision rates in brackets.
@@ -41,6 +43,11 @@ VARIANTS: dict[str, dict[str, Any]] = {
     "errors correlated over 60 s": {"adsb_error_tau_s": [60.0, 60.0]},
     "no latency": {"adsb_latency_s": [0.0, 0.0]},
     "no loss": {"adsb_drop_probability": 0.0},
+    "tracks filtered": {"adsb_filter": True},
+    "tracks filtered, errors correlated over 60 s": {
+        "adsb_filter": True,
+        "adsb_error_tau_s": [60.0, 60.0],
+    },
 }
 """Row name → the ADS-B settings that differ from the defaults."""
 

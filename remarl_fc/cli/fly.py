@@ -142,6 +142,14 @@ def add_parsers(sub: Any) -> None:
         "--speedup", type=float, default=1.0, help=argparse.SUPPRESS
     )  # only to fly a mock running faster than real time
     add_shield_flags(p, default=FLY_SHIELD_MODE)
+    add_choice(
+        p,
+        "--track-filter",
+        ["off", "on"],
+        unset=True,
+        help="fuse each ADS-B track's reports in a Kalman filter (default off: the newest "
+        "report, as the policies trained; docs/FLYING.md says when on helps)",
+    )
     bus = p.add_argument_group("swarm bus (one process per vehicle)")
     bus.add_argument(
         "--vehicle",
@@ -286,6 +294,7 @@ def cmd_fly(args: argparse.Namespace) -> int:
             signing=signing,
             vehicles=frozenset(args.vehicle) if args.vehicle else None,
             shield=shield,
+            **({} if args.track_filter is None else {"track_filter": args.track_filter == "on"}),
             **{setting: getattr(args, flag) for setting, flag in FLY_FLAGS.items()},
         )
     except ValueError as exc:

@@ -279,6 +279,13 @@ def add_eval(sub: Any) -> None:
         help="exact positions, or ADS-B intruders and GPS noise (default: the scenario's)",
     )
     p.add_argument(
+        "--track-filter",
+        choices=["on", "off"],
+        default=None,
+        help="ADS-B tracks fuse their reports in a Kalman filter, as `fly --track-filter on` "
+        "does, or hold the newest report (default: the scenario's, off)",
+    )
+    p.add_argument(
         "--arrival",
         choices=["hover", "leave"],
         default=None,
@@ -542,11 +549,11 @@ def validation_line(summary: dict[str, Any]) -> str:
 def cmd_eval(args: argparse.Namespace) -> int:
     """Evaluate a policy file with numpy inference; optionally draw one episode."""
     if args.suite:
-        if args.dynamics or args.sensors or args.arrival:
+        if args.dynamics or args.sensors or args.arrival or args.track_filter:
             raise ConfigError(
-                "eval --suite flies each family in its own world; --dynamics, --sensors and "
-                "--arrival apply to --policy evaluations on a scenario (the suite's oracle "
-                "labels are proved for the paper's vehicles)"
+                "eval --suite flies each family in its own world; --dynamics, --sensors, "
+                "--track-filter and --arrival apply to --policy evaluations on a scenario (the "
+                "suite's oracle labels are proved for the paper's vehicles)"
             )
         return cmd_eval_suite(args)
     if not args.policy:
@@ -554,7 +561,8 @@ def cmd_eval(args: argparse.Namespace) -> int:
     from remarl_fc.offline.evaluate import evaluate_policy, plot_episode, world_overrides
 
     episodes = args.episodes or DEFAULT_EVAL_EPISODES
-    world = world_overrides(args.dynamics, args.sensors, args.arrival)
+    track_filter = None if args.track_filter is None else args.track_filter == "on"
+    world = world_overrides(args.dynamics, args.sensors, args.arrival, track_filter)
     policy, result = evaluate_policy(
         args.policy, args.scenario, episodes, args.seed, world, shield_from_args(args)
     )
@@ -564,7 +572,8 @@ def cmd_eval(args: argparse.Namespace) -> int:
     human = (
         f"{result['scenario']} ({result['dynamics']}"
         f"{' randomised' if result['dynamics_randomised'] else ''}, {result['sensors']} "
-        f"sensing, arrived UAVs {result['arrival']}), {int(result['episodes'])} episodes: success "
+        f"sensing{', tracks filtered' if result['track_filter'] else ''}, arrived UAVs "
+        f"{result['arrival']}), {int(result['episodes'])} episodes: success "
         f"{result['success_rate']:.1%}, collisions {result['collision_rate']:.1%} "
         f"(U2O {result['collision_rate_u2o']:.1%}, U2U {result['collision_rate_u2u']:.1%}), "
         f"min d_U2O {result['min_d_u2o_m']:.1f} m, min d_U2U {result['min_d_u2u_m']:.1f} m, "

@@ -24,6 +24,7 @@ from remarl_fc.flight.tracking import VehicleTrack
 from remarl_fc.mavlink.codec import SigningConfig
 from remarl_fc.mavlink.consts import MavComponent, MsgId
 from remarl_fc.mavlink.link import LinkAddress, MavlinkLink
+from sim.config import SensorConfig
 from sim.shield import ShieldConfig
 
 HoldMode = Literal["brake", "loiter"]
@@ -102,6 +103,10 @@ class FlyConfig:
     takeoff_timeout_s: float = 60.0
     adsb_band_m: float = 50.0
     """Intruders within ±this height of a vehicle are obstacles."""
+    track_filter: bool = SensorConfig.adsb_filter
+    """Fuse each ADS-B track's reports in the simulator's track filter (`sim.sensors.fuse`,
+    with `sim.config.SensorConfig`'s noise), rather than hold the newest report; docs/FLYING.md
+    says when it helps ("ADS-B traffic")."""
     system_id: int = 255
     """The controller's MAVLink system id (ArduPilot's MAV_GCS_SYSID default)."""
     component_id: int = MavComponent.ONBOARD_COMPUTER

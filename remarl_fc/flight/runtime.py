@@ -80,6 +80,8 @@ from remarl_fc.mavlink.consts import (
 )
 from remarl_fc.mavlink.link import MavlinkLink, TlogWriter
 from remarl_fc.resource import StackOwner
+from sim.config import SensorConfig
+from sim.sensors import TrackNoise
 
 HOLD_CONFIRM_S = 6.0
 """At the end, wait at most this long for the last hold commands to be confirmed."""
@@ -113,7 +115,9 @@ class SwarmRuntime(StackOwner):
         self.by_sysid = {m.system_id: m for m in self.members}
         self.plans = {p.system_id: p for p in mission.vehicles}
         local = frozenset(m.system_id for m in self.members if m.local)
-        self.traffic = TrafficPicture(mission.origin)
+        self.traffic = TrafficPicture(
+            mission.origin, noise=TrackNoise.of(SensorConfig()) if cfg.track_filter else None
+        )
         self.bus: SwarmBus = bus or MemoryBus(MemoryBroker(), bus_core(cfg, local))
         self.peers = Peers(
             self.bus, self.members, self.traffic, self.clock, cfg.peer_timeout_s,

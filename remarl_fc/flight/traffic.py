@@ -27,6 +27,10 @@ module assumes even those may be wrong):
 * **The swarm bus.** Detections shared by other processes are keyed by
   ``(("peer", system id), ICAO)``, pass the same checks on metres and m/s, and give way to our
   own fresh report of the same ICAO.
+* **The track filter** (``noise``, `FlightConfig.track_filter`): each report from the link is
+  fused into its track by the simulator's filter (`sim.sensors.fuse`: constant velocity, an
+  innovation gate that restarts a track on a report it did not expect); without it a track is
+  its newest report. A shared detection is the peer's own track, stored as it comes.
 """
 
 from __future__ import annotations
@@ -43,7 +47,7 @@ import numpy as np
 from remarl_fc.flight.tracking import FloatArray
 from remarl_fc.frames import GeoPoint, from_deg_e7, geodetic_to_ned
 from remarl_fc.mavlink.consts import AdsbFlag
-from sim.sensors import TRACK_MAX_AGE_S, extrapolate, is_fresh, report_time
+from sim.sensors import TRACK_MAX_AGE_S, TrackNoise, extrapolate, fuse, is_fresh, report_time
 
 LinkSource = tuple[int, int]
 """(system id, component id) of the MAVLink sender of an ADSB_VEHICLE."""
@@ -143,6 +147,7 @@ class Intruder:
     vel_ne_m_s: FloatArray
     t: float
     shared: bool = False  # learnt from another vehicle over the swarm bus
+    cov: FloatArray | None = None  # the track filter's (P_pp, P_pv, P_vv); None: unfiltered
 
     def predicted_ne_m(self, now: float) -> FloatArray:
         """Position extrapolated at constant velocity to ``now`` (`sim.sensors.extrapolate`)."""
@@ -166,6 +171,8 @@ class TrafficPicture:
     Attributes:
         origin: the mission origin. max_age_s: a track older than this is dropped
             (`sim.sensors.TRACK_MAX_AGE_S`, which the simulator's tracker uses too).
+        noise: the track filter's assumptions (`sim.sensors.TrackNoise`); None: no filter,
+            a track is its newest report.
         max_speed_m_s: reports faster than this are rejected (`MAX_ADSB_SPEED_M_S`).
         max_stored: tracks kept at most. max_used: tracks `current` returns at most.
         rejected: reports dropped, by reason. conflicts: reports that placed an ICAO further
@@ -179,6 +186,7 @@ class TrafficPicture:
     max_speed_m_s: float = MAX_ADSB_SPEED_M_S
     max_stored: int = MAX_TRACKS_STORED
     max_used: int = MAX_TRACKS_USED
+    noise: TrackNoise | None = None
     rejected: Counter[str] = field(default_factory=Counter)
     conflicts: int = 0
     evicted: int = 0
@@ -227,7 +235,8 @@ class TrafficPicture:
         vel = np.array([speed * math.cos(course), speed * math.sin(course)])
         height = -float(d) if has_alt else math.nan  # unknown altitude: at every height
         key: TrackKey = ((int(source[0]), int(source[1])), int(msg.ICAO_address))
-        return self._store(key, Intruder(ne, height, vel, report_time(now, age)), now, "")
+        report = Intruder(ne, height, vel, report_time(now, age))
+        return self._store(key, self._filtered(key, report), now, "")
 
     def merge_shared(
         self,
@@ -334,6 +343,7 @@ class TrafficPicture:
         shared = sum(1 for src, _ in self._tracks if _is_peer(src))
         return {
             "tracks": len(self._tracks),
+            "filtered": self.noise is not None,
             "own": len(self._tracks) - shared,
             "shared": shared,
             "rejected": dict(sorted(self.rejected.items())),
@@ -342,6 +352,22 @@ class TrafficPicture:
         }
 
     # -- inside ---------------------------------------------------------------------------
+
+    def _filtered(self, key: TrackKey, report: Intruder) -> Intruder:
+        """``report`` fused into the track held under ``key`` (`sim.sensors.fuse`), if filtering.
+
+        With no track held (or a stale one) the filter starts from the report.
+        """
+        if self.noise is None:
+            return report
+        old = self._tracks.get(key)
+        if old is None or old.cov is None:
+            old = Intruder(np.full(2, math.nan), math.nan, np.full(2, math.nan), -math.inf)
+        pos, vel, cov, t = fuse(
+            old.ne_m, old.vel_ne_m_s, np.zeros(3) if old.cov is None else old.cov, old.t,
+            report.ne_m, report.vel_ne_m_s, report.t, self.noise,
+        )  # fmt: skip
+        return Intruder(pos, report.height_m, vel, float(t), cov=cov)
 
     def _reject(self, reason: str) -> bool:
         self.rejected[reason] += 1

@@ -99,7 +99,10 @@ arrived UAVs hovering (`world_overrides`, ``eval --dynamics arducopter --sensors
 
 
 def world_overrides(
-    dynamics: str | None = None, sensors: str | None = None, arrival: str | None = None
+    dynamics: str | None = None,
+    sensors: str | None = None,
+    arrival: str | None = None,
+    track_filter: bool | None = None,
 ) -> dict[str, Any]:
     """Scenario overrides that fly a scenario in another world (None: keep the scenario's).
 
@@ -108,6 +111,7 @@ def world_overrides(
             "arducopter", "px4", ... or a profile file).
         sensors: "exact" or "adsb" (with the scenario's ADS-B and GPS settings).
         arrival: "hover" or "leave".
+        track_filter: whether ADS-B tracks fuse their reports (`SensorConfig.adsb_filter`).
     """
     out: dict[str, Any] = {}
     if dynamics is not None:
@@ -118,6 +122,8 @@ def world_overrides(
         }
     if sensors is not None:
         out["sensors"] = {"model": sensors}
+    if track_filter is not None:
+        out["sensors"] = {**out.get("sensors", {}), "adsb_filter": track_filter}
     if arrival is not None:
         out["arrival"] = arrival
     return out
@@ -168,6 +174,7 @@ def evaluate_policy(
         "dynamics": cfg.dynamics,
         "dynamics_randomised": cfg.dynamics_randomisation.randomised,
         "sensors": cfg.sensors.model,
+        "track_filter": cfg.sensors.adsb_filter,
         "arrival": cfg.arrival,
     }
     return policy, result

@@ -223,7 +223,9 @@ def test_eval_in_the_worlds_of_real_flight(capsys):
     assert main([*args, "--dynamics", "px4", "--sensors", "adsb", "--arrival", "leave"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert (out["dynamics"], out["sensors"], out["arrival"]) == ("px4", "adsb", "leave")
-    assert not out["dynamics_randomised"]
+    assert not out["dynamics_randomised"] and not out["track_filter"]
+    assert main([*args, "--sensors", "adsb", "--track-filter", "on"]) == 0
+    assert json.loads(capsys.readouterr().out)["track_filter"] is True
     assert main(args) == 0
     out = json.loads(capsys.readouterr().out)
     assert (out["dynamics"], out["sensors"], out["arrival"]) == ("ideal", "exact", "hover")
@@ -235,3 +237,5 @@ def test_eval_names_an_unknown_vehicle_profile_and_the_suite_refuses_world_flags
     assert "unknown vehicle profile 'glider'" in err and "arducopter" in err
     assert main(["eval", "--suite", "smoke", "--dynamics", "px4"]) == 2
     assert "--dynamics" in capsys.readouterr().err
+    assert main(["eval", "--suite", "smoke", "--track-filter", "on"]) == 2
+    assert "--track-filter" in capsys.readouterr().err

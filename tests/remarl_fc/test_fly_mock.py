@@ -88,6 +88,25 @@ async def test_lossy_late_link_still_no_collision():
     assert sum(v["link"]["dropped_in"] for v in flight.ground_truth["vehicles"]) > 0
 
 
+async def test_filtered_tracks_fly_the_lossy_late_link_without_collision():
+    """`fly --track-filter on`: the ADS-B reports from the mock are fused into tracks."""
+    seen: dict[str, bool] = {}
+
+    async def watch(fleet, runtime) -> None:
+        await until_controlled(runtime)
+        await flown_for(fleet, runtime, 4.0)
+        tracks = list(runtime.traffic.tracks.values())
+        seen["fused"] = bool(tracks) and all(v.cov is not None for v in tracks)
+
+    faults = Faults(loss=0.10, latency_s=0.200)
+    flight = await fly_on_mock(
+        "3u2o", speedup=SPEEDUP, faults=faults, during=watch, fly_options={"track_filter": True}
+    )
+    assert_safe_and_arrived(flight.ground_truth)
+    assert seen["fused"]
+    assert flight.runtime["traffic"]["filtered"] is True
+
+
 async def test_link_cut_is_detected_within_a_second_and_the_vehicle_is_held():
     seen: dict[str, float] = {}
 

@@ -13,10 +13,13 @@ from remarl_fc.flight.traffic import Intruder, TrafficPicture, _at
 from sim.config import SensorConfig
 from sim.sensors import (
     ADSB_TSLC_S,
+    FILTER_GATE,
     POSITION_95_TO_SIGMA,
     TRACK_MAX_AGE_S,
     AdsbTracks,
+    TrackNoise,
     extrapolate,
+    fuse,
     gps_error,
     is_fresh,
     picture,
@@ -406,3 +409,93 @@ def test_runtime_ages_tracks_with_the_shared_rule():
     assert is_fresh(0.0, TRACK_MAX_AGE_S) and not is_fresh(0.0, TRACK_MAX_AGE_S + 1e-9)
     ages = np.array([0.0, 5.0, 5.5, -math.inf])
     np.testing.assert_array_equal(is_fresh(ages, 5.0), [True, True, True, False])
+
+
+# -- the track filter ------------------------------------------------------------------------
+
+NOISE = TrackNoise.of(SensorConfig())
+
+
+def filtered_errors(cfg, seed=0, count=4000, steps=30):
+    """RMS position and velocity error of the tracks' picture at every decision after the 5th,
+    intruders flying straight at 15 m/s, decisions 2 s apart."""
+    rng = np.random.default_rng(seed)
+    vel = np.zeros((count, 1, 2))
+    vel[..., 0] = 15.0
+    tracks = AdsbTracks.fresh(count, 1, cfg, rng)
+    pos_err, vel_err = [], []
+    for k in range(steps):
+        now = 2.0 * k
+        tracks = update(tracks, vel * now, vel, now, np.full((count, 1), -np.inf), cfg, rng)
+        pos, v, ok = picture(tracks, now)
+        if k >= 5:
+            pos_err.append(np.hypot(*(pos - vel * now)[ok].T))
+            vel_err.append(np.hypot(*(v - vel)[ok].T))
+    rms = [float(np.sqrt(np.mean(np.concatenate(e) ** 2))) for e in (pos_err, vel_err)]
+    return rms[0], rms[1]
+
+
+def test_the_filter_halves_the_error_of_independent_reports():
+    """Without latency the picture's error is the reports' own: the filter takes most of it away
+    (fused reports 2 s apart; the runtime, which fuses every report, takes more)."""
+    cfg = SensorConfig(model="adsb", adsb_latency_s=(0.0, 0.0))
+    raw_pos, raw_vel = filtered_errors(cfg)
+    pos, vel = filtered_errors(dataclasses.replace(cfg, adsb_filter=True))
+    mean_epu2 = (10.0**2 + 10.0 * 30.0 + 30.0**2) / 3.0  # EPU uniform in 10–30 m
+    assert raw_pos == pytest.approx(math.sqrt(2.0 * mean_epu2) / POSITION_95_TO_SIGMA, rel=0.05)
+    assert pos < 0.6 * raw_pos
+    assert vel < 0.95 * raw_vel
+
+
+def test_the_filter_is_off_by_default_and_changes_nothing_then():
+    cfg = SensorConfig(model="adsb")
+    assert not cfg.adsb_filter
+    on = dataclasses.replace(cfg, adsb_filter=True)
+    a, b = (
+        update(AdsbTracks.fresh(8, 3, c, np.random.default_rng(2)), np.zeros((8, 3, 2)),
+               np.ones((8, 3, 2)), 3.0, np.zeros((8, 3)), c, np.random.default_rng(4))
+        for c in (cfg, on)
+    )  # fmt: skip
+    np.testing.assert_array_equal(a.cov, 0.0)
+    # a first report starts every track: the same picture, and the filter's covariance
+    np.testing.assert_array_equal(a.pos_m, b.pos_m)
+    took = np.isfinite(b.t_report_s)
+    assert took.any()
+    start = np.array([NOISE.pos_var_m2, 0.0, NOISE.vel_var_m2_s2])
+    np.testing.assert_allclose(b.cov[took], np.broadcast_to(start, b.cov[took].shape))
+
+
+@given(
+    var=st.tuples(st.floats(0.01, 1e4), st.floats(-0.9, 0.9), st.floats(0.01, 1e3)),
+    dt=st.floats(0.0, 4.9),
+    z=st.lists(st.floats(-50.0, 50.0), min_size=4, max_size=4),
+)
+def test_a_fused_track_is_surer_than_its_prediction_and_its_report(var, dt, z):
+    """The posterior covariance stays symmetric positive definite, below the report's variance
+    and below the prediction's, whatever the prior (property of the Kalman update)."""
+    ppp, rho, pvv = var
+    cov = np.array([ppp, rho * math.sqrt(ppp * pvv), pvv])
+    pos, _, out, t = fuse(np.zeros(2), np.zeros(2), cov, 0.0, np.array(z[:2]),
+                            np.array(z[2:]), dt, NOISE)  # fmt: skip
+    if np.array_equal(out, [NOISE.pos_var_m2, 0.0, NOISE.vel_var_m2_s2]):  # the gate restarted
+        np.testing.assert_array_equal(pos, z[:2])
+        return
+    assert out[0] > 0 and out[2] > 0 and out[0] * out[2] > out[1] ** 2
+    assert out[0] <= NOISE.pos_var_m2 + 1e-9 and out[2] <= NOISE.vel_var_m2_s2 + 1e-9
+    predicted_pp = ppp + 2 * dt * cov[1] + dt * dt * pvv + NOISE.accel_var_m2_s4 * dt**4 / 4
+    assert out[0] <= predicted_pp + 1e-9
+    assert t == dt
+
+
+def test_the_gate_restarts_a_track_on_a_report_it_did_not_expect():
+    cov = np.array([NOISE.pos_var_m2, 0.0, NOISE.vel_var_m2_s2])
+    prior = (np.zeros(2), np.array([10.0, 0.0]), cov, 0.0)
+    near = fuse(*prior, np.array([12.0, 3.0]), np.array([10.5, 0.0]), 1.0, NOISE)
+    assert 0.0 < near[0][0] < 12.0 and near[1][0] == pytest.approx(10.2, abs=0.3)  # fused
+    jump = np.array([10.0 + 100.0, 0.0])  # 100 m off the prediction: χ² far beyond the gate
+    far = fuse(*prior, jump, np.array([10.0, 0.0]), 1.0, NOISE)
+    assert ((jump - [10.0, 0.0]) ** 2).sum() / (cov[0] + NOISE.pos_var_m2) > FILTER_GATE
+    np.testing.assert_array_equal(far[0], jump)
+    np.testing.assert_array_equal(far[2], cov)
+    stale = fuse(*prior, np.array([60.0, 0.0]), np.array([10.0, 0.0]), TRACK_MAX_AGE_S + 1, NOISE)
+    np.testing.assert_array_equal(stale[0], [60.0, 0.0])  # too old to fuse: starts afresh

@@ -24,10 +24,13 @@ from remarl_fc.flight.traffic import (
     MAX_TRACKS_STORED,
     MAX_TRACKS_USED,
     MIN_ALTITUDE_M,
+    Intruder,
     TrafficPicture,
 )
 from remarl_fc.frames import to_deg_e7
 from remarl_fc.mavlink.consts import AdsbFlag
+from sim.config import SensorConfig
+from sim.sensors import TrackNoise, fuse
 
 SRC = (1, 1)  # the bound autopilot
 OTHER = (7, 156)  # an ADS-B receiver the mission names (MAV_COMP_ID_ADSB)
@@ -505,3 +508,47 @@ def test_peers_merge_each_batch_once_and_publish_only_our_own_tracks():
     sent = peers._detections(SimpleNamespace(system_id=1), 1.2)
     assert [d.icao for d in sent.items] == [0xD, 0xC]  # ours only, nearest first
     assert sent.id == 1
+
+
+# -- the track filter ------------------------------------------------------------------------
+
+FILTER_NOISE = TrackNoise.of(SensorConfig())
+
+
+def test_runtime_fuses_with_the_same_filter():
+    """`TrafficPicture` with the filter holds what `fuse` gives for the same reports."""
+    pic = TrafficPicture(ORIGIN, noise=FILTER_NOISE)
+    first = Intruder(np.array([100.0, 0.0]), 30.0, np.array([0.0, 15.0]), 1.0)
+    second = Intruder(np.array([104.0, 16.0]), 30.0, np.array([1.0, 14.0]), 2.0)
+    key = ((1, 1), 0xABC)
+    pic._store(key, pic._filtered(key, first), 1.0, "")
+    got = pic._filtered(key, second)
+    start = np.array([FILTER_NOISE.pos_var_m2, 0.0, FILTER_NOISE.vel_var_m2_s2])
+    pos, vel, cov, t = fuse(first.ne_m, first.vel_ne_m_s, start, 1.0, second.ne_m,
+                            second.vel_ne_m_s, 2.0, FILTER_NOISE)  # fmt: skip
+    np.testing.assert_array_equal(got.ne_m, pos)
+    np.testing.assert_array_equal(got.vel_ne_m_s, vel)
+    np.testing.assert_array_equal(got.cov, cov)
+    assert got.t == t == 2.0 and got.height_m == 30.0
+    assert TrafficPicture(ORIGIN)._filtered(key, second) is second  # no filter
+
+
+def test_filtered_tracks_from_the_link_fuse_and_a_jump_restarts():
+    pic = TrafficPicture(ORIGIN, noise=FILTER_NOISE)
+    for k, north in enumerate([300.0, 318.0, 330.0]):  # reports of 15 m/s north, 1 s apart
+        assert pic.update(adsb(0xABC123, north, 0.0, 30.0, heading_cdeg=0, speed_cm_s=1500),
+                          10.0 + k, source=SRC)  # fmt: skip
+    fused = track(pic, 0xABC123)
+    assert fused.cov is not None and fused.cov[0] < FILTER_NOISE.pos_var_m2
+    assert 0.1 < abs(fused.ne_m[0] - 330.0) < 5.0  # not the last report alone, but near it
+    assert fused.t == 12.0
+    assert pic.update(adsb(0xABC123, 900.0, 0.0, 30.0, heading_cdeg=0, speed_cm_s=1500),
+                      13.0, source=SRC)  # fmt: skip
+    restarted = track(pic, 0xABC123)
+    np.testing.assert_allclose(restarted.ne_m, [900.0, 0.0], atol=QUANTUM_M)
+    np.testing.assert_allclose(restarted.cov, [FILTER_NOISE.pos_var_m2, 0.0,
+                                               FILTER_NOISE.vel_var_m2_s2])  # fmt: skip
+    other = TrafficPicture(ORIGIN)  # no filter: the newest report
+    other.update(adsb(0xABC123, 318.0, 0.0, 30.0, heading_cdeg=0, speed_cm_s=1500), 11.0,
+                 source=SRC)  # fmt: skip
+    assert track(other, 0xABC123).cov is None
