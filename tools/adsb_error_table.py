@@ -15,7 +15,7 @@ part of the simulated ADS-B report taken away at a time (`sim.config.SensorConfi
   successive reports sharing most of their error, as a real GNSS error does);
 * no latency; no loss;
 * the tracks filtered (`SensorConfig.adsb_filter`, `fly --track-filter on`), with the errors
-  as flown and correlated over 60 s.
+  as flown and correlated over 10 s and 60 s.
 
 Each row flies the same episodes (`remarl-fc eval`'s evaluation seeds). Prints a markdown table
 of success rates, with the UAV–intruder and UAV–UAV collision rates in brackets.
@@ -44,6 +44,10 @@ VARIANTS: dict[str, dict[str, Any]] = {
     "no latency": {"adsb_latency_s": [0.0, 0.0]},
     "no loss": {"adsb_drop_probability": 0.0},
     "tracks filtered": {"adsb_filter": True},
+    "tracks filtered, errors correlated over 10 s": {
+        "adsb_filter": True,
+        "adsb_error_tau_s": [10.0, 10.0],
+    },
     "tracks filtered, errors correlated over 60 s": {
         "adsb_filter": True,
         "adsb_error_tau_s": [60.0, 60.0],

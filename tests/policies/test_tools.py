@@ -118,7 +118,7 @@ def test_adsb_error_table_flies_each_variant_on_the_same_episodes(tmp_path):
     assert done.returncode == 0, done.stderr
     rows = [line for line in done.stdout.splitlines() if line.startswith("| ") and "%" in line]
     results = json.loads(out.read_text())
-    assert len(rows) == len(results) == 11
+    assert len(rows) == len(results) == 12
     by_variant = {r["variant"]: r for r in results}
     assert by_variant["as flown"]["adsb"] == {}
     assert by_variant["neither error"]["adsb"] == {"adsb_epu_m": [0.0, 0.0], "adsb_nacv_m_s": 0.0}

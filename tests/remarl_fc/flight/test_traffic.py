@@ -458,6 +458,7 @@ def test_shared_detections_are_checked_keyed_by_peer_and_give_way_to_ours():
     assert pic.merge_shared(5, 0xA, (100.0, 0.0), 20.0, (0.0, 5.0), 7.0, 7.0)
     assert pic.stats() == {
         "tracks": 1,
+        "filtered": False,
         "own": 0,
         "shared": 1,
         "rejected": {
