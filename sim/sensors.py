@@ -151,8 +151,9 @@ class TrackNoise:
     def of(cls, cfg: SensorConfig) -> TrackNoise:
         """The noise ``cfg`` describes: the middle of its EPU range, its NACv, its acceleration.
 
-        NACv's variance is scaled by `FILTER_VELOCITY_VARIANCE_SCALE`. The runtime cannot know a report's EPU (ADSB_VEHICLE carries no NACp), so the filter
-        assumes the middle of the configured range for every aircraft, in flight and here.
+        NACv's variance is scaled by `FILTER_VELOCITY_VARIANCE_SCALE`. The runtime cannot know
+        a report's EPU (ADSB_VEHICLE carries no NACp), so the filter assumes the middle of the
+        configured range for every aircraft, in flight and here.
         """
         pos_sigma = 0.5 * (cfg.adsb_epu_m[0] + cfg.adsb_epu_m[1]) / POSITION_95_TO_SIGMA
         vel_sigma = cfg.adsb_nacv_m_s / POSITION_95_TO_SIGMA
