@@ -354,6 +354,11 @@ class GeneralistConfig:
     report's error afresh, as the evaluations' real world does; a real GNSS error wanders over
     minutes, and a policy flies steady offsets worse than jumping ones (docs/MODEL.md §18)."""
 
+    real_track_filter: bool = False
+    """In the real-world families, each ADS-B track fuses its reports in the track filter
+    (`sim.config.SensorConfig.adsb_filter`, `fly --track-filter on`) rather than holding the
+    newest one: train for the picture the flight will give."""
+
     teacher_truth: bool = False
     """The teacher reads the true state in the real-world families (`SwarmState.exactly_sensed`:
     the intruders where they are, not their ADS-B tracks, and no GPS error) — a privileged

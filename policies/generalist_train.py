@@ -205,9 +205,14 @@ def swarm_peak(cfg: GeneralistConfig, family: Family) -> bool:
 def real_world(cfg: GeneralistConfig) -> dict[str, Any]:
     """The overrides of a real-world family (`REAL_WORLD`, errors as the run says).
 
-    Its ADS-B errors are correlated over `GeneralistConfig.real_error_tau_s`.
+    Its ADS-B errors are correlated over `GeneralistConfig.real_error_tau_s`, its tracks
+    filtered if `GeneralistConfig.real_track_filter` says so.
     """
-    sensors = {**REAL_WORLD["sensors"], "adsb_error_tau_s": list(cfg.real_error_tau_s)}
+    sensors = {
+        **REAL_WORLD["sensors"],
+        "adsb_error_tau_s": list(cfg.real_error_tau_s),
+        "adsb_filter": cfg.real_track_filter,
+    }
     return {**REAL_WORLD, "sensors": sensors}
 
 

@@ -187,6 +187,13 @@ def add_train(sub: Any) -> None:
         "drawn afresh)",
     )
     p.add_argument(
+        "--real-track-filter",
+        action="store_true",
+        default=None,
+        help="generalist: in the real-world families, ADS-B tracks fuse their reports in the "
+        "track filter, as `fly --track-filter on` does (default: a track is its newest report)",
+    )
+    p.add_argument(
         "--dagger-lr",
         type=float,
         metavar="LR",
@@ -491,6 +498,7 @@ def generalist_flags(args: argparse.Namespace) -> dict[str, Any]:
         "teacher_truth": args.teacher_truth,
         "real_share": args.real_share,
         "real_error_tau_s": tuple(args.real_error_tau) if args.real_error_tau else None,
+        "real_track_filter": args.real_track_filter,
         "dagger_turn_weight": args.turn_weight,
         "seed": args.seed or None,
     }

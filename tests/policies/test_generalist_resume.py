@@ -24,6 +24,7 @@ def test_a_resumed_run_keeps_its_stored_settings_not_todays_defaults():
         family_weights=(("swarms-*", 2.0),),
         hidden=32,
         real_error_tau_s=(10.0, 120.0),
+        real_track_filter=True,
         teacher_truth=True,
     )
     assert run != GeneralistConfig(seed=3)  # the defaults moved on since it started
