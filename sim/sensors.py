@@ -193,8 +193,10 @@ def fuse(
     """
     t_z = np.asarray(t_z, dtype=np.float64)
     t0 = np.asarray(t, dtype=np.float64)
-    held = np.isfinite(t0) & np.isfinite(pos).all(axis=-1) & is_fresh(t0, t_z)
-    dt = np.where(held, np.maximum(0.0, t_z - np.where(held, t0, 0.0)), 0.0)[..., np.newaxis]
+    finite = np.isfinite(t0) & np.isfinite(t_z)  # no inf − inf below
+    t0_at, tz_at = np.where(finite, t0, 0.0), np.where(finite, t_z, 0.0)
+    held = finite & np.isfinite(pos).all(axis=-1) & is_fresh(t0_at, tz_at)
+    dt = np.where(held, np.maximum(0.0, tz_at - t0_at), 0.0)[..., np.newaxis]
     # predict: x' = F x, P' = F P Fᵀ + Q (F = [[1, dt], [0, 1]], Q of white acceleration)
     q = noise.accel_var_m2_s4
     ppp, ppv, pvv = cov[..., 0:1], cov[..., 1:2], cov[..., 2:3]

@@ -142,14 +142,7 @@ def add_parsers(sub: Any) -> None:
         "--speedup", type=float, default=1.0, help=argparse.SUPPRESS
     )  # only to fly a mock running faster than real time
     add_shield_flags(p, default=FLY_SHIELD_MODE)
-    add_choice(
-        p,
-        "--track-filter",
-        ["off", "on"],
-        unset=True,
-        help="fuse each ADS-B track's reports in a Kalman filter (default off: the newest "
-        "report, as the policies trained; docs/FLYING.md says when on helps)",
-    )
+    add_track_filter_flag(p)
     bus = p.add_argument_group("swarm bus (one process per vehicle)")
     bus.add_argument(
         "--vehicle",
@@ -214,6 +207,13 @@ def add_parsers(sub: Any) -> None:
     p.add_argument("--log", default=None, metavar="DIR", help="keep the logs here")
     p.add_argument("--summary", default=None, help="write the ground truth here (JSON)")
     add_shield_flags(p, default=FLY_SHIELD_MODE)
+    add_track_filter_flag(p)
+    p.add_argument(
+        "--adsb-noise",
+        action="store_true",
+        help="the mock's ADS-B reports carry the simulator's report errors (EPU 10-30 m, "
+        "NACv 3 m/s; default: exact reports)",
+    )
     finish(p, cmd_demo)
 
     p = sub.add_parser("plot-flight", help="draw a flight from its log folder")
@@ -294,7 +294,7 @@ def cmd_fly(args: argparse.Namespace) -> int:
             signing=signing,
             vehicles=frozenset(args.vehicle) if args.vehicle else None,
             shield=shield,
-            **({} if args.track_filter is None else {"track_filter": args.track_filter == "on"}),
+            track_filter=track_filter_of(args),
             **{setting: getattr(args, flag) for setting, flag in FLY_FLAGS.items()},
         )
     except ValueError as exc:
@@ -382,6 +382,25 @@ def policy_line(policy: dict[str, Any]) -> str:
     return f"policy {policy['name']} ({count}, {checksum})"
 
 
+def add_track_filter_flag(p: Any) -> None:
+    """Add ``--track-filter off|on`` (left out: `FlyConfig`'s default, off)."""
+    add_choice(
+        p,
+        "--track-filter",
+        ["off", "on"],
+        unset=True,
+        help="fuse each ADS-B track's reports in a Kalman filter (default off: the newest "
+        "report, as the policies trained; docs/FLYING.md says when on helps)",
+    )
+
+
+def track_filter_of(args: argparse.Namespace) -> bool:
+    """`FlyConfig.track_filter` as ``--track-filter`` says (left out: its default)."""
+    from remarl_fc.flight.config import FlyConfig
+
+    return FlyConfig.track_filter if args.track_filter is None else args.track_filter == "on"
+
+
 def cmd_demo(args: argparse.Namespace) -> int:
     """Mock fleet + runtime in one process; plot and ground truth at the end."""
     from remarl_fc.demo import fly_on_mock
@@ -411,6 +430,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
                 vehicles=args.vehicles,
                 intruders=intruders,
                 shield=shield,
+                fly_options={"track_filter": track_filter_of(args)},
+                sitl_options={"adsb_noise": True} if args.adsb_noise else None,
             )
         )
         figure = plot_flight(log_dir, args.out)

@@ -99,6 +99,12 @@ def add_sitl_parser(sub: Any) -> None:
     p.add_argument("--gps-noise", type=float, default=0.0, help="position noise σ, m")
     p.add_argument("--gust", type=float, default=0.0, help="gust velocity σ, m/s")
     p.add_argument(
+        "--adsb-noise",
+        action="store_true",
+        help="ADS-B reports carry the simulator's report errors (EPU 10-30 m, NACv 3 m/s); "
+        "default: exact, as ArduPilot's SITL",
+    )
+    p.add_argument(
         "--vehicle",
         default="flavour",
         help="vehicle profile: flavour (default: fitted to the flavour's real SITL traces, "
@@ -181,6 +187,7 @@ def cmd_sitl(args: argparse.Namespace) -> int:
             speedup=args.speedup,
             seed=args.seed,
             cruise_alt_m=args.cruise_alt,
+            adsb_noise=args.adsb_noise,
             model=model,
             ardupilot=ardupilot,
             px4=px4,

@@ -248,6 +248,10 @@ class SitlConfig:
     adsb_hz: float = 2.0
     """ADSB_VEHICLE rate per intruder until a client asks for another with
     MAV_CMD_SET_MESSAGE_INTERVAL (246), per vehicle."""
+    adsb_noise: bool = False
+    """ADS-B reports carry the simulator's report errors (`sim.config.SensorConfig`'s EPU and
+    NACv; `remarl_fc.sitl.traffic.ReportErrors`); off: exact reports, as ArduPilot's SITL
+    sends them."""
     cruise_alt_m: float = 20.0
     """Height above the origin at which scenario intruders fly."""
     seed: int = 0

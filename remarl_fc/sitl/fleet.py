@@ -42,9 +42,9 @@ from remarl_fc.sitl.groundtruth import GroundTruth
 from remarl_fc.sitl.links import FleetLinks
 from remarl_fc.sitl.px4 import Px4Logic
 from remarl_fc.sitl.telemetry import TelemetryBuilder, heartbeat
-from remarl_fc.sitl.traffic import Traffic
+from remarl_fc.sitl.traffic import ReportErrors, Traffic
 from remarl_fc.sitl.vehicle import Airframes, step
-from sim.config import ScenarioConfig
+from sim.config import ScenarioConfig, SensorConfig
 from sim.spawn import SPAWN_SPACING_FACTOR, EpisodeStart, spawn_episodes
 from sim.vehicle import DelayLine, load_profile
 
@@ -119,11 +119,16 @@ class SitlFleet(StackOwner):
             yaw = heading_to_yaw(episode.headings()[0])
             targets: FloatArray | None = sim_to_ne(episode.target_m[0])
             d_col = scenario.d_col_m
+            errors = None
+            if cfg.adsb_noise:
+                count = episode.obstacle_pos_m.shape[1]
+                errors = ReportErrors.drawn(count, SensorConfig(), cfg.adsb_hz, cfg.seed, self.rng)
             self.traffic: Traffic | None = Traffic(
                 episode.obstacle_pos_m[0],
                 episode.obstacle_vel_m_s[0],
                 cfg.cruise_alt_m,
                 traffic_start_s,
+                errors,
             )
         else:
             d_col = DEFAULT_D_COL_M
@@ -369,6 +374,7 @@ class SitlFleet(StackOwner):
             "wall_s": round(wall, 3),
             "achieved_speedup": round(sim_s / wall, 3) if wall > 0 else None,
             "intruders": self.traffic.count if self.traffic is not None else 0,
+            "adsb_noise": self.cfg.adsb_noise,
             **self.truth.overall(),
             "vehicles": vehicles,
         }

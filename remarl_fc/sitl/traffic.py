@@ -7,11 +7,17 @@ simulator's frame (x east, y north) into the arena's NED frame at the cruise hei
 at their spawn points until the swarm starts its mission (the first vehicle moving faster than
 `START_SPEED_M_S` horizontally, or an explicit start time), so that take-off time does not
 eat the scenario's geometry.
+
+Reports are exact unless the fleet gives `ReportErrors` (``sitl --adsb-noise``): then each
+intruder's broadcast carries the simulator's report error (`sim.config.SensorConfig`: EPU drawn
+per intruder, NACv), drawn afresh for every broadcast and the same in every vehicle's
+receiver, as one transponder's broadcast is.
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -23,7 +29,9 @@ from remarl_fc.mavlink.consts import (
     ADSB_EMITTER_TYPE_UAV,
     AdsbFlag,
 )
+from sim.config import SensorConfig
 from sim.kinematics import straight_points
+from sim.sensors import POSITION_95_TO_SIGMA
 
 FloatArray = NDArray[np.float64]
 
@@ -45,6 +53,45 @@ ADSB_FLAGS = int(
 """ADSB_VEHICLE.flags of every intruder report (SIMULATED set, as ArduPilot SITL's are)."""
 
 
+@dataclass(frozen=True)
+class ReportErrors:
+    """The error of each intruder's ADS-B broadcasts, as the simulator draws a report's.
+
+    Broadcast j of intruder k is the one at ``floor(now · rate_hz) = j``; its error is drawn
+    from a generator seeded by (``seed``, k, j), so every vehicle's receiver hears the same
+    error for it, and asking twice gives the same report.
+
+    Attributes:
+        pos_sigma_m: (M,) position error σ per axis, m (EPU / 2.448).
+        vel_sigma_m_s: velocity error σ per axis, m/s (NACv / 2.448).
+        rate_hz: broadcasts per second.
+        seed: the fleet's seed.
+    """
+
+    pos_sigma_m: FloatArray
+    vel_sigma_m_s: float
+    rate_hz: float
+    seed: int
+
+    @classmethod
+    def drawn(
+        cls, count: int, sensors: SensorConfig, rate_hz: float, seed: int, rng: np.random.Generator
+    ) -> ReportErrors:
+        """EPU uniform in ``sensors.adsb_epu_m`` per intruder (one draw of ``rng`` each)."""
+        epu = rng.uniform(*sensors.adsb_epu_m, size=count)
+        nacv = sensors.adsb_nacv_m_s
+        return cls(epu / POSITION_95_TO_SIGMA, nacv / POSITION_95_TO_SIGMA, rate_hz, seed)
+
+    def at(self, now_s: float) -> tuple[FloatArray, FloatArray]:
+        """(M, 2) position and (M, 2) velocity errors (north, east) of the broadcast at now."""
+        j = math.floor(now_s * self.rate_hz)
+        pos, vel = np.empty((len(self.pos_sigma_m), 2)), np.empty((len(self.pos_sigma_m), 2))
+        for k, sigma in enumerate(self.pos_sigma_m.tolist()):
+            draw = np.random.default_rng([self.seed, k, j]).standard_normal(4)
+            pos[k], vel[k] = sigma * draw[:2], self.vel_sigma_m_s * draw[2:]
+        return pos, vel
+
+
 class Traffic:
     """M intruders of an episode.
 
@@ -53,6 +100,7 @@ class Traffic:
             (`sim.spawn.EpisodeStart.obstacle_pos_m` and ``obstacle_vel_m_s`` of one episode).
         cruise_alt_m: height above the origin they fly at.
         start_s: fixed start time, or None to start with the swarm.
+        errors: the reports' errors; None: exact reports.
     """
 
     def __init__(
@@ -61,12 +109,14 @@ class Traffic:
         vel_m_s: FloatArray,
         cruise_alt_m: float,
         start_s: float | None = None,
+        errors: ReportErrors | None = None,
     ) -> None:
         self.spawn_ne_m = sim_to_ne(np.asarray(pos_m).reshape(-1, 2))  # (M, 2)
         self.vel_ne_m_s = sim_to_ne(np.asarray(vel_m_s).reshape(-1, 2))
         self.down_m = -cruise_alt_m
         self.start_s = start_s
         self.count = len(self.spawn_ne_m)
+        self.errors = errors
 
     def maybe_start(self, now_s: float, vehicle_vel_ned: FloatArray) -> None:
         """Start the clock when the first vehicle moves (no-op once started)."""
@@ -92,6 +142,10 @@ class Traffic:
     def reports(self, factory: Any, origin: GeoPoint, now_s: float) -> list[Any]:
         """One ADSB_VEHICLE per intruder: degE7, altitude mm AMSL, heading cdeg, cm/s."""
         pos, vel = self.positions_ned(now_s), self.velocities_ned(now_s)
+        if self.errors is not None:
+            pos_err, vel_err = self.errors.at(now_s)
+            pos[:, :2] += pos_err
+            vel[:, :2] += vel_err
         lat, lon, alt = ned_to_geodetic(pos[:, 0], pos[:, 1], pos[:, 2], origin)
         course, speed = course_and_speed(vel[:, 0], vel[:, 1])
         out = []

@@ -104,6 +104,14 @@ def test_demo_command(tmp_path, capsys):
     assert json.loads((tmp_path / "t.json").read_text())["finished"] is True
 
 
+def test_demo_with_noisy_adsb_and_filtered_tracks(tmp_path, capsys):
+    args = ["demo", "--speedup", "4", "--out", str(tmp_path / "f.png"), "--json"]
+    assert main([*args, "--adsb-noise", "--track-filter", "on"]) in (0, 4)
+    result = json.loads(capsys.readouterr().out)
+    assert result["ground_truth"]["adsb_noise"] is True
+    assert result["runtime"]["traffic"]["filtered"] is True
+
+
 def test_the_summary_names_the_policy_flown():
     from remarl_fc.cli.fly import policy_line
     from remarl_fc.policy_io import load_policy
