@@ -27,7 +27,7 @@ module assumes even those may be wrong):
 * **The swarm bus.** Detections shared by other processes are keyed by
   ``(("peer", system id), ICAO)``, pass the same checks on metres and m/s, and give way to our
   own fresh report of the same ICAO.
-* **The track filter** (``noise``, `FlightConfig.track_filter`): each report from the link is
+* **The track filter** (``noise``, `FlyConfig.track_filter`): each report from the link is
   fused into its track by the simulator's filter (`sim.sensors.fuse`: constant velocity, an
   innovation gate that restarts a track on a report it did not expect); without it a track is
   its newest report. A shared detection is the peer's own track, stored as it comes.
@@ -361,12 +361,11 @@ class TrafficPicture:
         if self.noise is None:
             return report
         old = self._tracks.get(key)
-        if old is None or old.cov is None:
-            old = Intruder(np.full(2, math.nan), math.nan, np.full(2, math.nan), -math.inf)
-        pos, vel, cov, t = fuse(
-            old.ne_m, old.vel_ne_m_s, np.zeros(3) if old.cov is None else old.cov, old.t,
-            report.ne_m, report.vel_ne_m_s, report.t, self.noise,
-        )  # fmt: skip
+        if old is not None and old.cov is not None:
+            prior = (old.ne_m, old.vel_ne_m_s, old.cov, old.t)
+        else:  # nothing to fuse: a time of −inf starts the track from the report
+            prior = (np.full(2, math.nan), np.full(2, math.nan), np.zeros(3), -math.inf)
+        pos, vel, cov, t = fuse(*prior, report.ne_m, report.vel_ne_m_s, report.t, self.noise)
         return Intruder(pos, report.height_m, vel, float(t), cov=cov)
 
     def _reject(self, reason: str) -> bool:
