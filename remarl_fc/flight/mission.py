@@ -16,6 +16,8 @@ A mission is a TOML file::
 
     [traffic]                 # optional: ADS-B receivers trusted beside the vehicles' own
     adsb_sources = ["200:156"]   # "SYSTEM_ID:COMPONENT_ID" of each
+    epu_m = 10.0                 # optional: the reports' 95 % position error and
+    nacv_m_s = 1.0               #   velocity error the track filter assumes (--track-filter on)
 
     [[vehicle]]
     system_id = 1
@@ -34,6 +36,7 @@ consistent with itself: every target inside its own geofence, every ``alt_m`` un
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import tomllib
 from dataclasses import dataclass
@@ -45,7 +48,7 @@ from numpy.typing import NDArray
 
 from remarl_fc.errors import ConfigError, PolicyError, PolicySpecMismatch
 from remarl_fc.frames import GeoPoint, geodetic_to_ned, heading_to_yaw, sim_to_ne
-from sim.config import ScenarioConfig, groups_problem
+from sim.config import ScenarioConfig, SensorConfig, groups_problem
 from sim.spawn import EpisodeStart, group_index, swarm_layout, target_spacing_problem
 
 FloatArray = NDArray[np.float64]
@@ -156,6 +159,19 @@ class Mission:
     source: str = "<mission>"
     adsb_sources: frozenset[tuple[int, int]] = frozenset()
     """(system id, component id) of ADS-B receivers trusted beside the vehicles' own."""
+    adsb_epu_m: float | None = None
+    """The 95 % position error of the ADS-B reports the track filter assumes, m (None: the
+    middle of `sim.config.SensorConfig.adsb_epu_m`)."""
+    adsb_nacv_m_s: float | None = None
+    """The 95 % velocity error of the reports the track filter assumes, m/s (None:
+    `sim.config.SensorConfig.adsb_nacv_m_s`)."""
+
+    def sensors(self) -> SensorConfig:
+        """The ADS-B model the track filter assumes for this mission (`sim.sensors.TrackNoise`)."""
+        base = SensorConfig()
+        epu = base.adsb_epu_m if self.adsb_epu_m is None else (self.adsb_epu_m,) * 2
+        nacv = base.adsb_nacv_m_s if self.adsb_nacv_m_s is None else self.adsb_nacv_m_s
+        return dataclasses.replace(base, adsb_epu_m=epu, adsb_nacv_m_s=nacv)
 
     def by_slot(self) -> list[VehiclePlan]:
         """The vehicles ordered by policy slot."""
@@ -355,14 +371,19 @@ def mission_from_dict(data: dict[str, Any], *, source: str) -> Mission:
                     source=source,
                     key=f"vehicle[{k}].alt_m",
                 )
-    adsb = _adsb_sources(data["traffic"], source) if "traffic" in data else frozenset()
-    return Mission(origin, speed, tuple(plans), dt, fence, source, adsb)
+    traffic = data.get("traffic", {})
+    adsb = _adsb_sources(traffic, source)
+    epu, nacv = (
+        _number(traffic, key, source, "traffic.", positive=True) if key in traffic else None
+        for key in ("epu_m", "nacv_m_s")
+    )
+    return Mission(origin, speed, tuple(plans), dt, fence, source, adsb, epu, nacv)
 
 
 def _adsb_sources(t: Any, src: str) -> frozenset[tuple[int, int]]:
     if not isinstance(t, dict):
         raise MissionError("must be a table", source=src, key="traffic")
-    _only(t, {"adsb_sources"}, src, "traffic.")
+    _only(t, {"adsb_sources", "epu_m", "nacv_m_s"}, src, "traffic.")
     raw = t.get("adsb_sources", [])
     out: set[tuple[int, int]] = set()
     bad = MissionError(

@@ -80,7 +80,6 @@ from remarl_fc.mavlink.consts import (
 )
 from remarl_fc.mavlink.link import MavlinkLink, TlogWriter
 from remarl_fc.resource import StackOwner
-from sim.config import SensorConfig
 from sim.sensors import TrackNoise
 
 HOLD_CONFIRM_S = 6.0
@@ -116,7 +115,7 @@ class SwarmRuntime(StackOwner):
         self.plans = {p.system_id: p for p in mission.vehicles}
         local = frozenset(m.system_id for m in self.members if m.local)
         self.traffic = TrafficPicture(
-            mission.origin, noise=TrackNoise.of(SensorConfig()) if cfg.track_filter else None
+            mission.origin, noise=TrackNoise.of(mission.sensors()) if cfg.track_filter else None
         )
         self.bus: SwarmBus = bus or MemoryBus(MemoryBroker(), bus_core(cfg, local))
         self.peers = Peers(

@@ -325,6 +325,23 @@ def test_trusted_adsb_sources(tmp_path):
         assert error.key == "traffic.adsb_sources"
 
 
+def test_the_track_filters_report_noise_comes_from_the_mission(tmp_path):
+    from sim.config import SensorConfig
+    from sim.sensors import TrackNoise
+
+    default = load_mission(write(tmp_path, VALID))
+    assert default.sensors() == SensorConfig()  # none given: the simulator's
+    path = write(tmp_path, VALID + "\n[traffic]\nepu_m = 5.0\nnacv_m_s = 1.0\n")
+    mission = load_mission(path)
+    assert (mission.adsb_epu_m, mission.adsb_nacv_m_s) == (5.0, 1.0)
+    assert mission.sensors().adsb_epu_m == (5.0, 5.0)
+    assert TrackNoise.of(mission.sensors()).pos_var_m2 < TrackNoise.of(SensorConfig()).pos_var_m2
+    for bad in ("0", "-3", '"ten"', "nan"):
+        error = load_error(tmp_path, VALID + f"\n[traffic]\nepu_m = {bad}\n")
+        assert error.key == "traffic.epu_m"
+    assert load_error(tmp_path, VALID + "\n[traffic]\nnacv = 1\n").key == "traffic.nacv"
+
+
 def test_mission_error_is_a_value_error():
     err = MissionError("bad", source="m.toml", key="speed_m_s")
     assert isinstance(err, ValueError)
