@@ -248,41 +248,51 @@ async def fly_on_mock(
         fly_options = {"shield": shield, **(fly_options or {})}
     mission = Mission.from_scenario(cfg, DEFAULT_HOME, CRUISE_ALT_M, episode=episode)
     mission.check_policy(pol.uav_range, spec.speed_m_s, spec.dt_s, spec.arrival_m)
-    port = free_udp_port()
-    options: dict[str, Any] = {"ardupilot": ARDUPILOT_QUICK_START} if quick_start else {}
-    options.update(sitl_options or {})
-    sitl = SitlConfig(
-        vehicles=cfg.uav.count,
-        flavour=flavour,
-        base_port=0,
-        transport="tcp" if tcp else "udp",
-        out=None if link_per_vehicle or tcp else ("127.0.0.1", port),
-        speedup=speedup,
-        cruise_alt_m=CRUISE_ALT_M,
-        seed=seed,
-        **options,
-    )
-    if geofence is not None:
-        mission = dataclasses.replace(mission, geofence=geofence)
-    fleet = SitlFleet(sitl, scenario=cfg, faults=faults, signing_key=signing_key, episode=episode)
-    signing = SigningConfig(signing_key) if signing_key is not None else None
-    # the fleet outlives the runtime: the runtime's hold commands on exit must reach it
-    async with fleet:
-        connections: tuple[str, ...] = (f"udpin:127.0.0.1:{port}",)
-        if link_per_vehicle or tcp:
-            kind = "tcp" if tcp else "udpout"
-            connections = tuple(f"{kind}:{h}:{p}" for h, p in fleet.addresses)
-        fly = FlyConfig(
-            connections=connections,
-            mission=mission,
-            takeoff_m=CRUISE_ALT_M,
-            log_dir=log_dir,
+    # held until the runtime binds it: the fleet's own sockets take ephemeral ports, and one
+    # of them could otherwise take this one between the choice and the bind
+    reservation = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        reservation.bind(("127.0.0.1", 0))
+        port = int(reservation.getsockname()[1])
+        options: dict[str, Any] = {"ardupilot": ARDUPILOT_QUICK_START} if quick_start else {}
+        options.update(sitl_options or {})
+        sitl = SitlConfig(
+            vehicles=cfg.uav.count,
+            flavour=flavour,
+            base_port=0,
+            transport="tcp" if tcp else "udp",
+            out=None if link_per_vehicle or tcp else ("127.0.0.1", port),
             speedup=speedup,
-            signing=signing,
-            **(fly_options or {}),
+            cruise_alt_m=CRUISE_ALT_M,
+            seed=seed,
+            **options,
         )
-        runtime = SwarmRuntime(fly, pol, spec, on_status=on_status)
-        await _fly(fleet, runtime, during, speedup)
+        if geofence is not None:
+            mission = dataclasses.replace(mission, geofence=geofence)
+        fleet = SitlFleet(
+            sitl, scenario=cfg, faults=faults, signing_key=signing_key, episode=episode
+        )
+        signing = SigningConfig(signing_key) if signing_key is not None else None
+        # the fleet outlives the runtime: the runtime's hold commands on exit must reach it
+        async with fleet:
+            reservation.close()  # bound by the fleet's sockets now: the runtime's to take
+            connections: tuple[str, ...] = (f"udpin:127.0.0.1:{port}",)
+            if link_per_vehicle or tcp:
+                kind = "tcp" if tcp else "udpout"
+                connections = tuple(f"{kind}:{h}:{p}" for h, p in fleet.addresses)
+            fly = FlyConfig(
+                connections=connections,
+                mission=mission,
+                takeoff_m=CRUISE_ALT_M,
+                log_dir=log_dir,
+                speedup=speedup,
+                signing=signing,
+                **(fly_options or {}),
+            )
+            runtime = SwarmRuntime(fly, pol, spec, on_status=on_status)
+            await _fly(fleet, runtime, during, speedup)
+    finally:
+        reservation.close()
     return MockFlight(runtime.summary(), fleet.summary())
 
 

@@ -16,16 +16,19 @@ Per vehicle and tick, in this order (the first that applies wins):
    gets a zero-velocity setpoint (climbing: `CLIMB_RATE_M_S` up until
    `TAKEOFF_DONE_FRACTION` of the height);
 2. ``lost`` whose telemetry is fresh again → ``held`` (hold, never resumed);
-3. anything but ``controlled`` → nothing;
-4. telemetry older than `Rules.stale_s` → ``lost`` (an obstacle at its last track);
-5. telemetry that contradicts itself (`Telemetry.untrusted`) → ``held`` (hold): a vehicle we
+3. a vehicle told to hold while it flew our setpoints (`Vehicle.braking`) gets zero-velocity
+   setpoints until its HEARTBEATs confirm it left GUIDED / OFFBOARD: the hold is a command that
+   a lossy link can lose (and its retry waits for a timeout), the setpoint stream is not;
+4. anything but ``controlled`` → nothing;
+5. telemetry older than `Rules.stale_s` → ``lost`` (an obstacle at its last track);
+6. telemetry that contradicts itself (`Telemetry.untrusted`) → ``held`` (hold): a vehicle we
    cannot locate is not steered;
-6. a mode the pilot chose, confirmed by consecutive HEARTBEATs → ``pilot`` (released, never
+7. a mode the pilot chose, confirmed by consecutive HEARTBEATs → ``pilot`` (released, never
    fought; not in a dry run);
-7. at its target → ``reached`` (hold);
-8. a setpoint that is not a finite number (a broken policy) → ``held`` (hold);
-9. the next setpoint would leave the geofence within one decision step → ``held`` (hold);
-10. otherwise: the policy's setpoint.
+8. at its target → ``reached`` (hold);
+9. a setpoint that is not a finite number (a broken policy) → ``held`` (hold);
+10. the next setpoint would leave the geofence within one decision step → ``held`` (hold);
+11. otherwise: the policy's setpoint.
 
 Status changes go through `transition`, which allows only what `remarl_fc.flight.status`
 allows, logs an `Event` for every change that has a reason to tell, and a `Hold` for every
@@ -51,6 +54,11 @@ CLIMB_RATE_M_S = 1.5
 
 TAKEOFF_DONE_FRACTION = 0.95
 """A take-off is done at this fraction of its height."""
+
+BRAKE_ON_HOLD = frozenset({Status.CONTROLLED, Status.LOST})
+"""Statuses in which a vehicle flies our velocity setpoints (``lost``: the last one it heard):
+told to hold from one of these, it is braked by zero-velocity setpoints until the hold mode is
+confirmed (`Vehicle.braking`)."""
 
 
 @dataclass(frozen=True)
@@ -101,6 +109,9 @@ class Vehicle:
     """PX4 take-off in OFFBOARD: climb to this height."""
     lost_since: float | None = None
     """When it became ``lost`` (flight clock, s)."""
+    braking: bool = False
+    """Told to hold while it flew our setpoints (``controlled`` or ``lost``): stream zero
+    velocity until consecutive HEARTBEATs show the hold mode (or any mode but ours)."""
 
 
 @dataclass(frozen=True)
@@ -167,7 +178,8 @@ def transition(v: Vehicle, new: Status, why: str | None) -> tuple[Vehicle, tuple
     out: tuple[Command, ...] = () if why is None else (Event(v.system_id, why),)
     if new in HOLD_ON_ENTRY:
         out += (Hold(v.system_id),)
-    return replace(v, status=new, prestream=False, climb_target_m=None), out
+    braking = new in HOLD_ON_ENTRY and v.status in BRAKE_ON_HOLD
+    return replace(v, status=new, prestream=False, climb_target_m=None, braking=braking), out
 
 
 def next_action(
@@ -183,6 +195,11 @@ def next_action(
     fresh = tel.position_age_s <= rules.stale_s
     if v.status == Status.LOST and fresh:
         return transition(v, Status.HELD, "telemetry back: told to hold, not resumed")
+    if v.braking:
+        if rules.dry_run or not tel.external_mode:
+            return replace(v, braking=False), ()
+        yaw = tel.yaw_rad if math.isfinite(tel.yaw_rad) else 0.0
+        return v, (Setpoint(v.system_id, 0.0, 0.0, 0.0, yaw),)
     if v.status != Status.CONTROLLED:
         return v, ()
     if not fresh:

@@ -66,7 +66,10 @@ def test_lost_then_fresh_is_held_never_resumed():
     assert back.status == Status.HELD
     assert out == (core.Event(1, "telemetry back: told to hold, not resumed"), core.Hold(1))
     again, out = core.next_action(back, tel(), 3.2, RULES, FakeGuidance())
-    assert (again.status, out) == (Status.HELD, ())
+    assert (again.status, out) == (Status.HELD, (core.Setpoint(1, 0.0, 0.0, 0.0, 0.5),))
+    brake = tel(external=False, mode=17)  # BRAKE confirmed
+    confirmed, out = core.next_action(again, brake, 3.4, RULES, FakeGuidance())
+    assert (confirmed.status, confirmed.braking, out) == (Status.HELD, False, ())
 
 
 def test_untrusted_telemetry_holds_the_vehicle_instead_of_steering_it():
@@ -121,6 +124,30 @@ def test_at_the_target_it_is_reached_and_held():
     v, out = core.next_action(controlled(), tel((99.5, 0.2)), 3.0, RULES, FakeGuidance())
     assert v.status == Status.REACHED
     assert out == (core.Event(1, "target reached: hold and release"), core.Hold(1))
+
+
+def test_a_vehicle_told_to_hold_in_flight_is_braked_until_the_hold_mode_is_confirmed():
+    """The hold is one command over a lossy link; the zero-velocity stream brakes it meanwhile
+    (a lost DO_SET_MODE cost 3.5 s at 9 m/s on the mock's 10 %-loss link before this)."""
+    v, _ = core.next_action(controlled(), tel((99.5, 0.2)), 3.0, RULES, FakeGuidance())
+    assert v.braking
+    for t in (3.1, 3.2, 5.0):  # unconfirmed: still GUIDED by its HEARTBEATs, fresh or not
+        v, out = core.next_action(v, tel((95.0, 0.0), yaw=2.0, age=3.0), t, RULES, FakeGuidance())
+        assert (v.status, out) == (Status.REACHED, (core.Setpoint(1, 0.0, 0.0, 0.0, 2.0),))
+    v, out = core.next_action(v, tel(external=False, mode=17), 5.1, RULES, FakeGuidance())
+    assert (v.status, v.braking, out) == (Status.REACHED, False, ())
+    assert core.next_action(v, tel(), 5.2, RULES, FakeGuidance()) == (v, ())
+
+
+def test_a_vehicle_held_before_it_flew_or_in_a_dry_run_is_never_braked():
+    for before in (Status.WAITING, Status.TAKING_OFF, Status.READY):
+        held, _ = core.transition(core.Vehicle(1, 0, status=before), Status.HELD, "end")
+        assert not held.braking
+    dry = replace(RULES, dry_run=True)
+    v, _ = core.next_action(controlled(), tel((99.5, 0.2)), 3.0, dry, FakeGuidance())
+    assert v.braking
+    v, out = core.next_action(v, tel(), 3.1, dry, FakeGuidance())
+    assert (v.braking, out) == (False, ())
 
 
 def test_a_geofence_breach_within_one_step_holds_it():
