@@ -53,6 +53,16 @@ POSITION_95_TO_SIGMA = 2.448
 EPU and NACv are 95% horizontal radii, so σ per axis = EPU / 2.448 (NACv likewise)."""
 
 
+def report_sigmas(epu_m: FloatArray, nacv_m_s: float) -> tuple[FloatArray, float]:
+    """(position σ per axis, m; velocity σ per axis, m/s) of reports with these 95% radii.
+
+    >>> pos, vel = report_sigmas(np.array([24.48]), 2.448)
+    >>> pos.round(6).tolist(), round(vel, 6)
+    ([10.0], 1.0)
+    """
+    return epu_m / POSITION_95_TO_SIGMA, nacv_m_s / POSITION_95_TO_SIGMA
+
+
 @overload
 def report_time(receive_s: float, tslc_s: float) -> float: ...
 @overload
@@ -293,15 +303,17 @@ class AdsbTracks:
         period = 1.0 / rate
         phase = period * rng.random((b, m))  # [0, period)
         latency = rng.uniform(*cfg.adsb_latency_s, size=(b, m))
-        epu = rng.uniform(*cfg.adsb_epu_m, size=(b, m))
+        pos_sigma, vel_sigma = report_sigmas(
+            rng.uniform(*cfg.adsb_epu_m, size=(b, m)), cfg.adsb_nacv_m_s
+        )
         lo, hi = cfg.adsb_error_tau_s
         tau = rng.uniform(lo, hi, size=(b, m)) if hi > lo else np.full((b, m), lo)
         return cls(
             period_s=period,
             phase_s=phase,
             latency_s=latency,
-            pos_sigma_m=epu / POSITION_95_TO_SIGMA,
-            vel_sigma_m_s=np.full((b, m), cfg.adsb_nacv_m_s / POSITION_95_TO_SIGMA),
+            pos_sigma_m=pos_sigma,
+            vel_sigma_m_s=np.full((b, m), vel_sigma),
             error_tau_s=tau,
             last_index=np.full((b, m), -math.inf),
             t_valid_s=np.full((b, m), -math.inf),

@@ -26,6 +26,7 @@ from remarl_fc.cli.common import (
     shield_from_args,
 )
 from remarl_fc.policy_io import GENERALIST_ZOO
+from remarl_fc.sitl.traffic import report_errors_text
 
 DEMO_SCENARIO = "3u2o"
 """The scenario ``demo`` flies when given neither ``--scenario`` nor ``--vehicles``."""
@@ -211,8 +212,8 @@ def add_parsers(sub: Any) -> None:
     p.add_argument(
         "--adsb-noise",
         action="store_true",
-        help="the mock's ADS-B reports carry the simulator's report errors (EPU 10-30 m, "
-        "NACv 3 m/s; default: exact reports)",
+        help="the mock's ADS-B reports carry the simulator's report errors "
+        f"({report_errors_text()}; default: exact reports)",
     )
     finish(p, cmd_demo)
 

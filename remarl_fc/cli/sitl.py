@@ -15,6 +15,7 @@ from typing import Any
 from remarl_fc.cli.common import EXIT_TIMED_OUT, FLAVOURS, add_choice, add_seed, finish
 from remarl_fc.sitl.faults import parse_glitch, parse_pilot_switch, parse_window
 from remarl_fc.sitl.params import parse_override
+from remarl_fc.sitl.traffic import report_errors_text
 
 
 def _arg(parse: Any) -> Any:
@@ -101,7 +102,7 @@ def add_sitl_parser(sub: Any) -> None:
     p.add_argument(
         "--adsb-noise",
         action="store_true",
-        help="ADS-B reports carry the simulator's report errors (EPU 10-30 m, NACv 3 m/s); "
+        help=f"ADS-B reports carry the simulator's report errors ({report_errors_text()}); "
         "default: exact, as ArduPilot's SITL",
     )
     p.add_argument(

@@ -31,7 +31,7 @@ from remarl_fc.mavlink.consts import (
 )
 from sim.config import SensorConfig
 from sim.kinematics import straight_points
-from sim.sensors import POSITION_95_TO_SIGMA
+from sim.sensors import report_sigmas
 
 FloatArray = NDArray[np.float64]
 
@@ -51,6 +51,17 @@ ADSB_FLAGS = int(
     | AdsbFlag.VERTICAL_VELOCITY_VALID
 )
 """ADSB_VEHICLE.flags of every intruder report (SIMULATED set, as ArduPilot SITL's are)."""
+
+
+def report_errors_text(sensors: SensorConfig | None = None) -> str:
+    """The report errors `ReportErrors.drawn` draws from, in words (for help texts).
+
+    >>> report_errors_text()
+    'EPU 10-30 m, NACv 3 m/s'
+    """
+    s = SensorConfig() if sensors is None else sensors
+    lo, hi = s.adsb_epu_m
+    return f"EPU {lo:g}-{hi:g} m, NACv {s.adsb_nacv_m_s:g} m/s"
 
 
 @dataclass(frozen=True)
@@ -79,8 +90,7 @@ class ReportErrors:
     ) -> ReportErrors:
         """EPU uniform in ``sensors.adsb_epu_m`` per intruder (one draw of ``rng`` each)."""
         epu = rng.uniform(*sensors.adsb_epu_m, size=count)
-        nacv = sensors.adsb_nacv_m_s
-        return cls(epu / POSITION_95_TO_SIGMA, nacv / POSITION_95_TO_SIGMA, rate_hz, seed)
+        return cls(*report_sigmas(epu, sensors.adsb_nacv_m_s), rate_hz, seed)
 
     def at(self, now_s: float) -> tuple[FloatArray, FloatArray]:
         """(M, 2) position and (M, 2) velocity errors (north, east) of the broadcast at now."""

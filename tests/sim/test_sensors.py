@@ -465,6 +465,33 @@ def test_the_filter_is_off_by_default_and_changes_nothing_then():
     np.testing.assert_allclose(b.cov[took], np.broadcast_to(start, b.cov[took].shape))
 
 
+def test_with_the_filter_off_every_track_is_its_newest_report():
+    """Over a whole flight: off, the tracks carry no covariance and jump to each report; on, the
+    same reports arrive at the same times (the filter draws nothing) and are fused, not copied."""
+    cfg = SensorConfig(model="adsb")
+    vel = np.broadcast_to([12.0, -5.0], (6, 3, 2))
+    runs = {}
+    for c in (cfg, dataclasses.replace(cfg, adsb_filter=True)):
+        rng, seen = np.random.default_rng(7), []
+        tracks = AdsbTracks.fresh(6, 3, c, rng)
+        for k in range(1, 21):
+            t = 0.5 * k
+            tracks = update(tracks, vel * t, vel, t, np.zeros((6, 3)), c, rng)
+            seen.append(tracks)
+        runs[c.adsb_filter] = seen
+    moved = 0
+    for off, on in zip(runs[False], runs[True], strict=True):
+        np.testing.assert_array_equal(off.cov, 0.0)
+        np.testing.assert_array_equal(off.t_report_s, on.t_report_s)
+        np.testing.assert_array_equal(off.pos_err_m, on.pos_err_m)  # the same draws
+        moved += int((np.abs(off.pos_m - on.pos_m) > 1e-9).any(axis=-1).sum())
+    assert moved > 100  # the filter smooths what the raw tracks copy
+    last = runs[False][-1]
+    valid = last.t_report_s - last.latency_s  # when its newest report was true (tslc 0)
+    truth = vel * valid[..., np.newaxis]  # the intruders flew from the origin at t = 0
+    np.testing.assert_allclose(last.pos_m, truth + last.pos_err_m, atol=1e-9)
+
+
 @given(
     var=st.tuples(st.floats(0.01, 1e4), st.floats(-0.9, 0.9), st.floats(0.01, 1e3)),
     dt=st.floats(0.0, 4.9),
