@@ -128,3 +128,23 @@ def test_adsb_error_table_flies_each_variant_on_the_same_episodes(tmp_path):
     assert by_variant["neither error"]["energy_rad"] != by_variant["as flown"]["energy_rad"]
     assert by_variant["tracks filtered"]["track_filter"] is True
     assert not by_variant["as flown"]["track_filter"]
+
+
+def test_uav_collisions_counts_what_the_suite_evaluation_counts():
+    """tools/uav_collisions.py flies a family as `remarl-fc eval` does: the same UAV–UAV
+    collisions, split by whether a hovering UAV was hit."""
+    sys.path.insert(0, str(TOOLS))
+    try:
+        from uav_collisions import family_counts
+    finally:
+        sys.path.remove(str(TOOLS))
+    from remarl_fc.offline.suite import MethodSpec, run_family
+    from sim.suite import load_suite
+
+    suite = load_suite("standard")
+    family = suite.family("swarms-2x3")
+    episodes, uu, hovering, arriving = family_counts("generalist", family.name, "standard")
+    row = run_family(suite, family, MethodSpec.from_label("policy:generalist"))
+    assert episodes == row["episodes"] == suite.episodes
+    assert uu == round(row["collision_rate_u2u"] * episodes) > 0
+    assert 0 <= hovering + arriving <= uu
