@@ -4,10 +4,11 @@
     OMP_NUM_THREADS=1 python tools/uav_collisions.py --policy FILE --families dense-10u,swarms-2x5
     OMP_NUM_THREADS=1 python tools/uav_collisions.py --real-world        # the 8 paper scenarios
 
-``--real-world`` flies the paper scenarios as RESULTS "The generalist in the real world" does
-(``remarl-fc eval --scenario S --dynamics arducopter --sensors adsb --arrival hover``, 300
-episodes each, no shield): there an arrived vehicle brakes with the fitted response and may
-stop past the edge of its arrival circle.
+``--real-world`` flies the suite's paper scenarios in the world of RESULTS "The generalist in
+the real world" (`REAL_WORLD_FLOWN`: ``remarl-fc eval --scenario S --dynamics arducopter
+--sensors adsb --arrival hover``; 300 episodes each, drawn from seed 0, not the evaluation's,
+no shield): there an arrived vehicle brakes with the fitted response and may stop past the
+edge of its arrival circle.
 
 Each family's episodes are flown as ``remarl-fc eval --suite standard`` flies them (no shield;
 an episode ends at its first collision). For every episode whose first collision is between
@@ -21,17 +22,14 @@ import argparse
 
 import numpy as np
 
-from remarl_fc.offline.evaluate import evaluation_scenario, world_overrides
+from remarl_fc.offline.evaluate import REAL_WORLD_FLOWN, evaluation_scenario, world_overrides
 from remarl_fc.offline.rollout import PolicyFileAct, observe_for
 from remarl_fc.offline.suite import Act, MethodSpec, resolve_method
 from remarl_fc.policy_io import load_policy
-from sim.encounters import sample_family
+from sim.encounters import Family, sample_family
 from sim.state import SwarmState
-from sim.suite import load_suite
+from sim.suite import Suite, load_suite
 from sim.swarm import SwarmSim
-
-PAPER_SCENARIOS = ("2u1o", "3u1o", "3u2o", "5u1o", "5u2o", "7u1o", "7u2o", "10u1o")
-"""The scenarios of RESULTS "The generalist in the real world"."""
 
 
 def first_collisions(act: Act, sim: SwarmSim, state: SwarmState) -> tuple[int, int, int, int]:
@@ -58,14 +56,12 @@ def first_collisions(act: Act, sim: SwarmSim, state: SwarmState) -> tuple[int, i
     return episodes, uu, hovering, arriving
 
 
-def family_counts(policy: str, family_name: str, suite_name: str) -> tuple[int, int, int, int]:
+def family_counts(policy: str, suite: Suite, family: Family) -> tuple[int, int, int, int]:
     """`first_collisions` of one suite family's episodes."""
-    suite = load_suite(suite_name)
-    family = suite.family(family_name)
     cfg, batch = sample_family(family, suite.seed, range(suite.episodes))
     act, why = resolve_method(MethodSpec.from_label(f"policy:{policy}"), family, cfg)
     if act is None:
-        raise SystemExit(f"{policy} cannot fly {family_name}: {why}")
+        raise SystemExit(f"{policy} cannot fly {family.name}: {why}")
     sim = SwarmSim(cfg, scored=False)
     return first_collisions(act, sim, sim.start(batch, np.random.default_rng(0)))
 
@@ -73,8 +69,7 @@ def family_counts(policy: str, family_name: str, suite_name: str) -> tuple[int, 
 def real_world_counts(policy: str, scenario: str, episodes: int) -> tuple[int, int, int, int]:
     """`first_collisions` of a scenario's episodes in the real world (fitted ArduCopter, ADS-B)."""
     loaded = load_policy(policy)
-    world = world_overrides(dynamics="arducopter", sensors="adsb", arrival="hover")
-    cfg = evaluation_scenario(loaded, scenario, world)
+    cfg = evaluation_scenario(loaded, scenario, world_overrides(*REAL_WORLD_FLOWN))
     sim = SwarmSim(cfg, scored=False)
     rng = np.random.default_rng(0)
     return first_collisions(PolicyFileAct(loaded), sim, sim.initial_state(rng, episodes))
@@ -88,10 +83,12 @@ def main() -> None:
     p.add_argument("--real-world", action="store_true", help="the 8 paper scenarios, real world")
     p.add_argument("--episodes", type=int, default=300, help="per scenario (--real-world)")
     args = p.parse_args()
-    if args.real_world:
-        names = list(PAPER_SCENARIOS)
+    suite = load_suite(args.suite)
+    if args.real_world:  # the paper scenarios, as tools/ship_generalist.py flies them
+        names = [
+            f.name.removeprefix("paper-") for f in suite.families if f.name.startswith("paper-")
+        ]
     else:
-        suite = load_suite(args.suite)
         names = args.families.split(",") if args.families else [f.name for f in suite.families]
     print("| family | episodes | UAV–UAV first | with a hovering UAV | with one arriving |")
     print("|---|---:|---:|---:|---:|")
@@ -100,7 +97,7 @@ def main() -> None:
         counts = (
             real_world_counts(args.policy, name, args.episodes)
             if args.real_world
-            else family_counts(args.policy, name, args.suite)
+            else family_counts(args.policy, suite, suite.family(name))
         )
         total += counts
         if counts[1]:

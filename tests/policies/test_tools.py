@@ -135,7 +135,7 @@ def test_uav_collisions_counts_what_the_suite_evaluation_counts():
     collisions, split by whether a hovering UAV was hit."""
     sys.path.insert(0, str(TOOLS))
     try:
-        from uav_collisions import family_counts
+        from uav_collisions import family_counts, real_world_counts
     finally:
         sys.path.remove(str(TOOLS))
     from remarl_fc.offline.suite import MethodSpec, run_family
@@ -143,8 +143,12 @@ def test_uav_collisions_counts_what_the_suite_evaluation_counts():
 
     suite = load_suite("standard")
     family = suite.family("swarms-2x3")
-    episodes, uu, hovering, arriving = family_counts("generalist", family.name, "standard")
+    episodes, uu, hovering, arriving = family_counts("generalist", suite, family)
     row = run_family(suite, family, MethodSpec.from_label("policy:generalist"))
     assert episodes == row["episodes"] == suite.episodes
     assert uu == round(row["collision_rate_u2u"] * episodes) > 0
     assert 0 <= hovering + arriving <= uu
+    # the suite's UAVs leave on arrival; in the real world they hover, and are hit (10u1o: 18
+    # of the first 50 episodes' 19 UAV–UAV collisions, with the policy shipped 2026-11-29)
+    episodes, uu, hovering, arriving = real_world_counts("generalist", "10u1o", 50)
+    assert episodes == 50 and 0 < hovering <= uu
