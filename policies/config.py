@@ -359,6 +359,12 @@ class GeneralistConfig:
     (`sim.config.SensorConfig.adsb_filter`, `fly --track-filter on`) rather than holding the
     newest one: train for the picture the flight will give."""
 
+    real_hover: bool = False
+    """In the real-world families, a UAV that arrives hovers where it stops (as `fly` holds it,
+    and as the real world of `remarl-fc eval --arrival hover` scores it) rather than leaving, as
+    the suite's families do: the neighbours still flying learn to keep clear of it
+    (docs/MODEL.md §17)."""
+
     teacher_truth: bool = False
     """The teacher reads the true state in the real-world families (`SwarmState.exactly_sensed`:
     the intruders where they are, not their ADS-B tracks, and no GPS error) — a privileged

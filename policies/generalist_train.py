@@ -206,14 +206,16 @@ def real_world(cfg: GeneralistConfig) -> dict[str, Any]:
     """The overrides of a real-world family (`REAL_WORLD`, errors as the run says).
 
     Its ADS-B errors are correlated over `GeneralistConfig.real_error_tau_s`, its tracks
-    filtered if `GeneralistConfig.real_track_filter` says so.
+    filtered if `GeneralistConfig.real_track_filter` says so, its arrived UAVs hovering if
+    `GeneralistConfig.real_hover` does.
     """
     sensors = {
         **REAL_WORLD["sensors"],
         "adsb_error_tau_s": list(cfg.real_error_tau_s),
         "adsb_filter": cfg.real_track_filter,
     }
-    return {**REAL_WORLD, "sensors": sensors}
+    arrival = {"arrival": "hover"} if cfg.real_hover else {}
+    return {**REAL_WORLD, "sensors": sensors, **arrival}
 
 
 def make_worlds(

@@ -194,6 +194,13 @@ def add_train(sub: Any) -> None:
         "track filter, as `fly --track-filter on` does (default: a track is its newest report)",
     )
     p.add_argument(
+        "--real-hover",
+        action="store_true",
+        default=None,
+        help="generalist: in the real-world families, arrived UAVs hover where they stop, as "
+        "`fly` holds them (default: they leave, as in the suite)",
+    )
+    p.add_argument(
         "--dagger-lr",
         type=float,
         metavar="LR",
@@ -499,6 +506,7 @@ def generalist_flags(args: argparse.Namespace) -> dict[str, Any]:
         "real_share": args.real_share,
         "real_error_tau_s": tuple(args.real_error_tau) if args.real_error_tau else None,
         "real_track_filter": args.real_track_filter,
+        "real_hover": args.real_hover,
         "dagger_turn_weight": args.turn_weight,
         "seed": args.seed or None,
     }

@@ -285,17 +285,24 @@ def tiny_td3(tmp_path: Path, **changes: Any) -> GeneralistConfig:
 
 def test_real_world_families_draw_their_adsb_errors_correlation_time_from_the_run(tmp_path):
     from policies.generalist_train import generalist_layout, make_worlds
-    from sim.encounters import family_scenario
+    from sim.encounters import SUITE_ARRIVAL, family_scenario
     from sim.suite import load_suite
 
-    for tau, filtered in (((0.0, 0.0), False), ((10.0, 120.0), True)):
-        cfg = tiny_td3(tmp_path, real_share=1.0, real_error_tau_s=tau, real_track_filter=filtered)
+    for tau, filtered, hover in (((0.0, 0.0), False, False), ((10.0, 120.0), True, True)):
+        cfg = tiny_td3(
+            tmp_path,
+            real_share=1.0,
+            real_error_tau_s=tau,
+            real_track_filter=filtered,
+            real_hover=hover,
+        )
         base = family_scenario(load_suite(cfg.suites[0]).families[0])
         worlds = make_worlds(cfg, generalist_layout(cfg, base), np.random.default_rng(0))
         assert worlds and all(w.real for w in worlds)
         assert {w.cfg.sensors.model for w in worlds} == {"adsb"}
         assert {w.cfg.sensors.adsb_error_tau_s for w in worlds} == {tau}
         assert {w.cfg.sensors.adsb_filter for w in worlds} == {filtered}
+        assert {w.cfg.arrival for w in worlds} == {"hover" if hover else SUITE_ARRIVAL}
 
 
 def test_tiny_generalist_run_trains_checkpoints_and_resumes(tmp_path):
@@ -651,6 +658,7 @@ def test_train_generalist_flags_reach_the_config(tmp_path, monkeypatch):
     argv += ["--teacher-horizon", "14", "--turn-weight", "6", "--max-neighbours", "12"]
     argv += ["--init", "generalist", "--dagger-lr", "3e-4", "--teacher-truth"]
     argv += ["--real-share", "0.5", "--real-error-tau", "10", "120", "--real-track-filter"]
+    argv += ["--real-hover"]
     assert main([*argv, "--out", str(tmp_path / "run")]) == 0
     ((cfg, out, resume),) = seen
     assert cfg.swarm_field == "formation" and cfg.family_weights == (("swarms-*", 2.0),)
@@ -663,7 +671,7 @@ def test_train_generalist_flags_reach_the_config(tmp_path, monkeypatch):
     assert cfg.max_neighbours == 12
     assert cfg.init == "generalist" and cfg.dagger_lr == 3e-4
     assert cfg.teacher_truth and cfg.real_share == 0.5 and cfg.real_error_tau_s == (10.0, 120.0)
-    assert cfg.real_track_filter
+    assert cfg.real_track_filter and cfg.real_hover
     assert cfg.minutes == 2 and cfg.seed == 4 and out == tmp_path / "run" and not resume
     assert GeneralistConfig().swarm_field == "all"  # the paper's reward unless asked
     seen.clear()
