@@ -283,7 +283,7 @@ def tiny_td3(tmp_path: Path, **changes: Any) -> GeneralistConfig:
     return GeneralistConfig(**{**settings, **changes})
 
 
-def test_real_world_families_draw_their_adsb_errors_correlation_time_from_the_run(tmp_path):
+def test_real_world_families_take_the_runs_adsb_errors_track_filter_and_arrival(tmp_path):
     from policies.generalist_train import generalist_layout, make_worlds
     from sim.encounters import SUITE_ARRIVAL, family_scenario
     from sim.suite import load_suite
