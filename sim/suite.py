@@ -47,6 +47,9 @@ from sim.encounters import DISTRIBUTIONS, GENERATOR_VERSION, Encounter, Family
 from sim.errors import ConfigError
 from sim.evaluation import evaluation_seed
 
+PAPER_FAMILY_PREFIX = "paper-"
+"""A family named so flies a paper scenario's own episodes (``scenario`` names it)."""
+
 FAMILY_KEYS = {"name", "distribution", "uavs", "formation", "scenario", "overrides", "description"}
 """Keys of a ``[[family]]`` table besides the fields of `Encounter`."""
 
@@ -70,6 +73,10 @@ class Suite:
     seed: int
     families: tuple[Family, ...]
     labels_path: Path | None
+
+    def paper_scenarios(self) -> list[str]:
+        """The scenarios of its ``paper-*`` families (the paper's own episodes), in order."""
+        return [f.scenario for f in self.families if f.name.startswith(PAPER_FAMILY_PREFIX)]
 
     def family(self, name: str) -> Family:
         """The family called ``name``; a ConfigError naming the known ones otherwise."""

@@ -88,8 +88,7 @@ def real_world(policy: Path, episodes: int, suite: Suite) -> dict[str, dict[str,
     shield and without it."""
     world = world_overrides(*REAL_WORLD_FLOWN)
     out: dict[str, dict[str, Any]] = {}
-    paper = [f.name.removeprefix("paper-") for f in suite.families if f.name.startswith("paper-")]
-    for scenario in paper:
+    for scenario in suite.paper_scenarios():
         _, r = evaluate_policy(
             str(policy), scenario, episodes, evaluation_seed(), world, ShieldConfig(mode="on")
         )

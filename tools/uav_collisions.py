@@ -85,9 +85,7 @@ def main() -> None:
     args = p.parse_args()
     suite = load_suite(args.suite)
     if args.real_world:  # the paper scenarios, as tools/ship_generalist.py flies them
-        names = [
-            f.name.removeprefix("paper-") for f in suite.families if f.name.startswith("paper-")
-        ]
+        names = suite.paper_scenarios()
     else:
         names = args.families.split(",") if args.families else [f.name for f in suite.families]
     print("| family | episodes | UAV–UAV first | with a hovering UAV | with one arriving |")

@@ -152,3 +152,10 @@ def test_smoke_oracle_plans_pass_the_swept_check_and_match_the_cached_labels():
         assert np.array_equal(plans.solvable, cached_labels(suite, family, suite.episodes)), (
             family.name
         )
+
+
+def test_paper_scenarios_are_the_paper_families_scenarios_in_order():
+    suite = load_suite("standard")
+    expected = ["2u1o", "3u1o", "3u2o", "5u1o", "5u2o", "7u1o", "7u2o", "10u1o"]
+    assert suite.paper_scenarios() == expected
+    assert all(suite.family(f"paper-{name}").scenario == name for name in expected)
