@@ -398,11 +398,20 @@ class GeneralistConfig:
     device: str = "auto"
     """"cpu", "cuda" or "auto" (cuda when available)."""
 
+    rollout_processes: int = 0
+    """Processes that fly the DAgger phase's rollouts while this one learns
+    (`policies.generalist_rollouts`): 0 flies them here, between the learning steps; 1 on a
+    2-core machine overlaps the two halves of an iteration, about 1.5–1.7 times the iterations per
+    minute (docs/MODEL.md §20, `tools/bench_rollouts.py`). The rollouts are then flown with
+    the actor one iteration behind, and with random draws of their own; the recipe, the
+    teacher and the labels are the same."""
+
     def __post_init__(self) -> None:
         for name in ("actor_lr", "critic_lr", "tau", "grad_clip", "separation_factor"):
             check(getattr(self, name) > 0, name, "must be > 0")
         check(0 < self.gamma < 1, "gamma", "must be in (0, 1)")
         check(0.0 <= self.real_share <= 1.0, "real_share", "must be in [0, 1]")
+        check(self.rollout_processes >= 0, "rollout_processes", "must be >= 0")
         lo, hi = self.real_error_tau_s
         check(0.0 <= lo <= hi and math.isfinite(hi), "real_error_tau_s", "must be 0 <= low <= high")
         check(self.learner in ("td3", "ppo"), "learner", 'must be "td3" or "ppo"')
@@ -507,13 +516,18 @@ resumed; any other missing setting takes its default, which is what the code did
 
 
 def resumed_config(
-    stored: Mapping[str, Any], *, minutes: float | None = None, device: str | None = None
+    stored: Mapping[str, Any],
+    *,
+    minutes: float | None = None,
+    device: str | None = None,
+    rollout_processes: int | None = None,
 ) -> GeneralistConfig:
     """The settings of a stored generalist run (``config.json``'s "generalist"), to resume it.
 
-    A resumed run is the run it was: every setting comes from ``stored``. Two may change,
-    neither of which changes what is learned: ``minutes``, a new budget (the schedule keeps
-    the first budget's minutes, `GeneralistConfig.schedule_minutes`), and ``device``.
+    A resumed run is the run it was: every setting comes from ``stored``. Three may change,
+    none of which changes what is learned from: ``minutes``, a new budget (the schedule keeps
+    the first budget's minutes, `GeneralistConfig.schedule_minutes`), ``device`` and
+    ``rollout_processes``.
 
     Raises:
         ValueError: ``stored`` holds a setting this version does not know, or a value out of
@@ -537,4 +551,6 @@ def resumed_config(
         values["schedule_minutes"], values["minutes"] = first, minutes
     if device is not None:
         values["device"] = device
+    if rollout_processes is not None:
+        values["rollout_processes"] = rollout_processes
     return GeneralistConfig(**values)

@@ -22,7 +22,7 @@ reaches 0.035 on held-out states.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -36,8 +36,9 @@ from policies.train import optimiser_tensors, restore_optimiser
 from sim.orca import goal_turn_rad
 
 if TYPE_CHECKING:
+    from policies.generalist import SetNet
     from policies.generalist_ppo import PPONets
-    from policies.generalist_train import RunBook
+    from policies.generalist_train import RunBook, World
 
 CHECKPOINT_PREFIX = "dagger."
 """Names of the DAgger phase's state in a run's ``last.safetensors``: its labels and its
@@ -208,14 +209,53 @@ def value_update(nets: PPONets, obs: torch.Tensor, target: torch.Tensor, clip: f
     return float(loss.detach())
 
 
-def dagger_iteration(
-    book: RunBook, dagger: Dagger, recent: list[dict[str, Any]]
-) -> dict[str, float]:
-    """Fly one rollout of every world with the β-mixture, aggregate its labels, learn.
+@dataclass(frozen=True)
+class DaggerRollout:
+    """One DAgger rollout of some worlds: what `learn_dagger` takes from it.
 
-    Returns the iteration's scalars (losses, β); finished episodes join ``recent``.
+    Attributes:
+        flown: per world, per step, (`WorldStep`, action flown, zeros, teacher's label): the
+            rows of `policies.generalist_ppo.rollout_columns`. weights: per world, per step,
+            each UAV's label weight (`label_weights`). ended: the metrics of the episodes that
+            ended, each with its "family". transitions: UAV transitions flown. drawn: per
+            world, the episodes drawn so far. beta: the β it was flown with.
     """
-    from policies.generalist_ppo import rollout_columns
+
+    flown: list[list[tuple[Any, ...]]]
+    weights: list[list[NDArray[np.float32]]]
+    ended: list[dict[str, Any]]
+    transitions: int
+    drawn: list[int]
+    beta: float
+
+    @classmethod
+    def merge(cls, parts: list[DaggerRollout]) -> DaggerRollout:
+        """The rollouts of disjoint runs of worlds, in order, as one."""
+        return cls(
+            [rows for part in parts for rows in part.flown],
+            [rows for part in parts for rows in part.weights],
+            [row for part in parts for row in part.ended],
+            sum(part.transitions for part in parts),
+            [count for part in parts for count in part.drawn],
+            parts[0].beta,
+        )
+
+
+def fly_dagger(
+    worlds: list[World],
+    actor: SetNet,
+    teach: Callable[[World], NDArray[np.float32]],
+    beta: float,
+    cfg: GeneralistConfig,
+    goal_value: float,
+    rng: np.random.Generator,
+    device: str,
+) -> DaggerRollout:
+    """Fly ``ppo_rollout`` steps of every world with the β-mixture of ``teach`` and ``actor``.
+
+    Each UAV flies the teacher's action with probability ``beta``, the actor's deterministic
+    one otherwise, both with N(0, `TEACHER_NOISE`²) noise; the teacher labels every state.
+    """
     from policies.generalist_train import (
         TEACHER_NOISE,
         actor_actions,
@@ -224,35 +264,76 @@ def dagger_iteration(
         per_world,
     )
 
-    cfg, nets, worlds, device, rng = book.cfg, book.nets, book.worlds, book.device, book.rng
-    labels = dagger.labels
-    beta = dagger_beta(cfg, book.fraction_done())
-    flown: list[list[Any]] = [[] for _ in worlds]
+    size = worlds[0].obs.shape[-1]
+    flown: list[list[tuple[Any, ...]]] = [[] for _ in worlds]
+    weights: list[list[NDArray[np.float32]]] = [[] for _ in worlds]
+    ended: list[dict[str, Any]] = []
+    transitions = 0
+    for _ in range(cfg.ppo_rollout):
+        student = per_world(actor_actions(actor, joint_obs(worlds, size), device), worlds)
+        for k, (world, own) in enumerate(zip(worlds, student, strict=True)):
+            taught = teach(world)
+            pick = rng.random(own.shape) < beta
+            noise = rng.normal(0.0, TEACHER_NOISE, own.shape)
+            action = np.clip(np.where(pick, taught, own) + noise, -1.0, 1.0).astype(np.float32)
+            goal = goal_turn_rad(world.state, world.cfg) / world.cfg.uav.max_turn_rad
+            step, finished = advance_world(world, action, cfg, goal_value, rng)
+            weights[k].append(label_weights(taught, goal, cfg.dagger_turn_weight))
+            flown[k].append((step, action, np.zeros_like(action), taught.astype(np.float32)))
+            transitions += int(step.acted.sum())
+            ended += [{"family": world.family.name, **row} for row in finished]
+    return DaggerRollout(flown, weights, ended, transitions, [w.drawn for w in worlds], beta)
+
+
+def dagger_iteration(
+    book: RunBook, dagger: Dagger, recent: list[dict[str, Any]]
+) -> dict[str, float]:
+    """Fly one rollout of every world with the β-mixture in this process, then learn.
+
+    Returns the iteration's scalars (losses, β); finished episodes join ``recent``.
+    """
     with book.clock("simulator"):
-        for _ in range(cfg.ppo_rollout):
-            student = per_world(
-                actor_actions(nets.actor, joint_obs(worlds, labels.size), device), worlds
-            )
-            for k, (world, own) in enumerate(zip(worlds, student, strict=True)):
-                taught = book.teach(world)
-                pick = rng.random(own.shape) < beta
-                noise = rng.normal(0.0, TEACHER_NOISE, own.shape)
-                action = np.clip(np.where(pick, taught, own) + noise, -1.0, 1.0).astype(np.float32)
-                obs = world.obs
-                goal = goal_turn_rad(world.state, world.cfg) / world.cfg.uav.max_turn_rad
-                step, ended = advance_world(world, action, cfg, book.goal_value, rng)
-                weight = label_weights(taught, goal, cfg.dagger_turn_weight)
-                acted = step.acted
-                labels.add(obs[acted], taught[acted].astype(np.float32), weight[acted])
-                zeros = np.zeros_like(action)
-                flown[k].append((step, action, zeros, taught))
-                book.transitions += int(acted.sum())
-                recent += [{"family": world.family.name, **row} for row in ended]
+        rollout = fly_dagger(
+            book.worlds,
+            book.nets.actor,
+            book.teach,
+            dagger_beta(book.cfg, book.fraction_done()),
+            book.cfg,
+            book.goal_value,
+            book.rng,
+            book.device,
+        )
+    return learn_dagger(book, dagger, rollout, recent)
+
+
+def learn_dagger(
+    book: RunBook, dagger: Dagger, rollout: DaggerRollout, recent: list[dict[str, Any]]
+) -> dict[str, float]:
+    """Aggregate a rollout's labels and learn from them; returns the iteration's scalars.
+
+    The labels join in the order they were flown (step by step, world by world); the value
+    network takes ``ppo_epochs`` passes over the rollout's GAE targets, the actor
+    ``dagger_updates`` supervised steps on all the labels. The rollout's finished episodes
+    join ``recent``, its transitions and the episodes drawn the book's counters.
+    """
+    from policies.generalist_ppo import rollout_columns
+
+    cfg, nets, device, rng = book.cfg, book.nets, book.device, book.rng
+    labels = dagger.labels
+    for t in range(cfg.ppo_rollout):
+        for rows, weights in zip(rollout.flown, rollout.weights, strict=True):
+            step, taught, weight = rows[t][0], rows[t][3], weights[t]
+            acted = step.acted
+            labels.add(step.obs[acted], taught[acted], weight[acted])
+    for world, drawn in zip(book.worlds, rollout.drawn, strict=True):
+        world.drawn = drawn
+    book.transitions += rollout.transitions
+    recent += rollout.ended
     del recent[:-2000]
     book.iteration += 1
 
     with book.clock("learner"):
-        columns = rollout_columns(nets, flown, cfg, device)
+        columns = rollout_columns(nets, rollout.flown, cfg, device)
         obs_t = torch.from_numpy(columns["obs"]).to(device)
         target_t = torch.from_numpy(columns["target"]).to(device)
         value_loss = 0.0
@@ -276,6 +357,6 @@ def dagger_iteration(
     return {
         "losses/value": value_loss,
         "losses/clone": clone_loss,
-        "charts/dagger_beta": beta,
+        "charts/dagger_beta": rollout.beta,
         "charts/dagger_labels": float(labels.count),
     }

@@ -13,6 +13,7 @@ passes of clipped-surrogate steps (Schulman et al. 2017) over the UAV transition
 
 from __future__ import annotations
 
+import contextlib
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -26,7 +27,14 @@ from torch import Tensor, nn
 
 from policies.config import GeneralistConfig
 from policies.generalist import SetNet
-from policies.generalist_dagger import CHECKPOINT_PREFIX, Dagger, dagger_iteration
+from policies.generalist_dagger import (
+    CHECKPOINT_PREFIX,
+    Dagger,
+    dagger_beta,
+    dagger_iteration,
+    learn_dagger,
+)
+from policies.generalist_rollouts import RolloutFleet
 from policies.train import load_checkpoint_tensors
 from sim.arrays import BoolArray
 from sim.observation import ObservationLayout
@@ -185,16 +193,26 @@ def train_generalist_ppo(
 
         book.run_state = dagger_state
     try:
-        # ---- DAgger first, where asked (`policies.generalist_dagger`)
-        while (
-            dagger is not None
-            and book.fraction_done() < cfg.dagger_share()
-            and book.iteration < cfg.total_iterations
-            and not book.out_of_time()
-        ):
-            scalars = dagger_iteration(book, dagger, recent)
-            book.log(recent, scalars, progress, every=1)
-            book.save_and_validate_if_due()
+        # ---- DAgger first, where asked (`policies.generalist_dagger`), its rollouts in
+        # processes of their own where asked (`policies.generalist_rollouts`)
+        if dagger is not None:
+            with contextlib.ExitStack() as stack:
+                fleet = None
+                if cfg.rollout_processes > 0:
+                    fleet = stack.enter_context(RolloutFleet(book, cfg.rollout_processes))
+                while (
+                    book.fraction_done() < cfg.dagger_share()
+                    and book.iteration < cfg.total_iterations
+                    and not book.out_of_time()
+                ):
+                    if fleet is None:
+                        scalars = dagger_iteration(book, dagger, recent)
+                    else:
+                        with book.clock("simulator"):  # waiting for the rollout
+                            rollout = fleet.fly(lambda: dagger_beta(cfg, book.fraction_done()))
+                        scalars = learn_dagger(book, dagger, rollout, recent)
+                    book.log(recent, scalars, progress, every=1)
+                    book.save_and_validate_if_due()
         while book.iteration < cfg.total_iterations and not book.out_of_time():
             bc = bc_weight(cfg, book.fraction_done())
             with book.clock("simulator"):

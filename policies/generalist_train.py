@@ -411,6 +411,21 @@ def shielded(
     return shield_state(ShieldConfig(mode="on"), cfg, state, proposed, vehicle).action
 
 
+def teach(
+    world: World, cfg: GeneralistConfig, anchor: SetNet | None, device: str
+) -> NDArray[np.float32]:
+    """The teacher's actions (B, N) at the world's state (`GeneralistConfig.teacher`).
+
+    "self-shield": ``anchor``'s proposals (the ``init`` policy's actor, frozen) at the world's
+    observations, through the safety shield (`shielded`); any other teacher, where ``anchor``
+    is None: `teacher_actions`.
+    """
+    if anchor is not None:
+        proposed = actor_actions(anchor, world.obs, device)
+        return shielded(teacher_state(world, cfg.teacher_truth), world.cfg, proposed)
+    return teacher_actions(world, cfg.teacher, cfg.teacher_horizon_s, truth=cfg.teacher_truth)
+
+
 def bc_weight(cfg: GeneralistConfig, frac: float) -> float:
     """α of the behaviour-cloning term at the run's fraction ``frac`` done (0 without teacher)."""
     if cfg.teacher == "none":
@@ -624,16 +639,8 @@ class RunBook:
         return book
 
     def teach(self, world: World) -> NDArray[np.float32]:
-        """The teacher's actions (B, N) at the world's state (`GeneralistConfig.teacher`).
-
-        "self-shield": the ``init`` policy's proposals at the world's observations, through the
-        safety shield (`shielded`); any other teacher: `teacher_actions`.
-        """
-        if self.anchor is not None:
-            proposed = actor_actions(self.anchor, world.obs, self.device)
-            return shielded(teacher_state(world, self.cfg.teacher_truth), world.cfg, proposed)
-        cfg = self.cfg
-        return teacher_actions(world, cfg.teacher, cfg.teacher_horizon_s, truth=cfg.teacher_truth)
+        """The teacher's actions (B, N) at the world's state: `teach` with the run's anchor."""
+        return teach(world, self.cfg, self.anchor, self.device)
 
     def elapsed(self) -> float:
         """Seconds of the run, resumes included."""

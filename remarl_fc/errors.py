@@ -17,14 +17,15 @@ converted where they enter (``raise X from exc``), so callers need to know only 
      │    ├── LinkLost                       the socket failed or the peer went silent
      │    └── SpoofingDetected               two sources speak for one vehicle before take-off
      ├── CommandRejected                     an autopilot answered a command with a refusal
-     └── UnsafeParameters                    a vehicle's failsafe parameters would defeat `fly`
+     ├── UnsafeParameters                    a vehicle's failsafe parameters would defeat `fly`
+     └── WorkerFailed                        a process of a run (training's rollouts) stopped
 
 Messages say what to do next.
 """
 
 from __future__ import annotations
 
-from sim.errors import ConfigError, RemarlError, ScenarioError
+from sim.errors import ConfigError, RemarlError, ScenarioError, WorkerFailed
 from sim.policy_file import PolicyFileError
 
 __all__ = [
@@ -43,6 +44,7 @@ __all__ = [
     "SigningKeyError",
     "SpoofingDetected",
     "UnsafeParameters",
+    "WorkerFailed",
 ]
 
 

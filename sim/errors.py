@@ -7,8 +7,9 @@ project raises on purpose.
 ::
 
     RemarlError
-     └── ConfigError (also a ValueError)
-          └── ScenarioError          a scenario name or file that cannot be used
+     ├── ConfigError (also a ValueError)
+     │    └── ScenarioError          a scenario name or file that cannot be used
+     └── WorkerFailed               a process of a run stopped or failed
 """
 
 from __future__ import annotations
@@ -35,3 +36,11 @@ class ScenarioError(ConfigError):
         super().__init__(where + message)
         self.source = source
         self.key = key
+
+
+class WorkerFailed(RemarlError):
+    """A process that a run started to share its work stopped or failed.
+
+    A training run's rollout process (`policies.generalist_rollouts`); the message holds its
+    exit code or its traceback, and what to do.
+    """

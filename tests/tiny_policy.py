@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from policies.config import GeneralistConfig
 from sim.config import ScenarioConfig
 from sim.policy_file import METADATA_KEY, build_metadata, expected_shapes, sign_policy
 from sim.scenarios import load_scenario
@@ -158,3 +159,27 @@ def tiny_suite(folder: Path) -> Path:
     path = folder / "tiny.toml"
     path.write_text(TINY_SUITE)
     return path
+
+
+def tiny_run_cfg(tmp_path: Path, **changes: Any) -> GeneralistConfig:
+    """A 2-iteration PPO run of the tiny suite (from scratch unless ``changes`` say otherwise)."""
+    settings = {
+        "suites": (str(tiny_suite(tmp_path)),),
+        "learner": "ppo",
+        "agents_per_family": 4,
+        "hidden": 8,
+        "ppo_rollout": 3,
+        "ppo_epochs": 1,
+        "ppo_minibatch": 8,
+        "dagger_updates": 2,
+        "dagger_batch": 16,
+        "minutes": 0.0,
+        "total_iterations": 2,
+        "eval_minutes": 1e6,
+        "eval_episodes": 2,
+        "real_share": 0.5,
+        "device": "cpu",
+        "teacher": "none",
+        **changes,
+    }
+    return GeneralistConfig(**settings)

@@ -7,55 +7,19 @@ import dataclasses
 import numpy as np
 import pytest
 import torch
-from tiny_policy import tiny_suite
+from tiny_policy import tiny_run_cfg as tiny_cfg
 
 from policies.config import GeneralistConfig
 from policies.generalist_init import INIT_FILE
 from policies.generalist_ppo import PPONets
 from policies.generalist_train import (
     RunBook,
-    export_generalist_run,
     shielded,
     train_generalist,
 )
 from policies.train import load_checkpoint
 from remarl_fc.policy_io import load_policy
 from sim.errors import ConfigError
-
-
-def tiny_cfg(tmp_path, **changes) -> GeneralistConfig:
-    """A 2-iteration PPO run of the tiny suite (from scratch unless ``changes`` say otherwise)."""
-    settings = {
-        "suites": (str(tiny_suite(tmp_path)),),
-        "learner": "ppo",
-        "agents_per_family": 4,
-        "hidden": 8,
-        "ppo_rollout": 3,
-        "ppo_epochs": 1,
-        "ppo_minibatch": 8,
-        "dagger_updates": 2,
-        "dagger_batch": 16,
-        "minutes": 0.0,
-        "total_iterations": 2,
-        "eval_minutes": 1e6,
-        "eval_episodes": 2,
-        "real_share": 0.5,
-        "device": "cpu",
-        "teacher": "none",
-        **changes,
-    }
-    return GeneralistConfig(**settings)
-
-
-@pytest.fixture(scope="module")
-def start_policy(tmp_path_factory):
-    """A policy file exported from a tiny run: what the runs below start from."""
-    tmp_path = tmp_path_factory.mktemp("start")
-    out = tmp_path / "run"
-    train_generalist(tiny_cfg(tmp_path), out)
-    path = tmp_path / "start.safetensors"
-    export_generalist_run(out, path, checkpoint="last")
-    return path
 
 
 def test_a_run_from_a_policy_file_starts_from_its_actor_and_value_network(tmp_path, start_policy):

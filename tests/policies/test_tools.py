@@ -112,6 +112,17 @@ def test_bench_train_runs_each_device_and_teacher_and_refuses_an_unknown_device(
     assert done.returncode == 2 and "--devices: unknown gpu" in done.stderr
 
 
+def test_bench_rollouts_flies_a_round_per_process_count_and_refuses_a_negative_one():
+    result = run_tool("bench_rollouts", "--processes", "0,1", "--minutes", "0.1")
+    assert set(result) == {"processes-0", "processes-1"}
+    for row in result.values():
+        assert row["iterations"] >= 1 and row["transitions_per_min"] > 0
+        assert row["updates_per_min"] > 0 and row["wait_share"] >= 0
+    assert result["processes-0"]["iterations_per_min_ratio"] == 1.0  # its own reference
+    done = tool("bench_rollouts", "--processes", "-1")
+    assert done.returncode == 2 and "must be >= 0" in done.stderr
+
+
 def test_adsb_error_table_flies_each_variant_on_the_same_episodes(tmp_path):
     out = tmp_path / "adsb.json"
     done = tool("adsb_error_table", "--scenarios", "3u2o", "--episodes", "4", "--json", str(out))
@@ -152,3 +163,62 @@ def test_uav_collisions_counts_what_the_suite_evaluation_counts():
     # of the first 50 episodes' 19 UAV–UAV collisions, with the policy shipped 2026-11-29)
     episodes, uu, hovering, arriving = real_world_counts("generalist", "10u1o", 50)
     assert episodes == 50 and 0 < hovering <= uu
+
+
+def recipe_module():
+    """tools/generalist_recipe.py as a module (tools/ is not a package)."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(
+        "generalist_recipe", TOOLS / "generalist_recipe.py"
+    )
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_the_recipe_chains_each_round_from_the_last_export_with_flags_train_takes(tmp_path):
+    from remarl_fc.cli import build_parser
+    from remarl_fc.cli.learn import generalist_config
+
+    recipe = recipe_module()
+    plan = recipe.steps(tmp_path, None, 1, 13.0)
+    assert [name for name, _, _ in plan] == ["start"] + [f"round-{k}" for k in range(1, 9)]
+    policy = None
+    for number, (name, commands, made) in enumerate(plan):
+        train, export = (c[len(recipe.remarl()) :] for c in commands)
+        args = build_parser().parse_args(train)
+        cfg = generalist_config(args)  # every flag is one train --generalist takes, in range
+        assert export == ["export", args.out, "--out", str(made)]
+        if name == "start":
+            assert (cfg.seed, cfg.teacher_horizon_s, cfg.minutes) == (2, 10.0, 60.0)
+            assert cfg.rollout_processes == 0  # the start is the recorded run, one process
+        else:
+            assert args.init == str(policy)  # from the previous step's export
+            assert (cfg.teacher, cfg.dagger_fraction, cfg.dagger_lr) == ("self-shield", 1.0, 3e-4)
+            assert (cfg.seed, cfg.minutes, cfg.rollout_processes) == (
+                recipe.ROUNDS[number - 1][0],
+                13.0,
+                1,
+            )
+            assert bool(cfg.family_weights) == (number == 7)  # the crowded round
+        policy = made
+
+
+def test_the_recipe_resumes_a_round_with_a_checkpoint_and_skips_a_made_one(tmp_path):
+    start = tmp_path / "start.safetensors"
+    start.write_bytes(b"")
+    (tmp_path / "round-1.safetensors").write_bytes(b"")
+    (tmp_path / "round-2").mkdir()
+    (tmp_path / "round-2" / "last.safetensors").write_bytes(b"")
+    done = tool("generalist_recipe", "--out", str(tmp_path), "--start", str(start), "--dry-run")
+    assert done.returncode == 0, done.stderr
+    lines = done.stdout.splitlines()
+    assert lines[0].startswith("round-1:") and "skipped" in lines[0]
+    assert (
+        lines[1] == f"$ remarl-fc train --generalist --resume --out {tmp_path / 'round-2'} --json"
+    )
+    assert f"--init {tmp_path / 'round-2.safetensors'}" in lines[3]  # round 3 from round 2
+    missing = tool("generalist_recipe", "--out", str(tmp_path), "--start", str(tmp_path / "x"))
+    assert missing.returncode == 2 and "no such policy file" in missing.stderr
