@@ -148,7 +148,6 @@ class RolloutFleet:
         self.conns: list[Connection] = []
         self.procs: list[BaseProcess] = []
         self.requests = 0
-        self.in_flight = 0
         self.threads = torch.get_num_threads()
 
     def __enter__(self) -> RolloutFleet:
@@ -209,11 +208,10 @@ class RolloutFleet:
         ``beta``: β now (each request is flown with the β of when it was sent). The first call
         asks for two, both with the actor as it is.
         """
-        if self.in_flight == 0:
+        if self.requests == 0:
             self._request(beta())
         self._request(beta())
         parts = [self._receive(i, conn) for i, conn in enumerate(self.conns)]
-        self.in_flight -= 1
         return DaggerRollout.merge(parts)
 
     def _request(self, beta: float) -> None:
@@ -224,7 +222,6 @@ class RolloutFleet:
             except OSError as exc:
                 raise self._stopped(index) from exc
         self.requests += 1
-        self.in_flight += 1
 
     def _stopped(self, index: int) -> WorkerFailed:
         proc = self.procs[index]

@@ -85,12 +85,25 @@ def test_a_process_flies_what_this_one_would_with_the_same_weights_and_stream(
         assert got.drawn == [n for part in here for n in part[number].drawn]
 
 
-def test_a_run_with_a_rollout_process_learns_counts_and_resumes(tmp_path, start_policy):
+def test_a_run_with_a_rollout_process_learns_counts_and_resumes(
+    tmp_path, start_policy, monkeypatch
+):
+    import policies.generalist_ppo as generalist_ppo
+
+    flown = []  # the rollouts the run learned from came from its processes
+
+    class Counted(RolloutFleet):
+        def fly(self, beta):
+            flown.append(len(self.procs))
+            return super().fly(beta)
+
+    monkeypatch.setattr(generalist_ppo, "RolloutFleet", Counted)
     book = self_shield_book(tmp_path, start_policy)
     cfg = dataclasses.replace(book.cfg, rollout_processes=1, total_iterations=3)
     out = tmp_path / "fleet"
     summary = train_generalist(cfg, out)
     assert summary["iterations"] == 3 and summary["transitions"] > 0
+    assert flown == [1, 1, 1]
     nets = PPONets.create(book.layout, cfg, "cpu")
     meta = load_checkpoint(out / "last.safetensors", nets)
     assert meta["iteration"] == 3 and meta["updates"] == 3 * cfg.dagger_updates
