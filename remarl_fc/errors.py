@@ -20,7 +20,9 @@ converted where they enter (``raise X from exc``), so callers need to know only 
      ├── UnsafeParameters                    a vehicle's failsafe parameters would defeat `fly`
      └── WorkerFailed                        a process of a run (training's rollouts) stopped
 
-Messages say what to do next.
+Messages say what to do next. Every error of the tree crosses a process boundary whole: one
+raised in a worker (`remarl-fc eval --workers`, a training's rollout process) reaches the
+parent with its class, message and attributes (`RemarlError.__reduce__`).
 """
 
 from __future__ import annotations

@@ -14,9 +14,31 @@ project raises on purpose.
 
 from __future__ import annotations
 
+from typing import Any
+
 
 class RemarlError(Exception):
-    """Base class of every error remarl-fc raises on purpose."""
+    """Base class of every error remarl-fc raises on purpose.
+
+    Every error of the tree crosses a process boundary whole (a pool's worker raising it to
+    the parent: `remarl-fc eval --workers`, the training's rollout processes): pickle rebuilds
+    it from its message and attributes, not by calling its ``__init__``, whose keyword-only
+    arguments it would not know (it would raise a TypeError in the parent, and the user would
+    see a broken pool instead of what to do).
+    """
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        return (_rebuild_error, (type(self), self.args, dict(self.__dict__)))
+
+
+def _rebuild_error(
+    cls: type[RemarlError], args: tuple[Any, ...], state: dict[str, Any]
+) -> RemarlError:
+    """``cls`` with ``args`` and the attributes ``state``, its ``__init__`` not called."""
+    error = cls.__new__(cls, *args)
+    error.args = args
+    error.__dict__.update(state)
+    return error
 
 
 class ConfigError(RemarlError, ValueError):

@@ -227,3 +227,22 @@ def test_a_method_label_reads_back_as_its_spec(label):
     from remarl_fc.offline.suite import MethodSpec
 
     assert MethodSpec.from_label(label).label == label
+
+
+def test_a_corrupt_policy_says_so_from_the_workers_too(tmp_path, capsys):
+    """The checksum error raised in a worker process reaches the user whole, not as a broken
+    pool (the error tree pickles: tests/remarl_fc/test_errors.py)."""
+    from safetensors import safe_open
+    from safetensors.numpy import load_file, save_file
+
+    path = write_tiny_generalist(tmp_path / "g.safetensors", uavs=(1, 5))
+    with safe_open(str(path), "np") as handle:
+        metadata = handle.metadata()
+    tensors = load_file(str(path))
+    name = sorted(tensors)[0]
+    tensors[name] = tensors[name] + 0.25  # changed after it was signed
+    save_file(tensors, str(path), metadata=metadata)
+    argv = ["eval", "--suite", "smoke", "--policy", str(path), "--families"]
+    assert main([*argv, "crossing-1u,static-5u", "--workers", "2"]) == 2
+    err = capsys.readouterr().err
+    assert "checksum mismatch" in err and "re-export it" in err and "Traceback" not in err
