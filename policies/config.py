@@ -493,6 +493,14 @@ class GeneralistConfig:
         """
         return self.dagger_fraction if self.teacher != "none" and self.learner == "ppo" else 0.0
 
+    def ppo_follows(self) -> bool:
+        """Whether a PPO phase follows the DAgger phase (``dagger_share`` < 1).
+
+        A run that is DAgger from end to end has no use for a critic: its value network is
+        left as it began (the init's), and its passes are not spent.
+        """
+        return self.dagger_share() < 1.0
+
     def fraction_of(self, elapsed_s: float) -> float:
         """The schedule's fraction done after ``elapsed_s`` seconds, in [0, 1] (``minutes`` > 0)."""
         minutes = self.schedule_minutes or self.minutes

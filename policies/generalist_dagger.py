@@ -11,8 +11,10 @@ the aggregated data set of the states the student's own mixture visits). Then:
   weight) rows, and the actor takes ``dagger_updates`` supervised steps (mean squared error,
   weighted by ``dagger_turn_weight`` where it is > 0: `label_weights`; Adam of its own at
   ``dagger_lr``) on minibatches of ``dagger_batch`` drawn from all of it;
-- the value network learns the rollout's GAE targets (``ppo_epochs`` passes, the value loss
-  alone), so that PPO starts from a critic of the policy it inherits.
+- where PPO follows (``dagger_fraction`` < 1), the value network learns the rollout's GAE
+  targets (``ppo_epochs`` passes, the value loss alone: `warm_critic`), so that PPO starts from
+  a critic of the policy it inherits. A run that is DAgger from end to end skips them: its
+  critic would serve nothing, and the passes were a quarter of the learner's time.
 
 Why (docs/MODEL.md §20): inside the PPO loss the cloning term fits the teacher to a mean
 squared error of 0.07–0.10 on normalised actions, where the labels' own variance is 0.09 — it
@@ -306,18 +308,39 @@ def dagger_iteration(
     return learn_dagger(book, dagger, rollout, recent)
 
 
+def warm_critic(
+    nets: PPONets,
+    rollout: DaggerRollout,
+    cfg: GeneralistConfig,
+    device: str,
+    rng: np.random.Generator,
+) -> float:
+    """``ppo_epochs`` passes of the value network over the rollout's GAE targets; the last loss."""
+    from policies.generalist_ppo import rollout_columns
+
+    columns = rollout_columns(nets, rollout.flown, cfg, device)
+    obs_t = torch.from_numpy(columns["obs"]).to(device)
+    target_t = torch.from_numpy(columns["target"]).to(device)
+    value_loss = 0.0
+    for _ in range(cfg.ppo_epochs):
+        order = torch.from_numpy(rng.permutation(len(obs_t))).to(device)
+        for start in range(0, len(obs_t), cfg.ppo_minibatch):
+            idx = order[start : start + cfg.ppo_minibatch]
+            value_loss = value_update(nets, obs_t[idx], target_t[idx], cfg.grad_clip)
+    return value_loss
+
+
 def learn_dagger(
     book: RunBook, dagger: Dagger, rollout: DaggerRollout, recent: list[dict[str, Any]]
 ) -> dict[str, float]:
     """Aggregate a rollout's labels and learn from them; returns the iteration's scalars.
 
-    The labels join in the order they were flown (step by step, world by world); the value
-    network takes ``ppo_epochs`` passes over the rollout's GAE targets, the actor
-    ``dagger_updates`` supervised steps on all the labels. The rollout's finished episodes
-    join ``recent``, its transitions and the episodes drawn the book's counters.
+    The labels join in the order they were flown (step by step, world by world); where PPO
+    follows, the value network takes ``ppo_epochs`` passes over the rollout's GAE targets
+    (`warm_critic`); the actor takes ``dagger_updates`` supervised steps on all the labels.
+    The rollout's finished episodes join ``recent``, its transitions and the episodes drawn
+    the book's counters.
     """
-    from policies.generalist_ppo import rollout_columns
-
     cfg, nets, device, rng = book.cfg, book.nets, book.device, book.rng
     labels = dagger.labels
     for t in range(cfg.ppo_rollout):
@@ -332,16 +355,10 @@ def learn_dagger(
     del recent[:-2000]
     book.iteration += 1
 
+    scalars: dict[str, float] = {}
     with book.clock("learner"):
-        columns = rollout_columns(nets, rollout.flown, cfg, device)
-        obs_t = torch.from_numpy(columns["obs"]).to(device)
-        target_t = torch.from_numpy(columns["target"]).to(device)
-        value_loss = 0.0
-        for _ in range(cfg.ppo_epochs):
-            order = torch.from_numpy(rng.permutation(len(obs_t))).to(device)
-            for start in range(0, len(obs_t), cfg.ppo_minibatch):
-                idx = order[start : start + cfg.ppo_minibatch]
-                value_loss = value_update(nets, obs_t[idx], target_t[idx], cfg.grad_clip)
+        if cfg.ppo_follows():
+            scalars["losses/value"] = warm_critic(nets, rollout, cfg, device, rng)
         clone_loss = 0.0
         for _ in range(cfg.dagger_updates):
             obs, taught, weight = labels.sample(cfg.dagger_batch, rng)
@@ -354,8 +371,7 @@ def learn_dagger(
                 torch.from_numpy(weight).to(device) if cfg.dagger_turn_weight > 0 else None,
             )
             book.updates += 1
-    return {
-        "losses/value": value_loss,
+    return scalars | {
         "losses/clone": clone_loss,
         "charts/dagger_beta": rollout.beta,
         "charts/dagger_labels": float(labels.count),

@@ -119,3 +119,19 @@ def test_a_bad_start_is_a_clear_error(tmp_path, name, content, match):
     cfg = tiny_cfg(tmp_path, init=init)
     with pytest.raises(ConfigError, match=match):
         RunBook.open(cfg, tmp_path / "run", PPONets.create, resume=False)
+
+
+@pytest.mark.parametrize("fraction", [1.0, 0.5])
+def test_the_dagger_phase_warms_the_critic_only_where_ppo_follows(tmp_path, start_policy, fraction):
+    from policies.generalist_dagger import Dagger, dagger_iteration
+
+    cfg = tiny_cfg(
+        tmp_path, init=str(start_policy), teacher="self-shield", dagger_fraction=fraction
+    )
+    book = RunBook.open(cfg, tmp_path / "run", PPONets.create, resume=False)
+    before = [p.detach().clone() for p in book.nets.value.parameters()]
+    scalars = dagger_iteration(book, Dagger.create(cfg, book.layout.size, book.nets), [])
+    after = list(book.nets.value.parameters())
+    moved = any(not torch.equal(a, b) for a, b in zip(after, before, strict=True))
+    assert moved == cfg.ppo_follows() == (fraction < 1)
+    assert ("losses/value" in scalars) == moved and scalars["losses/clone"] > 0
