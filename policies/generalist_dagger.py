@@ -246,7 +246,7 @@ class DaggerRollout:
 def fly_dagger(
     worlds: list[World],
     actor: SetNet,
-    teach: Callable[[World], NDArray[np.float32]],
+    teach: Callable[[list[World]], list[NDArray[np.float32]]],
     beta: float,
     cfg: GeneralistConfig,
     goal_value: float,
@@ -273,8 +273,7 @@ def fly_dagger(
     transitions = 0
     for _ in range(cfg.ppo_rollout):
         student = per_world(actor_actions(actor, joint_obs(worlds, size), device), worlds)
-        for k, (world, own) in enumerate(zip(worlds, student, strict=True)):
-            taught = teach(world)
+        for k, (world, own, taught) in enumerate(zip(worlds, student, teach(worlds), strict=True)):
             pick = rng.random(own.shape) < beta
             noise = rng.normal(0.0, TEACHER_NOISE, own.shape)
             action = np.clip(np.where(pick, taught, own) + noise, -1.0, 1.0).astype(np.float32)

@@ -258,16 +258,17 @@ def fly_rollout(
         # the behaviour policy's log density of its own sample, (sample − mean)/σ = noise
         density = (-0.5 * noise * noise - log_std - 0.5 * LOG_2PI).astype(np.float32)
         action = np.clip(sample, -1.0, 1.0)
-        for k, (world, a, u, lp) in enumerate(
+        taught_all = book.teach(worlds) if bc > 0 else [None] * len(worlds)
+        for k, (world, a, u, lp, taught) in enumerate(
             zip(
                 worlds,
                 per_world(action, worlds),
                 per_world(sample, worlds),
                 per_world(density, worlds),
+                taught_all,
                 strict=True,
             )
         ):
-            taught = book.teach(world) if bc > 0 else None
             step, ended = advance_world(world, a, cfg, book.goal_value, rng)
             flown[k].append((step, u, lp, taught))
             book.transitions += int(step.acted.sum())

@@ -118,8 +118,8 @@ def serve(conn: Connection, spec: FleetSpec) -> None:
             anchor.load_state_dict({k: torch.from_numpy(v) for k, v in spec.anchor.items()})
             anchor.requires_grad_(False)
 
-        def teacher(world: Any) -> NDArray[np.float32]:
-            return teach(world, cfg, anchor, "cpu")
+        def teacher(worlds: list[Any]) -> list[NDArray[np.float32]]:
+            return teach(worlds, cfg, anchor, "cpu")
 
         while (request := conn.recv()) is not None:
             weights, beta, number = request

@@ -35,6 +35,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import fnmatch
+import functools
 import json
 import math
 import time
@@ -64,7 +65,7 @@ from sim.oracle import oracle_actions
 from sim.orca import HORIZON_S as ORCA_HORIZON_S
 from sim.orca import orca_actions
 from sim.scenarios import REAL_WORLD
-from sim.shield import ShieldConfig, shield_state, vehicle_of
+from sim.shield import ShieldConfig, Vehicle, shield_state, vehicle_of
 from sim.spawn import EpisodeStart, spawn_episodes
 from sim.state import SwarmState, merge_where
 from sim.suite import load_suite
@@ -174,6 +175,15 @@ class World:
     def envs(self) -> int:
         """B."""
         return int(self.state.pos_m.shape[0])
+
+    @functools.cached_property
+    def teacher_vehicle(self) -> Vehicle:
+        """The shield's vehicle for a teacher here: `teacher_vehicle` of the world's scenario.
+
+        Resolved once per world (it reads the vehicle profiles' files): a teacher shields
+        every step, and reading them at each took a tenth of a DAgger rollout.
+        """
+        return teacher_vehicle(self.cfg)
 
 
 def draw(family: Family, cfg: ScenarioConfig, seed: int, first: int, count: int) -> EpisodeStart:
@@ -356,7 +366,8 @@ def teacher_actions(
 
     On the world's true state if ``truth`` (`GeneralistConfig.teacher_truth`).
     """
-    return teacher_plan(teacher_state(world, truth), world.cfg, teacher, horizon_s)
+    state = teacher_state(world, truth)
+    return teacher_plan(state, world.cfg, teacher, horizon_s, world.teacher_vehicle)
 
 
 def teacher_state(world: World, truth: bool) -> SwarmState:
@@ -365,7 +376,11 @@ def teacher_state(world: World, truth: bool) -> SwarmState:
 
 
 def teacher_plan(
-    state: SwarmState, cfg: ScenarioConfig, teacher: str, horizon_s: float = ORCA_HORIZON_S
+    state: SwarmState,
+    cfg: ScenarioConfig,
+    teacher: str,
+    horizon_s: float = ORCA_HORIZON_S,
+    vehicle: Vehicle | None = None,
 ) -> NDArray[np.float32]:
     """The teacher's actions (B, N) at a state of scenario ``cfg``.
 
@@ -376,7 +391,8 @@ def teacher_plan(
     tracks, if any; `SwarmState.exactly_sensed` is the truth). ``horizon_s`` is its τ_o
     against the intruders (`GeneralistConfig.teacher_horizon_s`). "oracle": the oracle's plan
     from the current state, replanned at every step (`sim.oracle.oracle_actions`), and ORCA
-    through the shield in the environments where it finds no plan.
+    through the shield in the environments where it finds no plan. ``vehicle``: the shield's
+    (`teacher_vehicle` of ``cfg`` where None).
     """
     if teacher not in STATE_TEACHERS:
         raise ValueError(f"teacher {teacher!r} does not label from the state alone (RunBook.teach)")
@@ -384,46 +400,65 @@ def teacher_plan(
         planned_actions, planned = oracle_actions(state, cfg)
         if planned.all():
             return planned_actions
-        fallback = orca_shield_actions(state, cfg, horizon_s)
+        fallback = orca_shield_actions(state, cfg, horizon_s, vehicle)
         return np.where(planned[:, None], planned_actions, fallback)
-    return orca_shield_actions(state, cfg, horizon_s)
+    return orca_shield_actions(state, cfg, horizon_s, vehicle)
 
 
 def orca_shield_actions(
-    state: SwarmState, cfg: ScenarioConfig, horizon_s: float = ORCA_HORIZON_S
+    state: SwarmState,
+    cfg: ScenarioConfig,
+    horizon_s: float = ORCA_HORIZON_S,
+    vehicle: Vehicle | None = None,
 ) -> NDArray[np.float32]:
     """The "orca-shield" teacher's actions (B, N).
 
     ORCA looking ``horizon_s`` ahead at the intruders it senses with ``cfg``, then the safety
-    shield, turning only.
+    shield, turning only (`shielded`).
     """
-    return shielded(state, cfg, orca_actions(state, cfg, horizon_s=horizon_s))
+    return shielded(state, cfg, orca_actions(state, cfg, horizon_s=horizon_s), vehicle)
+
+
+def teacher_vehicle(cfg: ScenarioConfig) -> Vehicle:
+    """The shield's vehicle for a teacher: `vehicle_of` ``cfg``, turning only (no speed)."""
+    return dataclasses.replace(vehicle_of(cfg), can_slow=False)
 
 
 def shielded(
-    state: SwarmState, cfg: ScenarioConfig, proposed: NDArray[np.float32]
+    state: SwarmState,
+    cfg: ScenarioConfig,
+    proposed: NDArray[np.float32],
+    vehicle: Vehicle | None = None,
 ) -> NDArray[np.float32]:
     """Proposed actions (B, N) through the safety shield, turning only.
 
-    A teacher commands no speed: the default `ShieldConfig`, the vehicle of ``cfg``.
+    A teacher commands no speed: the default `ShieldConfig`, ``vehicle`` (`teacher_vehicle` of
+    ``cfg`` where None; a `World` holds its own).
     """
-    vehicle = dataclasses.replace(vehicle_of(cfg), can_slow=False)
+    vehicle = vehicle or teacher_vehicle(cfg)
     return shield_state(ShieldConfig(mode="on"), cfg, state, proposed, vehicle).action
 
 
 def teach(
-    world: World, cfg: GeneralistConfig, anchor: SetNet | None, device: str
-) -> NDArray[np.float32]:
-    """The teacher's actions (B, N) at the world's state (`GeneralistConfig.teacher`).
+    worlds: list[World], cfg: GeneralistConfig, anchor: SetNet | None, device: str
+) -> list[NDArray[np.float32]]:
+    """The teacher's actions (B, N) at each world's state (`GeneralistConfig.teacher`).
 
-    "self-shield": ``anchor``'s proposals (the ``init`` policy's actor, frozen) at the world's
-    observations, through the safety shield (`shielded`); any other teacher, where ``anchor``
-    is None: `teacher_actions`.
+    "self-shield": ``anchor``'s proposals (the ``init`` policy's actor, frozen) at the worlds'
+    observations, all of them in one batch, each world's through the safety shield
+    (`shielded`); any other teacher, where ``anchor`` is None: `teacher_actions`.
     """
     if anchor is not None:
-        proposed = actor_actions(anchor, world.obs, device)
-        return shielded(teacher_state(world, cfg.teacher_truth), world.cfg, proposed)
-    return teacher_actions(world, cfg.teacher, cfg.teacher_horizon_s, truth=cfg.teacher_truth)
+        size = worlds[0].obs.shape[-1]
+        proposals = per_world(actor_actions(anchor, joint_obs(worlds, size), device), worlds)
+        return [
+            shielded(teacher_state(w, cfg.teacher_truth), w.cfg, proposed, w.teacher_vehicle)
+            for w, proposed in zip(worlds, proposals, strict=True)
+        ]
+    return [
+        teacher_actions(w, cfg.teacher, cfg.teacher_horizon_s, truth=cfg.teacher_truth)
+        for w in worlds
+    ]
 
 
 def bc_weight(cfg: GeneralistConfig, frac: float) -> float:
@@ -638,9 +673,9 @@ class RunBook:
         book.start = book.last_eval = book.last_save = time.monotonic()
         return book
 
-    def teach(self, world: World) -> NDArray[np.float32]:
-        """The teacher's actions (B, N) at the world's state: `teach` with the run's anchor."""
-        return teach(world, self.cfg, self.anchor, self.device)
+    def teach(self, worlds: list[World]) -> list[NDArray[np.float32]]:
+        """The teacher's actions (B, N) at each world's state: `teach` with the run's anchor."""
+        return teach(worlds, self.cfg, self.anchor, self.device)
 
     def elapsed(self) -> float:
         """Seconds of the run, resumes included."""

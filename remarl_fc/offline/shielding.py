@@ -16,7 +16,7 @@ from numpy.typing import NDArray
 from sim.arrays import FloatArray
 from sim.config import ScenarioConfig
 from sim.observation import ObservationLayout
-from sim.shield import ShieldConfig, shield_state
+from sim.shield import ShieldConfig, Vehicle, shield_state, vehicle_of
 from sim.state import SwarmState
 
 
@@ -32,6 +32,7 @@ class Shielded:
     def __init__(self, act: Any, cfg: ShieldConfig) -> None:
         self.inner = act
         self.cfg = cfg
+        self._vehicle: tuple[ScenarioConfig, Vehicle] | None = None
         self.decisions = 0
         self.interventions = 0
         self.intervened_envs: NDArray[np.bool_] | None = None
@@ -41,6 +42,13 @@ class Shielded:
         """The observation layout the wrapped act function reads (None: the scenario's)."""
         layout: ObservationLayout | None = getattr(self.inner, "layout", None)
         return layout
+
+    def vehicle(self, cfg: ScenarioConfig) -> Vehicle:
+        """`sim.shield.vehicle_of` the scenario, read once per scenario (it reads files)."""
+        known = self._vehicle
+        if known is None or (known[0] is not cfg and known[0] != cfg):
+            known = self._vehicle = (cfg, vehicle_of(cfg))
+        return known[1]
 
     def reset(self) -> None:
         """Forget the counts (a new batch of episodes)."""
@@ -52,7 +60,7 @@ class Shielded:
     ) -> tuple[NDArray[np.float32], FloatArray]:
         """(actions, speeds) to fly for the observations (B, N, D) of ``state``."""
         proposed = self.inner(obs, state, cfg)
-        decision = shield_state(self.cfg, cfg, state, proposed)
+        decision = shield_state(self.cfg, cfg, state, proposed, self.vehicle(cfg))
         self.decisions += int(state.active.sum())
         self.interventions += int(decision.intervened.sum())
         hit: NDArray[np.bool_] = np.asarray(decision.intervened.any(axis=-1))

@@ -677,3 +677,24 @@ def test_train_generalist_flags_reach_the_config(tmp_path, monkeypatch):
     seen.clear()
     assert main(["train", "--generalist", "--json", "--out", str(tmp_path / "plain")]) == 0
     assert seen[0][0] == GeneralistConfig(seed=seen[0][0].seed)  # no flag: every default
+
+
+def test_a_world_reads_its_vehicle_profiles_once_for_every_teacher_step(monkeypatch):
+    """The shield's vehicle comes from the profile files: read once per world, not per step
+    (it was a tenth of a DAgger rollout)."""
+    import sim.shield
+    from policies.generalist_train import World, teacher_actions, teacher_vehicle, with_layout
+    from sim.scenarios import load_scenario
+    from sim.swarm import SwarmSim
+
+    reads: list[str] = []
+    load = sim.shield.load_profile
+    monkeypatch.setattr(sim.shield, "load_profile", lambda name: reads.append(name) or load(name))
+    cfg = with_layout(load_scenario("3u2o"), LAYOUT)
+    swarm = SwarmSim(cfg)
+    state = swarm.initial_state(np.random.default_rng(0), 3)
+    world = World(None, cfg, False, swarm, state, swarm.observe(state).flat(), 3)  # type: ignore[arg-type]
+    for _ in range(4):
+        teacher_actions(world, "orca-shield")
+    assert reads == [cfg.dynamics]
+    assert world.teacher_vehicle == teacher_vehicle(cfg) and not world.teacher_vehicle.can_slow

@@ -46,7 +46,7 @@ def test_the_self_shield_teacher_is_the_start_policy_through_the_shield(tmp_path
     for world in book.worlds:
         proposed = policy.act(world.obs).astype(np.float32)
         expected = shielded(world.state, world.cfg, proposed)
-        np.testing.assert_allclose(book.teach(world), expected, atol=1e-5)
+        np.testing.assert_allclose(book.teach([world])[0], expected, atol=1e-5)
 
 
 def test_the_self_shield_labels_go_through_the_shield(tmp_path, start_policy, monkeypatch):
@@ -54,12 +54,12 @@ def test_the_self_shield_labels_go_through_the_shield(tmp_path, start_policy, mo
     that marks what it returns shows every label passed through it."""
     import policies.generalist_train as generalist_train
 
-    monkeypatch.setattr(generalist_train, "shielded", lambda state, cfg, proposed: proposed + 7)
+    monkeypatch.setattr(generalist_train, "shielded", lambda state, cfg, proposed, _: proposed + 7)
     cfg = tiny_cfg(tmp_path, init=str(start_policy), teacher="self-shield", dagger_fraction=1.0)
     book = RunBook.open(cfg, tmp_path / "run", PPONets.create, resume=False)
     policy = load_policy(str(start_policy))
     for world in book.worlds:
-        np.testing.assert_allclose(book.teach(world), policy.act(world.obs) + 7, atol=1e-5)
+        np.testing.assert_allclose(book.teach([world])[0], policy.act(world.obs) + 7, atol=1e-5)
 
 
 def test_a_self_shield_run_learns_resumes_and_keeps_its_start(tmp_path, start_policy):
@@ -135,3 +135,13 @@ def test_the_dagger_phase_warms_the_critic_only_where_ppo_follows(tmp_path, star
     moved = any(not torch.equal(a, b) for a, b in zip(after, before, strict=True))
     assert moved == cfg.ppo_follows() == (fraction < 1)
     assert ("losses/value" in scalars) == moved and scalars["losses/clone"] > 0
+
+
+def test_the_self_shield_teacher_labels_the_worlds_together_as_each_alone(tmp_path, start_policy):
+    """One batch of the anchor's proposals for every world (`teach`), the same labels."""
+    cfg = tiny_cfg(tmp_path, init=str(start_policy), teacher="self-shield", dagger_fraction=1.0)
+    book = RunBook.open(cfg, tmp_path / "run", PPONets.create, resume=False)
+    assert len(book.worlds) > 1
+    together = book.teach(book.worlds)
+    for world, labels in zip(book.worlds, together, strict=True):
+        np.testing.assert_allclose(labels, book.teach([world])[0], atol=1e-5)

@@ -62,7 +62,7 @@ def test_a_process_flies_what_this_one_would_with_the_same_weights_and_stream(
                 fly_dagger(
                     mine,
                     book.nets.actor,
-                    lambda w: teach(w, cfg, book.anchor, "cpu"),
+                    lambda ws: teach(ws, cfg, book.anchor, "cpu"),
                     0.5,
                     cfg,
                     book.goal_value,
