@@ -12,6 +12,15 @@ flown without the shield too), writes ``policies/zoo/NAME.eval.json`` (per famil
 over all and over the solvable episodes, collisions, interventions; with and without the
 shield; per real-world scenario: success and collisions, with and without the shield), and
 exports ``policies/zoo/NAME.safetensors`` again with the suite means in its metadata.
+
+    python tools/ship_generalist.py --reshield [--name generalist] [--workers 2]
+
+flies the shipped ``policies/zoo/NAME.safetensors`` again behind today's shield and rewrites
+only what the shield decides in its eval file (every figure under ``shielded``, the
+interventions, the shielded suite mean), after checking that the flights without the shield
+repeat the recorded ones: the shield is not part of the policy, and a change to it leaves the
+policy file and the rest of its evaluation as shipped (the file's metadata keeps the shielded
+mean of its shipping day).
 """
 
 from __future__ import annotations
@@ -99,9 +108,73 @@ def real_world(policy: Path, episodes: int, suite: Suite) -> dict[str, dict[str,
     return out
 
 
+SHIELDED_KEPT = (
+    "success_rate",
+    "success_rate_solvable",
+    "collision_rate_u2o",
+    "collision_rate_u2u",
+)
+"""What the eval file keeps of each family flown behind the shield."""
+
+
+def shielded(result: dict[str, Any]) -> dict[str, Any]:
+    """A family's figures behind the shield, from its row of `evaluate_suite`."""
+    return {k: result[k] for k in SHIELDED_KEPT}
+
+
+def reshield(name: str, workers: int) -> dict[str, Any]:
+    """`--reshield`: the shielded figures of a shipped generalist's eval file, flown again."""
+    path = zoo_dir() / f"{name}.eval.json"
+    report = json.loads(path.read_text())
+    suite = load_suite(report["suite"])
+    policy = zoo_dir() / f"{name}.safetensors"
+    results = evaluate_suite(
+        suite, [MethodSpec("policy", str(policy))], workers=workers, shield=ShieldConfig(mode="on")
+    )
+    for r in results:
+        row = report["families"][r["family"]]
+        if r["success_rate_unshielded"] != row["success_rate"]:
+            raise SystemExit(
+                f"{r['family']}: without the shield {r['success_rate_unshielded']} where the eval "
+                f"file records {row['success_rate']}: the policy or the simulator changed since "
+                "it shipped; ship it again (python tools/ship_generalist.py RUN) instead"
+            )
+        row["intervention_rate"] = r["intervention_rate"]
+        row["shielded"] = shielded(r)
+    families = report["families"].values()
+    report["shielded_success_rate_solvable"] = _mean(
+        [f["shielded"]["success_rate_solvable"] for f in families]
+    )
+    scenarios = report["real_world"]["scenarios"]
+    if scenarios:
+        episodes = int(next(iter(scenarios.values()))["episodes"])
+        for scenario, flown in real_world(policy, episodes, suite).items():
+            if flown["success_rate"] != scenarios[scenario]["success_rate"]:
+                raise SystemExit(
+                    f"{scenario} in the real world: without the shield {flown['success_rate']} "
+                    f"where the eval file records {scenarios[scenario]['success_rate']}; ship "
+                    "it again instead"
+                )
+            scenarios[scenario]["shielded"] = flown["shielded"]
+    path.write_text(json.dumps(report, indent=2, default=float) + "\n")
+    return {
+        "shielded_success_rate_solvable": report["shielded_success_rate_solvable"],
+        "shielded_collision_rate_u2u": _mean(
+            [f["shielded"]["collision_rate_u2u"] for f in families]
+        ),
+        "real_world_shielded": _mean([r["shielded"]["success_rate"] for r in scenarios.values()]),
+    }
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("run", help="the --out folder of remarl-fc train --generalist")
+    parser.add_argument("run", nargs="?", help="the --out folder of remarl-fc train --generalist")
+    parser.add_argument(
+        "--reshield",
+        action="store_true",
+        help="fly the shipped NAME again behind today's shield and rewrite only the shielded "
+        "figures of its eval file (no run)",
+    )
     parser.add_argument("--checkpoint", default="best", choices=["best", "last"])
     parser.add_argument("--workers", type=int, default=1)
     parser.add_argument(
@@ -121,6 +194,11 @@ def main() -> None:
     )
     args = parser.parse_args()
     keep_freed_memory()
+    if args.reshield:
+        print(json.dumps(reshield(args.name, args.workers), indent=2))
+        return
+    if args.run is None:
+        parser.error("a run folder is required (or --reshield)")
     run = Path(args.run)
     suite = load_suite("standard")
     with tempfile.TemporaryDirectory() as tmp:
@@ -143,12 +221,7 @@ def main() -> None:
         row["success_rate_solvable"] = r["success_rate_solvable_unshielded"]
         row["collision_rate_u2o"] = r["collision_rate_u2o_unshielded"]
         row["collision_rate_u2u"] = r["collision_rate_u2u_unshielded"]
-        row["shielded"] = {
-            "success_rate": r["success_rate"],
-            "success_rate_solvable": r["success_rate_solvable"],
-            "collision_rate_u2o": r["collision_rate_u2o"],
-            "collision_rate_u2u": r["collision_rate_u2u"],
-        }
+        row["shielded"] = shielded(r)
         families[r["family"]] = row
     episodes = sum(f["episodes"] for f in families.values())
     u2u = sum(f["collision_rate_u2u"] * f["episodes"] for f in families.values()) / episodes

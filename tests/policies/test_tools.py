@@ -150,19 +150,28 @@ def test_uav_collisions_counts_what_the_suite_evaluation_counts():
     finally:
         sys.path.remove(str(TOOLS))
     from remarl_fc.offline.suite import MethodSpec, run_family
+    from sim.shield import ShieldConfig
     from sim.suite import load_suite
 
     suite = load_suite("standard")
     family = suite.family("swarms-2x3")
-    episodes, uu, hovering, arriving = family_counts("generalist", suite, family)
+    episodes, uu, hovering, arriving, unsafe = family_counts("generalist", suite, family)
     row = run_family(suite, family, MethodSpec.from_label("policy:generalist"))
     assert episodes == row["episodes"] == suite.episodes
     assert uu == round(row["collision_rate_u2u"] * episodes) > 0
-    assert 0 <= hovering + arriving <= uu
+    assert 0 <= hovering + arriving <= uu and unsafe == 0  # no shield, nothing to pass
     # the suite's UAVs leave on arrival; in the real world they hover, and are hit (10u1o: 18
     # of the first 50 episodes' 19 UAV–UAV collisions, with the policy shipped 2026-11-29)
-    episodes, uu, hovering, arriving = real_world_counts("generalist", "10u1o", 50)
+    episodes, uu, hovering, arriving, _ = real_world_counts("generalist", "10u1o", 50)
     assert episodes == 50 and 0 < hovering <= uu
+    # behind the shield, as `remarl-fc eval --shield on` flies it (dense-10u: 11 of its 200
+    # episodes end in a UAV–UAV collision, each with a UAV for which nothing passed)
+    shield = ShieldConfig(mode="on")
+    family = suite.family("dense-10u")
+    episodes, uu, _, _, unsafe = family_counts("generalist", suite, family, shield)
+    row = run_family(suite, family, MethodSpec.from_label("policy:generalist"), shield=shield)
+    assert uu == round(row["collision_rate_u2u"] * episodes) > 0
+    assert 0 < unsafe <= uu
 
 
 def recipe_module():
