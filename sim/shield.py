@@ -20,9 +20,11 @@ candidates a turn-limited UAV can fly). The policy's action passes when its clos
 stays ≥ d_col + ``margin_m`` (plus the intruder's uncertainty) over the horizon; otherwise the
 shield flies the passing heading change nearest to the proposed one at full speed, then (where
 the vehicle can slow down) the fastest slower speed with a passing heading, nearest first; when
-nothing passes, the candidate with the largest clearance (closest approach minus what is
-required). Nothing after a UAV reaches its target (its distance over the cruise speed, at least
-the coming step) is checked: it leaves, or hovers where nothing of the swarm is headed; a
+nothing passes, the least dangerous candidate (`_rank`: it avoids a collision predicted in the
+coming step first, then one with an intruder within the neighbour look-ahead, then one with a
+neighbour in it; then the largest clearance, the closest approach minus what is required).
+Nothing after a UAV reaches its target (its distance over the cruise speed, at least the coming
+step) is checked: it leaves, or hovers where nothing of the swarm is headed; a
 straight line past the target would see conflicts the UAV never flies into.
 
 Modes: "off" (the proposal is flown, nothing computed), "monitor" (computed and recorded, never
@@ -338,7 +340,9 @@ def _decide(
 
     # 1. The proposal of every UAV at full speed: most pass, and their decision is made.
     unit_x, unit_y = (d.reshape(-1, b * n, 1) for d in _time_first(committed))  # (P, B·N, 1)
-    clear, cpa = _clearance(unit_x, unit_y, paths.owner, cruise, paths, (b, n), cruise)
+    clear, cpa, rank = _clearance(
+        unit_x, unit_y, paths.owner, cruise, paths, (b, n), cruise, vehicle.d_col_m
+    )
     proposed_cpa = cpa[..., 0]
     fails = deciding & (clear[..., 0] < 0.0)
     turn, speed, flown_cpa = prop.copy(), full.copy(), proposed_cpa.copy()
@@ -355,7 +359,7 @@ def _decide(
             )
         )  # (P, F, K): the F failing UAVs' candidates only
         row = np.cumsum(fails.reshape(-1)) - 1  # each failing UAV's place among them
-        best = clear[..., 0].copy()  # the largest clearance so far (the fallback's)
+        best = rank[..., 0].copy()  # the fallback's rank so far (`_rank`)
         fallback = (prop.copy(), full.copy(), proposed_cpa.copy())
         speeds = [cruise]
         if vehicle.can_slow:
@@ -365,7 +369,9 @@ def _decide(
             if not todo.any():
                 break
             mine = paths.of(todo)
-            c, d = _clearance(unit_x, unit_y, row[mine.owner], v, mine, (b, n), cruise)
+            c, d, u = _clearance(
+                unit_x, unit_y, row[mine.owner], v, mine, (b, n), cruise, vehicle.d_col_m
+            )
             ok = (c >= 0.0) & todo[..., None]
             pick = np.where(ok, np.abs(grid - prop[..., None]), np.inf).argmin(axis=-1)
             now = ok.any(axis=-1)
@@ -373,15 +379,15 @@ def _decide(
             flown_cpa = np.where(now, _at(d, pick), flown_cpa)
             speed = np.where(now, v, speed)
             found = found | now
-            top = c.argmax(axis=-1)
-            better = todo & ~now & (_at(c, top) > best)
-            best = np.where(better, _at(c, top), best)
+            top = u.argmax(axis=-1)
+            better = todo & ~now & (_at(u, top) > best)
+            best = np.where(better, _at(u, top), best)
             fallback = (
                 np.where(better, _at(grid, top), fallback[0]),
                 np.where(better, v, fallback[1]),
                 np.where(better, _at(d, top), fallback[2]),
             )
-        # 3. Nothing passes: the largest clearance.
+        # 3. Nothing passes: the least dangerous (`_rank`).
         turn = np.where(found, turn, fallback[0])
         speed = np.where(found, speed, fallback[1])
         flown_cpa = np.where(found, flown_cpa, fallback[2])
@@ -484,20 +490,23 @@ def _clearance(
     paths: ThreatPaths,
     swarm_shape: tuple[int, int],
     cruise_m_s: float,
-) -> tuple[FloatArray, FloatArray]:
-    """(clearance, closest approach), each (B, N, K), of the candidates flown at one speed.
+    d_col_m: float,
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """(clearance, closest approach, rank), each (B, N, K), of the candidates at one speed.
 
     ``unit_x``, ``unit_y`` (P, R, K) (`_time_first`): candidates' displacements at 1 m/s (a
     displacement scales with the speed); ``row`` (S,): the row of each pair's UAV. Clearance:
     the smallest (distance − required) over every threat and segment; +inf with no threat
-    (and the closest approach +inf too).
+    (and the closest approach +inf too). Rank: `_rank`, what the fallback flies the highest of
+    when nothing passes.
     """
     b, n = swarm_shape
     k = unit_x.shape[-1]
     clearance = np.full((b, n, k), np.inf)
     cpa_sq = np.full((b, n, k), np.inf)
+    rank = np.full((b, n, k), np.inf)
     if not len(paths.owner):
-        return clearance, np.sqrt(cpa_sq)
+        return clearance, np.sqrt(cpa_sq), rank
     # Time first from here on: every segment operation runs over contiguous blocks.
     rx = _flown(unit_x[:, row], speed_m_s, cruise_m_s)  # (P, S, K), contiguous float32
     rx += paths.rel_x[..., None]
@@ -512,9 +521,56 @@ def _clearance(
     # Per UAV: the worst pair (the pairs come grouped by owner, in order).
     starts = paths.starts
     owners = paths.owner[starts]
-    clearance.reshape(b * n, k)[owners] = np.minimum.reduceat(pair_clear, starts, axis=0)
+    worst = np.minimum.reduceat(pair_clear, starts, axis=0)  # (owners, K)
+    clearance.reshape(b * n, k)[owners] = worst
     cpa_sq.reshape(b * n, k)[owners] = np.minimum.reduceat(pair_cpa, starts, axis=0)
-    return clearance, np.sqrt(cpa_sq)
+    # The rank, for the UAVs none of whose candidates passes (the fallback's only): from their
+    # pairs' near segments (the rest weigh nothing), a predicted collision being closer than
+    # d_col itself (not the margin, not a track's uncertainty), weighed by how sure and how
+    # near it is.
+    hopeless = (worst < 0.0).all(axis=-1)
+    if hopeless.any():
+        pairs = np.repeat(hopeless, np.diff(np.append(starts, len(paths.owner))))
+        near = len(paths.severity)
+        mine = seg[:near, pairs]  # (Q, S', K) clearances
+        distance = mine + paths.need[:near, pairs, None]
+        danger = np.where(distance < d_col_m, paths.severity[:, pairs, None], np.uint8(0))
+        firsts = _group_starts(paths.owner[pairs])
+        rank.reshape(b * n, k)[owners[hopeless]] = _rank(
+            worst[hopeless],
+            np.minimum.reduceat(mine.min(axis=0), firsts, axis=0),
+            np.maximum.reduceat(danger.max(axis=0), firsts, axis=0),
+        )
+    return clearance, np.sqrt(cpa_sq), rank
+
+
+COLLISION_NOW, COLLISION_INTRUDER_SOON, COLLISION_NEIGHBOUR_SOON = 3, 2, 1
+"""How much a collision predicted in a segment weighs in the fallback's `_rank` (0: none, or
+beyond the neighbour look-ahead): in the coming step, which is flown whatever the next
+decisions do, most; with an intruder within the neighbour look-ahead (it flies on straight, as
+predicted), less; with a neighbour in it (it decides again next step, and keeps clear too),
+least."""
+
+RANK_TIER_M = 1e6
+"""Weight of one level of `_rank`'s danger, metres of clearance: more than any clearance a check
+can see (a few kilometres), so the danger decides and the metres break ties."""
+
+
+def _rank(clearance: FloatArray, near_clear: FloatArray, danger: NDArray[np.uint8]) -> FloatArray:
+    """The fallback's rank of candidates, (R, K) (higher: flown first when nothing passes).
+
+    ``danger``: the heaviest predicted collision of each candidate (`COLLISION_NOW`, ...; 0:
+    none within the neighbour look-ahead). Lower danger first; among equals, the largest
+    clearance over the segments that can weigh (within the neighbour look-ahead) where some
+    collision is predicted there, else over the whole look-ahead, as the shield did before.
+    The largest clearance alone traded a collision with a neighbour in the coming step for more
+    room from an intruder twenty seconds away, which the coming decisions can still turn from
+    (docs/MODEL.md §21).
+    """
+    hit = danger > 0
+    metres = np.clip(np.where(hit, near_clear, clearance), -RANK_TIER_M / 4, RANK_TIER_M / 4)
+    out: FloatArray = metres - danger * RANK_TIER_M
+    return out
 
 
 def _flown(unit: Float32Array, speed_m_s: float, cruise_m_s: float) -> Float32Array:
@@ -540,7 +596,8 @@ class ThreatPaths:
         pairs start. rel_x, rel_y: (P, S) the UAV's position now minus the threat's at each
         time point. need: (P − 1, S) the distance each segment requires. reach: (P − 1, S)
         the fraction of each segment flown before the UAV reaches its target (float32).
-        after: (P − 1, S) the segments that start after it: not checked.
+        after: (P − 1, S) the segments that start after it: not checked. severity: (Q, S)
+        the weight of a collision predicted in each of the Q near segments (`_severity`).
     """
 
     owner: NDArray[np.intp]
@@ -550,6 +607,7 @@ class ThreatPaths:
     need: FloatArray
     reach: Float32Array
     after: BoolArray
+    severity: NDArray[np.uint8]
 
     @staticmethod
     def grouped(
@@ -559,11 +617,10 @@ class ThreatPaths:
         need: FloatArray,
         reach: Float32Array,
         after: BoolArray,
+        severity: NDArray[np.uint8],
     ) -> ThreatPaths:
         """The pairs (sorted by owner) with the start of each owner's group."""
-        starts = np.flatnonzero(owner[1:] != owner[:-1]) + 1
-        starts = np.concatenate([np.zeros(min(len(owner), 1), dtype=np.intp), starts])
-        return ThreatPaths(owner, starts, rel_x, rel_y, need, reach, after)
+        return ThreatPaths(owner, _group_starts(owner), rel_x, rel_y, need, reach, after, severity)
 
     def of(self, uavs: BoolArray) -> ThreatPaths:
         """The pairs of the UAVs selected by ``uavs`` (B, N) alone."""
@@ -575,7 +632,15 @@ class ThreatPaths:
             self.need[:, keep],
             self.reach[:, keep],
             self.after[:, keep],
+            self.severity[:, keep],
         )
+
+
+def _group_starts(owner: NDArray[np.intp]) -> NDArray[np.intp]:
+    """Where each run of equal owners starts in ``owner`` (sorted): `np.minimum.reduceat`'s."""
+    starts = np.flatnonzero(owner[1:] != owner[:-1]) + 1
+    out: NDArray[np.intp] = np.concatenate([np.zeros(min(len(owner), 1), dtype=np.intp), starts])
+    return out
 
 
 def _threat_paths(
@@ -660,6 +725,7 @@ def _threat_paths(
             empty[1:],
             empty[1:].astype(np.float32),
             np.zeros((p - 1, 0), dtype=bool),
+            _severity(times, vehicle.dt_s, cfg.neighbour_horizon_s, np.zeros(0, dtype=bool)),
         )
     env, uav, slot = np.nonzero(np.concatenate(masks, axis=-1))
     threat = np.concatenate(slots, axis=-1)[env, uav, slot]
@@ -676,7 +742,24 @@ def _threat_paths(
         np.concatenate(needs, axis=-1)[:, env, threat],
         np.clip((to_go - start) / (end - start), 0.0, 1.0).astype(np.float32),
         start >= to_go,
+        _severity(times, vehicle.dt_s, cfg.neighbour_horizon_s, threat >= m),
     )
+
+
+def _severity(
+    times: FloatArray, dt_s: float, soon_s: float, neighbour: BoolArray
+) -> NDArray[np.uint8]:
+    """(Q, S) the weight of a collision predicted in each near segment of each pair (`_rank`).
+
+    The near segments: the Q first, those that start within ``soon_s`` (the neighbour
+    look-ahead), at least the coming step's; a collision predicted after them weighs nothing.
+    ``neighbour`` (S,): the pair's threat is a UAV of the swarm (else an intruder).
+    """
+    start = times[:-1, None]
+    start = start[: max(CHORDS, int(np.count_nonzero(start < soon_s - 1e-9)))]
+    soon = np.where(neighbour, COLLISION_NEIGHBOUR_SOON, COLLISION_INTRUDER_SOON)
+    out: NDArray[np.uint8] = np.where(start < dt_s - 1e-9, COLLISION_NOW, soon).astype(np.uint8)
+    return out
 
 
 def vehicle_of(cfg: ScenarioConfig) -> Vehicle:

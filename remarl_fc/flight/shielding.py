@@ -60,7 +60,7 @@ class Check:
         t: decision time (flight clock, s). system_id: the vehicle. mode: "monitor" or "on".
         intervened: the proposal did not keep clear: the shield replaced it ("on") or would
             have ("monitor"). safe_exists: some candidate kept clear (else the shield flies,
-            or would fly, the one with the largest clearance).
+            or would fly, the least dangerous: `sim.shield`'s fallback).
         proposed_deg, flown_deg, shield_deg: NED yaw (degrees) at the end of the coming arc of
             the policy's proposal, of the decision flown, and of the shield's choice.
         flown_speed_m_s, shield_speed_m_s: the speed flown, and the shield's.
@@ -128,7 +128,7 @@ class Check:
         """The live console's words for an intervention (after ``vehicle N: ``)."""
         would = "would turn" if self.mode == "monitor" else "turned"
         speed = f" at {self.shield_speed_m_s:.1f} m/s"
-        unsafe = "" if self.safe_exists else " (no candidate kept clear: the largest clearance)"
+        unsafe = "" if self.safe_exists else " (no candidate kept clear: the least dangerous)"
         return (
             f"shield {would} heading {self.proposed_deg:05.1f} -> {self.shield_deg:05.1f} deg"
             f"{speed}: predicted closest approach {_shown(self.proposed_cpa_m)} -> "

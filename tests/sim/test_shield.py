@@ -12,7 +12,19 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from sim.scenarios import load_scenario
-from sim.shield import ShieldConfig, Swarm, Threats, Vehicle, shield, shield_state
+from sim.shield import (
+    COLLISION_INTRUDER_SOON,
+    COLLISION_NEIGHBOUR_SOON,
+    COLLISION_NOW,
+    ShieldConfig,
+    Swarm,
+    Threats,
+    Vehicle,
+    _rank,
+    _severity,
+    shield,
+    shield_state,
+)
 from sim.swarm import SwarmSim
 
 VEHICLE = Vehicle(d_col_m=20.0, dt_s=2.0, max_turn_rad=math.pi / 4, cruise_m_s=5.0)
@@ -217,6 +229,76 @@ def test_boxed_in_multirotor_slows_down_and_a_fixed_speed_uav_takes_the_best_cle
     assert hover.intervened[0, 0] and fixed.intervened[0, 0]
     assert hover.speed_m_s[0, 0] <= fixed.speed_m_s[0, 0]
     assert fixed.speed_m_s[0, 0] == 5.0
+
+
+def test_with_nothing_passing_the_nearest_collision_in_time_is_avoided_first():
+    """A fixed-speed UAV with a neighbour 24 m to its left and an intruder from the left that
+    no turn clears within the look-ahead. The largest clearance over the whole look-ahead turns
+    hard left, behind the intruder and into the neighbour within the coming two steps; the
+    shield keeps clear of the neighbour and leaves the intruder, ten seconds away, to the
+    decisions still to come."""
+    fixed = Vehicle(20.0, 2.0, math.pi / 4, 5.0, can_slow=False)
+    swarm = Swarm(
+        pos_m=np.array([[[0.0, 0.0], [0.0, 24.0]]]),
+        heading_rad=np.zeros((1, 2)),
+        target_m=np.array([[[1e4, 0.0], [1e4, 24.0]]]),
+        deciding=np.array([[True, False]]),
+        present=np.ones((1, 2), bool),
+        speed_m_s=np.full((1, 2), 5.0),
+    )
+    threats = Threats(
+        np.array([[[25.0, 100.0]]]), np.array([[[1.5, -13.5]]]), np.ones((1, 1), bool),
+        np.zeros((1, 1)),
+    )  # fmt: skip
+    cfg = ShieldConfig(mode="on")
+    proposed = np.zeros((1, 2))
+    decision = shield(cfg, fixed, swarm, threats, proposed)
+    assert not decision.safe_exists[0, 0]
+    grid = np.linspace(-1.0, 1.0, cfg.headings)
+    clearance = [dense_clearance(cfg, swarm, threats, 0, 0, a, 5.0, proposed) for a in grid]
+    assert max(clearance) < 0.0
+    neighbour, t = dense_path(swarm.pos_m[0, 1], 0.0, 0.0, 5.0, cfg.horizon_s)
+
+    def closest_to_neighbour(action):
+        me, _ = dense_path(swarm.pos_m[0, 0], 0.0, action, 5.0, cfg.horizon_s)
+        return np.hypot(*(me - neighbour).T)[t <= cfg.neighbour_horizon_s].min()
+
+    widest = grid[int(np.argmax(clearance))]
+    assert widest > 0.5 and closest_to_neighbour(widest) < fixed.d_col_m
+    assert decision.action[0, 0] < 0.0
+    assert closest_to_neighbour(decision.action[0, 0]) >= fixed.d_col_m + cfg.margin_m
+
+
+def test_the_fallback_weighs_a_collision_by_how_near_and_how_sure_it_is():
+    """The coming step's segments weigh most for any threat; within the neighbour look-ahead an
+    intruder's (flown straight, as predicted) more than a neighbour's (it decides again)."""
+    times = np.array([0.0, 1.0, 2.0, 4.0, 25.0])
+    weight = _severity(times, 2.0, 4.0, np.array([False, True]))
+    # the segments past the neighbour look-ahead weigh nothing: they are not kept
+    assert weight[:, 0].tolist() == [COLLISION_NOW, COLLISION_NOW, COLLISION_INTRUDER_SOON]
+    assert weight[:, 1].tolist() == [COLLISION_NOW, COLLISION_NOW, COLLISION_NEIGHBOUR_SOON]
+    # a look-ahead inside the coming step still weighs the whole of it
+    assert _severity(times, 2.0, 1.0, np.array([True])).ravel().tolist() == [COLLISION_NOW] * 2
+    assert COLLISION_NOW > COLLISION_INTRUDER_SOON > COLLISION_NEIGHBOUR_SOON > 0
+
+
+METRES = st.integers(-30_000, 30_000).map(lambda dm: dm / 10)
+"""Clearances to a decimetre, within the few kilometres a check sees."""
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.tuples(METRES, METRES, st.integers(0, COLLISION_NOW)), min_size=2, max_size=8))
+def test_a_less_dangerous_candidate_always_ranks_higher(candidates):
+    clearance, near, danger = (np.array([c[i] for c in candidates])[None] for i in range(3))
+    rank = _rank(clearance, near, danger.astype(np.uint8))[0]
+    for a, (ca, na, da) in enumerate(candidates):
+        for b, (cb, nb, db) in enumerate(candidates):
+            if da < db:
+                assert rank[a] > rank[b]
+            elif da == db == 0 and ca > cb:
+                assert rank[a] > rank[b]  # no predicted collision: the largest clearance
+            elif da == db > 0 and na > nb:
+                assert rank[a] > rank[b]  # the same danger: the most room where it weighs
 
 
 def test_uncertainty_of_old_reports_widens_what_is_required():
