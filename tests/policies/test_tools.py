@@ -174,17 +174,20 @@ def test_uav_collisions_counts_what_the_suite_evaluation_counts():
     assert 0 < unsafe <= uu
 
 
-def recipe_module():
-    """tools/generalist_recipe.py as a module (tools/ is not a package)."""
+def tool_module(name: str):
+    """tools/<name>.py as a module (tools/ is not a package)."""
     import importlib.util
 
-    spec = importlib.util.spec_from_file_location(
-        "generalist_recipe", TOOLS / "generalist_recipe.py"
-    )
+    spec = importlib.util.spec_from_file_location(name, TOOLS / f"{name}.py")
     assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
+
+
+def recipe_module():
+    """tools/generalist_recipe.py as a module."""
+    return tool_module("generalist_recipe")
 
 
 def test_the_recipe_chains_each_round_from_the_last_export_with_flags_train_takes(tmp_path):
@@ -231,3 +234,67 @@ def test_the_recipe_resumes_a_round_with_a_checkpoint_and_skips_a_made_one(tmp_p
     assert f"--init {tmp_path / 'round-2.safetensors'}" in lines[3]  # round 3 from round 2
     missing = tool("generalist_recipe", "--out", str(tmp_path), "--start", str(tmp_path / "x"))
     assert missing.returncode == 2 and "no such policy file" in missing.stderr
+
+
+def test_reshield_rewrites_only_the_shielded_figures_and_refuses_a_changed_policy(
+    tmp_path, monkeypatch
+):
+    """`ship_generalist.py --reshield` on a copy of the shipped eval file, the flights stubbed:
+    the shielded figures change and nothing else; an unshielded figure that does not repeat
+    stops it before anything is written."""
+    from remarl_fc.policy_io import zoo_dir
+
+    ship = tool_module("ship_generalist")
+    shipped = json.loads((zoo_dir() / "generalist.eval.json").read_text())
+    (tmp_path / "generalist.eval.json").write_text(json.dumps(shipped))
+    monkeypatch.setattr(ship, "zoo_dir", lambda: tmp_path)
+
+    def flown(suite, methods, workers, shield):  # every family as shipped, shielded at 0.5
+        assert shield.mode == "on"
+        return [
+            {
+                "family": name,
+                "success_rate_unshielded": row["success_rate"],
+                "intervention_rate": 0.25,
+                "success_rate": 0.5,
+                "success_rate_solvable": 0.5,
+                "collision_rate_u2o": 0.125,
+                "collision_rate_u2u": 0.0625,
+            }
+            for name, row in shipped["families"].items()
+        ]
+
+    def real(policy, episodes, suite):
+        return {
+            name: {**{k: r[k] for k in ship.REAL_WORLD_KEPT}, "shielded": {"success_rate": 0.75}}
+            for name, r in shipped["real_world"]["scenarios"].items()
+        }
+
+    monkeypatch.setattr(ship, "evaluate_suite", flown)
+    monkeypatch.setattr(ship, "real_world", real)
+    summary = ship.reshield("generalist", workers=1)
+    assert summary == {
+        "shielded_success_rate_solvable": 0.5,
+        "shielded_collision_rate_u2u": 0.0625,
+        "real_world_shielded": 0.75,
+    }
+    again = json.loads((tmp_path / "generalist.eval.json").read_text())
+    for name, row in again["families"].items():
+        assert row["shielded"]["success_rate_solvable"] == 0.5
+        assert row["intervention_rate"] == 0.25
+        before = {k: v for k, v in shipped["families"][name].items() if k != "intervention_rate"}
+        assert {k: v for k, v in row.items() if k != "intervention_rate"} | {
+            "shielded": before["shielded"]
+        } == before
+    assert again["success_rate"] == shipped["success_rate"]
+    assert again["training"] == shipped["training"]
+    # a policy that flies differently without the shield is not the one the file records
+    written = (tmp_path / "generalist.eval.json").read_text()
+    monkeypatch.setattr(
+        ship,
+        "evaluate_suite",
+        lambda *a, **k: [dict(r, success_rate_unshielded=-1.0) for r in flown(*a, **k)],
+    )
+    with pytest.raises(SystemExit, match="ship it again"):
+        ship.reshield("generalist", workers=1)
+    assert (tmp_path / "generalist.eval.json").read_text() == written
