@@ -49,7 +49,7 @@ def first_collisions(
     """`Counts` of the episodes of ``state`` flown to their first collision or end."""
     cfg = sim.cfg
     rng = np.random.default_rng(0)
-    vehicle = vehicle_of(cfg)
+    vehicle = vehicle_of(cfg) if shield is not None else None  # read once, not every step
     episodes = state.pos_m.shape[0]
     open_ = np.ones(episodes, dtype=bool)  # no collision and not over yet
     uu = hovering = arriving = unsafe = 0
