@@ -305,6 +305,27 @@ class GeneralistConfig:
     shipped recipe. Meant for the large swarms, where most labels say "fly on"; measured with
     κ = 2 on two seeds it made both worse (docs/MODEL.md §20, "Weighting the turns")."""
 
+    dagger_separation_weight: float = 0.0
+    """DAgger: w, the weight of the own-view separation penalty beside the squared error of
+    each supervised step (`policies.own_view`): the actor's own action charged for the closest
+    approach to each visible neighbour that its observation predicts over
+    ``dagger_separation_horizon_s``, from ``separation_factor``·d_col in. 0: the imitation loss
+    alone, the shipped recipe (docs/MODEL.md §20, "A penalty the student can see")."""
+
+    dagger_separation_horizon_s: float = 4.0
+    """DAgger: seconds ahead the own-view separation penalty predicts (the safety shield's
+    look-ahead at the swarm, `sim.shield.ShieldConfig.neighbour_horizon_s`)."""
+
+    dagger_separation_reciprocal: bool = False
+    """DAgger: the own-view separation penalty predicts each neighbour turning as the UAV itself
+    does, from its own course (a formation that turns together keeps its spacing), rather than
+    flying straight on (`policies.own_view.OwnView.reciprocal`)."""
+
+    dagger_separation_intruders: bool = False
+    """DAgger: the own-view separation penalty charges the closest approach to each visible
+    intruder too (straight on at its velocity), so that the student does not buy its distance
+    from its neighbours with its distance from the intruders."""
+
     learner: str = "ppo"
     """"ppo" (on-policy: clipped surrogate over rollouts of every world, GAE,
     `policies.generalist_ppo`) or "td3" (off-policy: one replay buffer of every UAV's
@@ -480,6 +501,9 @@ class GeneralistConfig:
         check(0 <= self.dagger_fraction <= 1, "dagger_fraction", "must be in [0, 1]")
         check(0 <= self.dagger_beta <= 1, "dagger_beta", "must be in [0, 1]")
         check(self.dagger_lr > 0, "dagger_lr", "must be > 0")
+        for name in ("dagger_separation_weight", "dagger_separation_horizon_s"):
+            value = getattr(self, name)
+            check(math.isfinite(value) and value >= 0, name, "must be finite and >= 0")
         check(
             math.isfinite(self.dagger_turn_weight) and self.dagger_turn_weight >= 0,
             "dagger_turn_weight",

@@ -10,7 +10,9 @@ the aggregated data set of the states the student's own mixture visits). Then:
 - the labels join `Labels`, a ring of the last ``dagger_rows`` (observation, teacher action,
   weight) rows, and the actor takes ``dagger_updates`` supervised steps (mean squared error,
   weighted by ``dagger_turn_weight`` where it is > 0: `label_weights`; Adam of its own at
-  ``dagger_lr``) on minibatches of ``dagger_batch`` drawn from all of it;
+  ``dagger_lr``) on minibatches of ``dagger_batch`` drawn from all of it, plus, where
+  ``dagger_separation_weight`` is > 0, that weight times the own-view separation penalty of
+  the actor's actions (`policies.own_view`);
 - where PPO follows (``dagger_fraction`` < 1), the value network learns the rollout's GAE
   targets (``ppo_epochs`` passes, the value loss alone: `warm_critic`), so that PPO starts from
   a critic of the policy it inherits. A run that is DAgger from end to end skips them: its
@@ -34,6 +36,7 @@ from numpy.typing import NDArray
 from torch import nn
 
 from policies.config import GeneralistConfig
+from policies.own_view import OwnView
 from policies.train import optimiser_tensors, restore_optimiser
 from sim.orca import goal_turn_rad
 
@@ -187,18 +190,41 @@ def clone_update(
     teacher: torch.Tensor,
     clip: float,
     weight: torch.Tensor | None = None,
+    separation: tuple[OwnView, float] | None = None,
 ) -> float:
-    """One supervised step of ``actor`` toward the teacher's actions.
+    """One supervised step of ``actor`` toward the teacher's actions; returns the imitation loss.
 
-    The mean squared error, weighted by ``weight`` (Σ w·e² / Σ w) where given.
+    The mean squared error, weighted by ``weight`` (Σ w·e² / Σ w) where given. With
+    ``separation`` (view, w): plus w times the mean own-view separation penalty of the actor's
+    actions (`policies.own_view`; ``dagger_separation_weight``).
     """
-    error = (actor(obs) - teacher) ** 2
+    action = actor(obs)
+    error = (action - teacher) ** 2
     loss = error.mean() if weight is None else (weight * error).sum() / weight.sum()
+    total = loss
+    if separation is not None:
+        view, w = separation
+        total = loss + w * view.penalty(obs, action).mean()
     opt.zero_grad(set_to_none=True)
-    loss.backward()
+    total.backward()
     nn.utils.clip_grad_norm_(list(actor.parameters()), clip)
     opt.step()
     return float(loss.detach())
+
+
+def separation_view(book: RunBook) -> OwnView | None:
+    """The own-view separation penalty of ``book``'s run, or None where its weight is 0."""
+    cfg = book.cfg
+    if cfg.dagger_separation_weight <= 0:
+        return None
+    return OwnView.of(
+        book.layout,
+        [world.cfg for world in book.worlds],
+        cfg.dagger_separation_horizon_s,
+        cfg.separation_factor,
+        cfg.dagger_separation_reciprocal,
+        cfg.dagger_separation_intruders,
+    )
 
 
 def value_update(nets: PPONets, obs: torch.Tensor, target: torch.Tensor, clip: float) -> float:
@@ -359,6 +385,8 @@ def learn_dagger(
         if cfg.ppo_follows():
             scalars["losses/value"] = warm_critic(nets, rollout, cfg, device, rng)
         clone_loss = 0.0
+        view = separation_view(book)
+        separation = None if view is None else (view, cfg.dagger_separation_weight)
         for _ in range(cfg.dagger_updates):
             obs, taught, weight = labels.sample(cfg.dagger_batch, rng)
             clone_loss = clone_update(
@@ -368,8 +396,14 @@ def learn_dagger(
                 torch.from_numpy(taught).to(device),
                 cfg.grad_clip,
                 torch.from_numpy(weight).to(device) if cfg.dagger_turn_weight > 0 else None,
+                separation,
             )
             book.updates += 1
+        if separation is not None and cfg.dagger_updates:  # the last minibatch's, after them
+            with torch.no_grad():
+                obs_t = torch.from_numpy(obs).to(device)
+                penalty = separation[0].penalty(obs_t, nets.actor(obs_t)).mean()
+            scalars["losses/own_separation"] = float(penalty)
     return scalars | {
         "losses/clone": clone_loss,
         "charts/dagger_beta": rollout.beta,

@@ -130,6 +130,33 @@ def add_train(sub: Any) -> None:
         "straight way to the target (default 0: every label alike)",
     )
     p.add_argument(
+        "--own-separation",
+        type=float,
+        metavar="W",
+        help="generalist: DAgger adds W x the separation penalty the student's own "
+        "observation predicts for its action (default 0: imitation alone)",
+    )
+    p.add_argument(
+        "--own-separation-horizon",
+        type=float,
+        metavar="S",
+        help="generalist: how far ahead that penalty predicts, seconds (default 4)",
+    )
+    p.add_argument(
+        "--own-separation-reciprocal",
+        action="store_true",
+        default=None,
+        help="generalist: that penalty predicts each neighbour turning as the UAV itself does "
+        "(default: flying straight on)",
+    )
+    p.add_argument(
+        "--own-separation-intruders",
+        action="store_true",
+        default=None,
+        help="generalist: that penalty charges the intruders in view too (default: the "
+        "neighbours alone)",
+    )
+    p.add_argument(
         "--sensing-aperture",
         type=float,
         metavar="DEG",
@@ -529,6 +556,10 @@ def generalist_flags(args: argparse.Namespace) -> dict[str, Any]:
         "real_track_filter": args.real_track_filter,
         "real_hover": args.real_hover,
         "dagger_turn_weight": args.turn_weight,
+        "dagger_separation_weight": args.own_separation,
+        "dagger_separation_horizon_s": args.own_separation_horizon,
+        "dagger_separation_reciprocal": args.own_separation_reciprocal,
+        "dagger_separation_intruders": args.own_separation_intruders,
         "seed": args.seed or None,
     }
     if args.family_weight:

@@ -609,6 +609,8 @@ def test_a_bad_family_weight_flag_says_what_to_write(text):
         ("--sensing-aperture", "400", "sensing_aperture_deg"),
         ("--teacher-horizon", "1", "teacher_horizon_s"),
         ("--turn-weight", "-2", "dagger_turn_weight"),
+        ("--own-separation", "-1", "dagger_separation_weight"),
+        ("--own-separation-horizon", "-4", "dagger_separation_horizon_s"),
         ("--max-neighbours", "-1", "max_neighbours"),
         ("--dagger-lr", "0", "dagger_lr"),
         ("--real-share", "1.5", "real_share"),
@@ -658,7 +660,8 @@ def test_train_generalist_flags_reach_the_config(tmp_path, monkeypatch):
     argv += ["--teacher-horizon", "14", "--turn-weight", "6", "--max-neighbours", "12"]
     argv += ["--init", "generalist", "--dagger-lr", "3e-4", "--teacher-truth"]
     argv += ["--real-share", "0.5", "--real-error-tau", "10", "120", "--real-track-filter"]
-    argv += ["--real-hover"]
+    argv += ["--real-hover", "--own-separation", "0.3", "--own-separation-horizon", "6"]
+    argv += ["--own-separation-reciprocal", "--own-separation-intruders"]
     assert main([*argv, "--out", str(tmp_path / "run")]) == 0
     ((cfg, out, resume),) = seen
     assert cfg.swarm_field == "formation" and cfg.family_weights == (("swarms-*", 2.0),)
@@ -672,6 +675,8 @@ def test_train_generalist_flags_reach_the_config(tmp_path, monkeypatch):
     assert cfg.init == "generalist" and cfg.dagger_lr == 3e-4
     assert cfg.teacher_truth and cfg.real_share == 0.5 and cfg.real_error_tau_s == (10.0, 120.0)
     assert cfg.real_track_filter and cfg.real_hover
+    assert (cfg.dagger_separation_weight, cfg.dagger_separation_horizon_s) == (0.3, 6.0)
+    assert cfg.dagger_separation_reciprocal and cfg.dagger_separation_intruders
     assert cfg.minutes == 2 and cfg.seed == 4 and out == tmp_path / "run" and not resume
     assert GeneralistConfig().swarm_field == "all"  # the paper's reward unless asked
     seen.clear()

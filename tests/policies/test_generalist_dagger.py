@@ -81,6 +81,9 @@ def test_dagger_applies_only_to_ppo_with_a_teacher():
         ({"dagger_lr": 0.0}, "> 0"),
         ({"dagger_turn_weight": -1.0}, ">= 0"),
         ({"dagger_turn_weight": float("inf")}, ">= 0"),
+        ({"dagger_separation_weight": -0.5}, ">= 0"),
+        ({"dagger_separation_weight": float("nan")}, ">= 0"),
+        ({"dagger_separation_horizon_s": -1.0}, ">= 0"),
     ],
 )
 def test_bad_dagger_settings_are_refused_by_name(changes, message):
@@ -183,9 +186,9 @@ def test_dagger_weighs_its_labels_by_the_runs_turn_weight(tmp_path, monkeypatch,
         added.append(weight.copy())
         return add(self, obs, action, weight)
 
-    def spied_step(actor, opt, obs, teacher, clip, weight=None):
+    def spied_step(actor, opt, obs, teacher, clip, weight=None, separation=None):
         stepped.append(weight)
-        return step(actor, opt, obs, teacher, clip, weight)
+        return step(actor, opt, obs, teacher, clip, weight, separation)
 
     monkeypatch.setattr(generalist_dagger.Labels, "add", spied_add)
     monkeypatch.setattr(generalist_dagger, "clone_update", spied_step)
