@@ -174,6 +174,33 @@ def test_uav_collisions_counts_what_the_suite_evaluation_counts():
     assert 0 < unsafe <= uu
 
 
+def test_own_view_collisions_counts_the_suites_collisions_and_what_the_rows_foresaw():
+    """tools/own_view_collisions.py flies the suite's episodes: the same first UAV–UAV
+    collisions as `uav_collisions`, and for each colliding UAV what its own rows predicted."""
+    own_view = tool_module("own_view_collisions")
+    uav_collisions = tool_module("uav_collisions")
+    from remarl_fc.offline.rollout import PolicyFileAct
+    from remarl_fc.policy_io import load_policy
+    from sim.encounters import sample_family
+    from sim.suite import load_suite
+    from sim.swarm import SwarmSim
+
+    episodes, collisions, per_lag, (flown, foreseen, avoidable) = own_view.family_counts(
+        "generalist", "dense-10u", 30, 4.0, 2
+    )
+    suite = load_suite("standard")
+    cfg, batch = sample_family(suite.family("dense-10u"), suite.seed, range(30))
+    sim = SwarmSim(cfg, scored=False)
+    act = PolicyFileAct(load_policy("generalist"))
+    start = sim.start(batch, np.random.default_rng(0))
+    assert (episodes, collisions) == uav_collisions.first_collisions(act, sim, start)[:2]
+    assert collisions > 0
+    assert per_lag.shape == (3, 3) and per_lag[0, 0] >= 2 * collisions  # pairs at least
+    assert np.all(per_lag[:, 2] <= per_lag[:, 1]) and np.all(per_lag[:, 1] <= per_lag[:, 0])
+    assert per_lag[0, 1] > per_lag[0, 0] // 2  # at the collision itself, mostly foreseen
+    assert 0 < avoidable <= foreseen < flown // 10  # the flagged states are rare
+
+
 def tool_module(name: str):
     """tools/<name>.py as a module (tools/ is not a package)."""
     import importlib.util
