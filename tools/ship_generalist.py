@@ -81,6 +81,10 @@ TRAINING_KEPT = (
     "dagger_beta",
     "dagger_updates",
     "dagger_lr",
+    "dagger_separation_weight",
+    "dagger_separation_horizon_s",
+    "dagger_separation_intruders",
+    "dagger_separation_reciprocal",
     "hidden",
     "pooling",
     "family_weights",
@@ -257,6 +261,7 @@ def main() -> None:
         },
     }
     out = zoo_dir() / args.name
+    out.parent.mkdir(parents=True, exist_ok=True)  # a new zoo folder (robust/, …)
     out.with_suffix(".eval.json").write_text(json.dumps(report, indent=2, default=float) + "\n")
     export_generalist_run(
         run, out.with_suffix(".safetensors"), checkpoint=args.checkpoint, metrics=metrics

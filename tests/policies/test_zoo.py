@@ -29,7 +29,7 @@ def test_zoo_names_are_scenarios():
     assert set(zoo_names()) - set(GENERALISTS) <= set(scenario_names())
 
 
-@pytest.mark.parametrize("name", [*GENERALISTS, "robust/generalist"])
+@pytest.mark.parametrize("name", [*GENERALISTS, "robust/generalist", "own-separation/generalist"])
 def test_a_zoo_generalist_flies_any_swarm_and_carries_its_suite_results(name):
     from sim.swarm import SwarmSim
 
@@ -58,6 +58,18 @@ def test_the_robust_generalist_carries_its_real_world_results():
     assert mean == pytest.approx(report["real_world_success_rate"])
     assert mean == pytest.approx(policy.meta["metrics"]["real_world_success_rate"])
     assert report["training"]["teacher_truth"] is True  # what makes it the robust one
+
+
+def test_the_own_separation_generalist_records_the_penalty_it_was_trained_with():
+    policy = load_policy("own-separation/generalist")
+    report = json.loads((zoo_dir() / "own-separation" / "generalist.eval.json").read_text())
+    training = report["training"]
+    assert training["dagger_separation_weight"] == 0.05 and training["dagger_separation_intruders"]
+    assert training["init"] == "generalist" and training["teacher"] == "self-shield"
+    assert report["collision_rate_u2u"] == pytest.approx(
+        policy.meta["metrics"]["collision_rate_u2u"]
+    )
+    assert len(report["real_world"]["scenarios"]) == 8
 
 
 def test_the_robust_3u2o_policy_carries_the_world_it_was_trained_in():
