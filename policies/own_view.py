@@ -103,11 +103,13 @@ class OwnView:
             intruders,
         )
 
-    def time_points(self) -> torch.Tensor:
+    def time_points(self, device: torch.device | str = "cpu") -> torch.Tensor:
         """(P,) the instants of the prediction, s: the arc's chords, then the horizon."""
-        arc = torch.linspace(0.0, self.dt_s, ARC_SEGMENTS + 1, dtype=torch.float64)
+        arc = torch.linspace(0.0, self.dt_s, ARC_SEGMENTS + 1, dtype=torch.float64, device=device)
         if self.horizon_s > self.dt_s:
-            return torch.cat([arc, torch.tensor([self.horizon_s], dtype=torch.float64)])
+            return torch.cat(
+                [arc, torch.tensor([self.horizon_s], dtype=torch.float64, device=device)]
+            )
         return arc
 
     def closest(self, obs: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
@@ -130,7 +132,7 @@ class OwnView:
         turn = a * self.max_turn_rad  # (...)
         ox, oy = self._path(torch.zeros_like(speed), speed, turn)  # the heading frame: ψ = 0
         ox, oy = ox[..., None, :], oy[..., None, :]  # (..., 1, P)
-        t = self.time_points()  # (P,)
+        t = self.time_points(x.device)  # (P,)
 
         sets = [("neighbours", "neighbour_mask", lay.max_neighbours, NEIGHBOUR_COLUMNS)]
         if self.intruders:
@@ -159,7 +161,7 @@ class OwnView:
         ``heading``, ``speed`` and ``turn`` broadcast to (...). As the simulator flies it: the
         arc's chords, then straight on the arc's final heading until the horizon.
         """
-        u = torch.linspace(0.0, 1.0, ARC_SEGMENTS + 1, dtype=torch.float64)
+        u = torch.linspace(0.0, 1.0, ARC_SEGMENTS + 1, dtype=torch.float64, device=speed.device)
         half = 0.5 * turn[..., None] * u  # (..., S + 1)
         chord = speed[..., None] * self.dt_s * u * torch.sinc(half / math.pi)
         direction = heading[..., None] + half

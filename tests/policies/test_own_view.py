@@ -219,3 +219,13 @@ def test_intruders_are_charged_only_when_the_view_reads_them():
     assert torch.isinf(closest[LAYOUT.max_neighbours + 1 :]).all()  # empty rows
     assert float(alone.penalty(obs, straight)) == 0.0
     assert float(both.penalty(obs, straight)) == pytest.approx(((30 - 2) / 10) ** 2, rel=1e-4)
+
+
+@pytest.mark.parametrize("reciprocal", [False, True])
+def test_the_penalty_stays_on_the_observations_device(reciprocal):
+    """Every tensor it makes follows the observations (a run on a GPU learns there): on torch's
+    meta device, one tensor made elsewhere would raise."""
+    cfg = scenario()
+    meta = OwnView.of(LAYOUT, [cfg], 4.0, 1.5, reciprocal=reciprocal, intruders=True)
+    obs = torch.zeros(3, LAYOUT.size, device="meta")
+    assert meta.penalty(obs, torch.zeros(3, device="meta")).device.type == "meta"
