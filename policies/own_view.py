@@ -37,7 +37,7 @@ from sim.observation import (
     ROW_SELF,
     ObservationLayout,
 )
-from sim.prediction import ARC_SEGMENTS
+from sim.prediction import ARC_SEGMENTS, time_points
 
 
 @dataclass(frozen=True)
@@ -104,13 +104,8 @@ class OwnView:
         )
 
     def time_points(self, device: torch.device | str = "cpu") -> torch.Tensor:
-        """(P,) the instants of the prediction, s: the arc's chords, then the horizon."""
-        arc = torch.linspace(0.0, self.dt_s, ARC_SEGMENTS + 1, dtype=torch.float64, device=device)
-        if self.horizon_s > self.dt_s:
-            return torch.cat(
-                [arc, torch.tensor([self.horizon_s], dtype=torch.float64, device=device)]
-            )
-        return arc
+        """(P,) the instants of the prediction, s: `sim.prediction.time_points`, as a tensor."""
+        return torch.from_numpy(time_points(self.dt_s, self.horizon_s)).to(device)
 
     def closest(self, obs: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
         """(..., k [+ m]) predicted closest approach, m, to each row (masked rows: inf).

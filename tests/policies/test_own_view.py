@@ -229,3 +229,31 @@ def test_the_penalty_stays_on_the_observations_device(reciprocal):
     meta = OwnView.of(LAYOUT, [cfg], 4.0, 1.5, reciprocal=reciprocal, intruders=True)
     obs = torch.zeros(3, LAYOUT.size, device="meta")
     assert meta.penalty(obs, torch.zeros(3, device="meta")).device.type == "meta"
+
+
+def test_a_supervised_step_with_the_penalty_turns_away_from_a_neighbour_ahead():
+    """The penalty enters the actor's update: with labels equal to the actor's own actions the
+    imitation alone moves nothing, and with the penalty the action turns away from a neighbour
+    closing in ahead and to the left."""
+    from policies.config import GeneralistConfig
+    from policies.generalist_dagger import clone_update
+    from policies.generalist_ppo import PPONets
+
+    cfg = scenario()
+    obs = one_neighbour(40.0, 5.0, vx_m_s=-20.0).repeat(8, 1)
+    actions = {}
+    for weight in (0.0, 1.0):
+        torch.manual_seed(0)
+        nets = PPONets.create(LAYOUT, GeneralistConfig(hidden=16), "cpu")
+        with torch.no_grad():
+            before = nets.actor(obs).clone()
+        opt = torch.optim.Adam(nets.actor.parameters(), lr=1e-2)
+        separation = (view(cfg), weight) if weight else None
+        for _ in range(20):
+            clone_update(nets.actor, opt, obs, before, 1.0, None, separation)
+        with torch.no_grad():
+            actions[weight] = (float(before[0]), float(nets.actor(obs)[0]))
+    start, after = actions[0.0]
+    assert after == pytest.approx(start, abs=1e-6)  # the labels are its own: nothing to learn
+    start, after = actions[1.0]
+    assert after < start - 0.05  # to the right, away from the neighbour on the left
