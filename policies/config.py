@@ -326,6 +326,13 @@ class GeneralistConfig:
     intruder too (straight on at its velocity), so that the student does not buy its distance
     from its neighbours with its distance from the intruders."""
 
+    dagger_separation_intruder_horizon_s: float = 0.0
+    """DAgger: seconds ahead the own-view separation penalty predicts the intruders it charges
+    (``dagger_separation_intruders``). 0: ``dagger_separation_horizon_s``, as the neighbours.
+    The safety shield looks at its swarm 4 s and at intruders 25 s ahead
+    (`sim.shield.ShieldConfig`): a gap that opens only inside 4 s of an intruder may be too
+    late for a turn-limited UAV."""
+
     learner: str = "ppo"
     """"ppo" (on-policy: clipped surrogate over rollouts of every world, GAE,
     `policies.generalist_ppo`) or "td3" (off-policy: one replay buffer of every UAV's
@@ -501,7 +508,11 @@ class GeneralistConfig:
         check(0 <= self.dagger_fraction <= 1, "dagger_fraction", "must be in [0, 1]")
         check(0 <= self.dagger_beta <= 1, "dagger_beta", "must be in [0, 1]")
         check(self.dagger_lr > 0, "dagger_lr", "must be > 0")
-        for name in ("dagger_separation_weight", "dagger_separation_horizon_s"):
+        for name in (
+            "dagger_separation_weight",
+            "dagger_separation_horizon_s",
+            "dagger_separation_intruder_horizon_s",
+        ):
             value = getattr(self, name)
             check(math.isfinite(value) and value >= 0, name, "must be finite and >= 0")
         check(

@@ -224,6 +224,7 @@ def separation_view(book: RunBook) -> OwnView | None:
         cfg.separation_factor,
         cfg.dagger_separation_reciprocal,
         cfg.dagger_separation_intruders,
+        cfg.dagger_separation_intruder_horizon_s,
     )
 
 

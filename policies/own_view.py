@@ -53,6 +53,8 @@ class OwnView:
             formation turning together keeps its spacing), rather than to fly straight on.
             intruders: the intruder rows are charged too (each straight on at its velocity,
             as ADS-B traffic is predicted everywhere), after the neighbours.
+            intruder_horizon_s: how far ahead the intruder rows are predicted, s (≥ dt_s);
+            ``horizon_s`` where not set.
     """
 
     layout: ObservationLayout
@@ -63,6 +65,7 @@ class OwnView:
     factor: float
     reciprocal: bool = False
     intruders: bool = False
+    intruder_horizon_s: float | None = None
 
     @classmethod
     def of(
@@ -73,8 +76,11 @@ class OwnView:
         factor: float,
         reciprocal: bool = False,
         intruders: bool = False,
+        intruder_horizon_s: float = 0.0,
     ) -> OwnView:
         """The view of ``layout`` over worlds that share one decision step, turn limit and d_col.
+
+        ``intruder_horizon_s`` 0: the intruders are predicted over ``horizon_s`` too.
 
         Raises:
             ConfigError: the layout is not version 2, or the worlds' kinematics differ.
@@ -101,11 +107,18 @@ class OwnView:
             factor,
             reciprocal,
             intruders,
+            max(intruder_horizon_s, dt_s) if intruder_horizon_s > 0 else None,
         )
 
-    def time_points(self, device: torch.device | str = "cpu") -> torch.Tensor:
-        """(P,) the instants of the prediction, s: `sim.prediction.time_points`, as a tensor."""
-        return torch.from_numpy(time_points(self.dt_s, self.horizon_s)).to(device)
+    def time_points(
+        self, device: torch.device | str = "cpu", horizon_s: float | None = None
+    ) -> torch.Tensor:
+        """(P,) the instants of the prediction, s: `sim.prediction.time_points`, as a tensor.
+
+        Over ``horizon_s``, by default the view's ``horizon_s``.
+        """
+        horizon = self.horizon_s if horizon_s is None else horizon_s
+        return torch.from_numpy(time_points(self.dt_s, horizon)).to(device)
 
     def closest(self, obs: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
         """(..., k [+ m]) predicted closest approach, m, to each row (masked rows: inf).
@@ -125,15 +138,18 @@ class OwnView:
         own_v = x[..., ROW_SELF * COLUMNS + 2 : ROW_SELF * COLUMNS + 4] * lay.speed_m_s
         speed = torch.linalg.vector_norm(own_v, dim=-1)  # (...)
         turn = a * self.max_turn_rad  # (...)
-        ox, oy = self._path(torch.zeros_like(speed), speed, turn)  # the heading frame: ψ = 0
-        ox, oy = ox[..., None, :], oy[..., None, :]  # (..., 1, P)
-        t = self.time_points(x.device)  # (P,)
 
         sets = [("neighbours", "neighbour_mask", lay.max_neighbours, NEIGHBOUR_COLUMNS)]
+        horizons = [self.horizon_s]
         if self.intruders:
             sets.append(("intruders", "intruder_mask", lay.max_obstacles, INTRUDER_COLUMNS))
+            horizons.append(self.intruder_horizon_s or self.horizon_s)
         out = []
-        for rows_name, mask_name, count, width in sets:
+        for (rows_name, mask_name, count, width), horizon in zip(sets, horizons, strict=True):
+            # the UAV's own path in its heading frame (ψ = 0): (..., 1, P)
+            ox, oy = self._path(torch.zeros_like(speed), speed, turn, horizon)
+            ox, oy = ox[..., None, :], oy[..., None, :]
+            t = self.time_points(x.device, horizon)  # (P,)
             rows = x[..., blocks[rows_name]].unflatten(-1, (count, width))
             kept = x[..., blocks[mask_name]] > 0.5
             px, py = rows[..., 0] * lay.range_m, rows[..., 1] * lay.range_m  # (..., R)
@@ -141,7 +157,7 @@ class OwnView:
             vy = own_v[..., 1:2] + rows[..., 3] * lay.speed_m_s
             if self.reciprocal and rows_name == "neighbours":  # turning as the UAV does
                 heading = torch.atan2(vy, vx)
-                nx, ny = self._path(heading, torch.hypot(vx, vy), turn[..., None])  # (..., R, P)
+                nx, ny = self._path(heading, torch.hypot(vx, vy), turn[..., None], horizon)
             else:  # straight on at its velocity
                 nx, ny = vx[..., None] * t, vy[..., None] * t
             d = segment_closest(px[..., None] + nx - ox, py[..., None] + ny - oy)  # (..., R)
@@ -149,7 +165,7 @@ class OwnView:
         return torch.cat(out, dim=-1)
 
     def _path(
-        self, heading: torch.Tensor, speed: torch.Tensor, turn: torch.Tensor
+        self, heading: torch.Tensor, speed: torch.Tensor, turn: torch.Tensor, horizon_s: float
     ) -> tuple[torch.Tensor, torch.Tensor]:
         """Displacements (x, y), each (..., P), of vehicles turning by ``turn`` over the step.
 
@@ -161,9 +177,9 @@ class OwnView:
         chord = speed[..., None] * self.dt_s * u * torch.sinc(half / math.pi)
         direction = heading[..., None] + half
         x, y = chord * torch.cos(direction), chord * torch.sin(direction)
-        if self.horizon_s > self.dt_s:
+        if horizon_s > self.dt_s:
             final = heading + turn
-            rest = speed * (self.horizon_s - self.dt_s)
+            rest = speed * (horizon_s - self.dt_s)
             x = torch.cat([x, (x[..., -1] + rest * torch.cos(final))[..., None]], dim=-1)
             y = torch.cat([y, (y[..., -1] + rest * torch.sin(final))[..., None]], dim=-1)
         return x, y

@@ -157,6 +157,13 @@ def add_train(sub: Any) -> None:
         "neighbours alone)",
     )
     p.add_argument(
+        "--own-separation-intruder-horizon",
+        type=float,
+        metavar="S",
+        help="generalist: how far ahead that penalty predicts the intruders, seconds (default "
+        "0: as --own-separation-horizon)",
+    )
+    p.add_argument(
         "--sensing-aperture",
         type=float,
         metavar="DEG",
@@ -560,6 +567,7 @@ def generalist_flags(args: argparse.Namespace) -> dict[str, Any]:
         "dagger_separation_horizon_s": args.own_separation_horizon,
         "dagger_separation_reciprocal": args.own_separation_reciprocal,
         "dagger_separation_intruders": args.own_separation_intruders,
+        "dagger_separation_intruder_horizon_s": args.own_separation_intruder_horizon,
         "seed": args.seed or None,
     }
     if args.family_weight:

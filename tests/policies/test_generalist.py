@@ -611,6 +611,7 @@ def test_a_bad_family_weight_flag_says_what_to_write(text):
         ("--turn-weight", "-2", "dagger_turn_weight"),
         ("--own-separation", "-1", "dagger_separation_weight"),
         ("--own-separation-horizon", "-4", "dagger_separation_horizon_s"),
+        ("--own-separation-intruder-horizon", "nan", "dagger_separation_intruder_horizon_s"),
         ("--max-neighbours", "-1", "max_neighbours"),
         ("--dagger-lr", "0", "dagger_lr"),
         ("--real-share", "1.5", "real_share"),
@@ -662,6 +663,7 @@ def test_train_generalist_flags_reach_the_config(tmp_path, monkeypatch):
     argv += ["--real-share", "0.5", "--real-error-tau", "10", "120", "--real-track-filter"]
     argv += ["--real-hover", "--own-separation", "0.3", "--own-separation-horizon", "6"]
     argv += ["--own-separation-reciprocal", "--own-separation-intruders"]
+    argv += ["--own-separation-intruder-horizon", "12"]
     assert main([*argv, "--out", str(tmp_path / "run")]) == 0
     ((cfg, out, resume),) = seen
     assert cfg.swarm_field == "formation" and cfg.family_weights == (("swarms-*", 2.0),)
@@ -677,6 +679,7 @@ def test_train_generalist_flags_reach_the_config(tmp_path, monkeypatch):
     assert cfg.real_track_filter and cfg.real_hover
     assert (cfg.dagger_separation_weight, cfg.dagger_separation_horizon_s) == (0.3, 6.0)
     assert cfg.dagger_separation_reciprocal and cfg.dagger_separation_intruders
+    assert cfg.dagger_separation_intruder_horizon_s == 12.0
     assert cfg.minutes == 2 and cfg.seed == 4 and out == tmp_path / "run" and not resume
     assert GeneralistConfig().swarm_field == "all"  # the paper's reward unless asked
     seen.clear()

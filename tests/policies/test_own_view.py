@@ -221,6 +221,30 @@ def test_intruders_are_charged_only_when_the_view_reads_them():
     assert float(both.penalty(obs, straight)) == pytest.approx(((30 - 2) / 10) ** 2, rel=1e-4)
 
 
+def test_intruders_may_be_predicted_further_ahead_than_the_neighbours():
+    """An intruder 180 m ahead closing at 20 m/s meets us at 9 s: beyond a 4 s look, inside 10 s;
+    the neighbour rows keep their own 4 s (a wingman 50 m ahead, slower, is not charged)."""
+    cfg = scenario()
+    obs = one_neighbour(50.0, 0.0, -5.0)  # 5 m/s slower: 20 m nearer in 4 s, 50 m in 10 s
+    blocks = LAYOUT.blocks()
+    intruder = np.array([180.0 / 200, 2.0 / 200, -20.0 / 10, 0.0, 180.0 / 200], dtype=np.float32)
+    obs[blocks["intruders"].start : blocks["intruders"].start + 5] = torch.from_numpy(intruder)
+    obs[blocks["intruder_mask"].start] = 1.0
+    straight = torch.tensor(0.0)
+    short = OwnView.of(LAYOUT, [cfg], 4.0, 1.5, intruders=True)
+    far = OwnView.of(LAYOUT, [cfg], 4.0, 1.5, intruders=True, intruder_horizon_s=10.0)
+    k = LAYOUT.max_neighbours
+    near, ahead = short.closest(obs, straight), far.closest(obs, straight)
+    assert float(near[k]) == pytest.approx(180.0 - 20.0 * 4.0, abs=0.5)  # 100 m off at 4 s
+    assert float(ahead[k]) == pytest.approx(2.0, abs=1e-3)  # head-on inside 10 s
+    assert torch.equal(near[:k], ahead[:k])  # the neighbours' look is the same
+    assert float(near[0]) == pytest.approx(30.0, abs=0.5)
+    assert float(short.penalty(obs, straight)) == 0.0
+    assert float(far.penalty(obs, straight)) == pytest.approx(((30 - 2) / 10) ** 2, rel=1e-4)
+    same = OwnView.of(LAYOUT, [cfg], 4.0, 1.5, intruders=True, intruder_horizon_s=0.0)
+    assert same == short  # 0: as the neighbours
+
+
 @pytest.mark.parametrize("reciprocal", [False, True])
 def test_the_penalty_stays_on_the_observations_device(reciprocal):
     """Every tensor it makes follows the observations (a run on a GPU learns there): on torch's
