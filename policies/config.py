@@ -10,6 +10,7 @@ from typing import Any
 
 from sim.config import SWARM_FIELDS, TEACHERS, ScenarioConfig
 from sim.setnet import ATTENTION_HEADS, POOLINGS
+from sim.shield import NEIGHBOUR_ARCS
 
 
 def check(ok: bool, name: str, message: str) -> None:
@@ -401,6 +402,13 @@ class GeneralistConfig:
     itself reads the true positions either way). The ideal-world families are the same
     either way."""
 
+    teacher_neighbours: str = "proposals"
+    """What the "self-shield" teacher's shield expects of each UAV's neighbours
+    (`sim.shield.ShieldConfig.neighbour_arcs`): "proposals" (what the proposer proposes for
+    them this step, two passes: the shield as it flies) or "straight" (each flies on at its
+    heading and speed, one pass: a label made from what the UAV itself sees, which a student
+    can copy; docs/MODEL.md §20, "A teacher the student can copy")."""
+
     minutes: float = 60.0
     """Wall-clock budget of the run (resumes count the time already spent): the shipped
     generalist's run, whose best validation came at 45.7 minutes (docs/MODEL.md §20)."""
@@ -499,6 +507,16 @@ class GeneralistConfig:
             self.teacher != "self-shield" or bool(self.init),
             "teacher",
             '"self-shield" distils a policy behind the shield: name it with init',
+        )
+        check(
+            self.teacher_neighbours in NEIGHBOUR_ARCS,
+            "teacher_neighbours",
+            f"must be one of {NEIGHBOUR_ARCS}",
+        )
+        check(
+            self.teacher_neighbours == "proposals" or self.teacher == "self-shield",
+            "teacher_neighbours",
+            'the "self-shield" teacher only',
         )
         check(not self.init or self.learner == "ppo", "init", "the ppo learner only")
         check(self.bc_weight >= 0, "bc_weight", "must be >= 0")

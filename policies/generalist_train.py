@@ -42,7 +42,7 @@ import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import torch
@@ -65,7 +65,7 @@ from sim.oracle import oracle_actions
 from sim.orca import HORIZON_S as ORCA_HORIZON_S
 from sim.orca import orca_actions
 from sim.scenarios import REAL_WORLD
-from sim.shield import ShieldConfig, Vehicle, shield_state, vehicle_of
+from sim.shield import NeighbourArcs, ShieldConfig, Vehicle, shield_state, vehicle_of
 from sim.spawn import EpisodeStart, spawn_episodes
 from sim.state import SwarmState, merge_where
 from sim.suite import load_suite
@@ -429,14 +429,16 @@ def shielded(
     cfg: ScenarioConfig,
     proposed: NDArray[np.float32],
     vehicle: Vehicle | None = None,
+    neighbour_arcs: NeighbourArcs = "proposals",
 ) -> NDArray[np.float32]:
     """Proposed actions (B, N) through the safety shield, turning only.
 
-    A teacher commands no speed: the default `ShieldConfig`, ``vehicle`` (`teacher_vehicle` of
-    ``cfg`` where None; a `World` holds its own).
+    A teacher commands no speed: the default `ShieldConfig` but for ``neighbour_arcs``,
+    ``vehicle`` (`teacher_vehicle` of ``cfg`` where None; a `World` holds its own).
     """
     vehicle = vehicle or teacher_vehicle(cfg)
-    return shield_state(ShieldConfig(mode="on"), cfg, state, proposed, vehicle).action
+    shield_cfg = ShieldConfig(mode="on", neighbour_arcs=neighbour_arcs)
+    return shield_state(shield_cfg, cfg, state, proposed, vehicle).action
 
 
 def teach(
@@ -452,7 +454,13 @@ def teach(
         size = worlds[0].obs.shape[-1]
         proposals = per_world(actor_actions(anchor, joint_obs(worlds, size), device), worlds)
         return [
-            shielded(teacher_state(w, cfg.teacher_truth), w.cfg, proposed, w.teacher_vehicle)
+            shielded(
+                teacher_state(w, cfg.teacher_truth),
+                w.cfg,
+                proposed,
+                w.teacher_vehicle,
+                cast(NeighbourArcs, cfg.teacher_neighbours),
+            )
             for w, proposed in zip(worlds, proposals, strict=True)
         ]
     return [

@@ -51,6 +51,8 @@ from sim.vehicle import load_profile
 
 ShieldMode = Literal["off", "monitor", "on"]
 SHIELD_MODES: tuple[ShieldMode, ...] = ("off", "monitor", "on")
+NeighbourArcs = Literal["proposals", "straight"]
+NEIGHBOUR_ARCS: tuple[NeighbourArcs, ...] = ("proposals", "straight")
 
 
 @dataclass(frozen=True)
@@ -118,9 +120,23 @@ class ShieldConfig:
     episodes, 28 to 4.5 % of 50u8o's, 3.5 to 1 % of two lines of five; a third pass changed
     nothing measurable (docs/MODEL.md §21)."""
 
+    neighbour_arcs: NeighbourArcs = "proposals"
+    """What each UAV expects of its neighbours: "proposals" (the arcs the swarm's controller
+    proposes for them this step, and with ``passes`` > 1 what the earlier passes decided: the
+    swarm shares its decisions) or "straight" (each flies on at its heading and speed: what one
+    UAV's own observation tells it, `policies.own_view`). "straight" makes every decision a
+    function of what that UAV sees, so that a student can copy it (a DAgger teacher:
+    ``remarl-fc train --generalist --teacher self-shield --teacher-neighbours straight``); it
+    makes one pass, whatever ``passes`` says."""
+
     def __post_init__(self) -> None:
         if self.mode not in SHIELD_MODES:
             raise ValueError(f"shield mode must be one of {', '.join(SHIELD_MODES)}")
+        if self.neighbour_arcs not in NEIGHBOUR_ARCS:
+            raise ValueError(
+                f"shield neighbour_arcs must be one of {', '.join(NEIGHBOUR_ARCS)}, "
+                f"got {self.neighbour_arcs!r}"
+            )
         for name in (
             "horizon_s",
             "track_horizon_s",
@@ -253,7 +269,11 @@ def shield(
         no = np.zeros((b, n), dtype=bool)
         act = prop.astype(np.float32)
         return ShieldDecision(act, full, no, ~no, inf, inf, act, full)
-    arcs = [Commitment(prop, swarm.speed_m_s, np.ones((b, n), dtype=bool))]
+    everyone = np.ones((b, n), dtype=bool)
+    if cfg.neighbour_arcs == "straight":  # what each UAV sees: its neighbours flying on
+        arcs = [Commitment(np.zeros_like(prop), swarm.speed_m_s, everyone)]
+        return _decide(cfg, vehicle, swarm, threats, prop, arcs)
+    arcs = [Commitment(prop, swarm.speed_m_s, everyone)]
     decision = _decide(cfg, vehicle, swarm, threats, prop, arcs)
     for _ in range(cfg.passes - 1):
         # compared in float32, the decision's own precision: a passing float64 proposal comes
@@ -312,22 +332,24 @@ def _decide(
     times, split = _times(dt, horizon, cuts)  # (P,)
     a_max = vehicle.max_turn_rad
     deciding = swarm.deciding
-    # Every UAV's proposal at 1 m/s, (B, N, 1, P): its own first candidate, and (at its
-    # speed) the committed arc its neighbours check against.
+    # Every UAV's proposal at 1 m/s, (B, N, 1, P): its own first candidate; and each arc its
+    # neighbours check against (at its speed), the proposal itself first unless they expect it
+    # to fly straight on (`ShieldConfig.neighbour_arcs`).
     committed = _at_times(
         displacements(swarm.heading_rad, prop[..., None] * a_max, 1.0, dt, horizon, CHORDS),
         split,
     )
-    theirs = [committed]
-    for arc in arcs[1:]:
-        theirs.append(
-            _at_times(
-                displacements(
-                    swarm.heading_rad, arc.action[..., None] * a_max, 1.0, dt, horizon, CHORDS
-                ),
-                split,
-            )
+    theirs = [
+        committed
+        if arc.action is prop
+        else _at_times(
+            displacements(
+                swarm.heading_rad, arc.action[..., None] * a_max, 1.0, dt, horizon, CHORDS
+            ),
+            split,
         )
+        for arc in arcs
+    ]
     paths = _threat_paths(
         cfg,
         vehicle,

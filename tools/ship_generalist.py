@@ -72,6 +72,7 @@ TRAINING_KEPT = (
     "init",
     "teacher",
     "teacher_truth",
+    "teacher_neighbours",
     "teacher_horizon_s",
     "real_share",
     "real_error_tau_s",

@@ -108,7 +108,7 @@ def add_shield_flags(p: Any, default: str) -> None:
 
     The defaults of the horizon, margin and passes are `sim.shield.ShieldConfig`'s.
     """
-    from sim.shield import SHIELD_MODES, ShieldConfig
+    from sim.shield import NEIGHBOUR_ARCS, SHIELD_MODES, ShieldConfig
 
     base = ShieldConfig()
     p.add_argument(
@@ -145,6 +145,13 @@ def add_shield_flags(p: Any, default: str) -> None:
         help="decisions per step: each pass after the first also keeps clear of the turns the "
         f"earlier ones gave the neighbours (default {base.passes})",
     )
+    p.add_argument(
+        "--shield-neighbours",
+        choices=list(NEIGHBOUR_ARCS),
+        default=base.neighbour_arcs,
+        help="what each UAV expects of its neighbours: the swarm's proposals this step, or "
+        f"flying straight on, one pass (default {base.neighbour_arcs})",
+    )
 
 
 def shield_from_args(args: argparse.Namespace) -> Any:
@@ -158,6 +165,7 @@ def shield_from_args(args: argparse.Namespace) -> Any:
             track_horizon_s=args.shield_track_horizon,
             margin_m=args.shield_margin,
             passes=args.shield_passes,
+            neighbour_arcs=args.shield_neighbours,
         )
     except ValueError as exc:
         raise ConfigError(f"--shield: {exc}") from exc

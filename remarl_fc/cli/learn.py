@@ -213,6 +213,14 @@ def add_train(sub: Any) -> None:
         "teacher (default: its shield reads the UAVs' ADS-B tracks, as in flight)",
     )
     p.add_argument(
+        "--teacher-neighbours",
+        choices=["proposals", "straight"],
+        default=None,
+        help="generalist: what the self-shield teacher expects of each UAV's neighbours: "
+        "their proposals this step (default, the shield as it flies) or flying straight on "
+        "(a label made from what the UAV itself sees)",
+    )
+    p.add_argument(
         "--real-share",
         type=float,
         metavar="F",
@@ -558,6 +566,7 @@ def generalist_flags(args: argparse.Namespace) -> dict[str, Any]:
         "max_neighbours": args.max_neighbours,
         "teacher_horizon_s": args.teacher_horizon,
         "teacher_truth": args.teacher_truth,
+        "teacher_neighbours": args.teacher_neighbours,
         "real_share": args.real_share,
         "real_error_tau_s": tuple(args.real_error_tau) if args.real_error_tau else None,
         "real_track_filter": args.real_track_filter,

@@ -617,6 +617,7 @@ def test_a_bad_family_weight_flag_says_what_to_write(text):
         ("--real-share", "1.5", "real_share"),
         ("--real-error-tau 30", "10", "real_error_tau_s"),
         ("--teacher", "self-shield", "teacher"),
+        ("--teacher-neighbours", "straight", "teacher_neighbours"),  # orca-shield: refused
         ("--init generalist --learner", "td3", "init"),
     ],
 )
@@ -682,6 +683,12 @@ def test_train_generalist_flags_reach_the_config(tmp_path, monkeypatch):
     assert cfg.dagger_separation_intruder_horizon_s == 12.0
     assert cfg.minutes == 2 and cfg.seed == 4 and out == tmp_path / "run" and not resume
     assert GeneralistConfig().swarm_field == "all"  # the paper's reward unless asked
+    assert cfg.teacher_neighbours == "proposals"  # the shield as it flies unless asked
+    seen.clear()
+    argv = ["train", "--generalist", "--json", "--init", "generalist", "--teacher"]
+    argv += ["self-shield", "--teacher-neighbours", "straight", "--out", str(tmp_path / "sv")]
+    assert main(argv) == 0
+    assert seen[0][0].teacher_neighbours == "straight"
     seen.clear()
     assert main(["train", "--generalist", "--json", "--out", str(tmp_path / "plain")]) == 0
     assert seen[0][0] == GeneralistConfig(seed=seen[0][0].seed)  # no flag: every default

@@ -49,17 +49,30 @@ def test_the_self_shield_teacher_is_the_start_policy_through_the_shield(tmp_path
         np.testing.assert_allclose(book.teach([world])[0], expected, atol=1e-5)
 
 
-def test_the_self_shield_labels_go_through_the_shield(tmp_path, start_policy, monkeypatch):
+@pytest.mark.parametrize(("neighbours", "mark"), [("proposals", 7.0), ("straight", 9.0)])
+def test_the_self_shield_labels_go_through_the_shield(
+    tmp_path, start_policy, monkeypatch, neighbours, mark
+):
     """Where the shield would turn nothing, the test above cannot tell it was asked: a shield
-    that marks what it returns shows every label passed through it."""
+    that marks what it returns shows every label passed through it, with the neighbours'
+    expected arcs the run asks for (``teacher_neighbours``)."""
     import policies.generalist_train as generalist_train
 
-    monkeypatch.setattr(generalist_train, "shielded", lambda state, cfg, proposed, _: proposed + 7)
-    cfg = tiny_cfg(tmp_path, init=str(start_policy), teacher="self-shield", dagger_fraction=1.0)
+    def marking(state, cfg, proposed, vehicle, arcs):
+        return proposed + {"proposals": 7.0, "straight": 9.0}[arcs]
+
+    monkeypatch.setattr(generalist_train, "shielded", marking)
+    cfg = tiny_cfg(
+        tmp_path,
+        init=str(start_policy),
+        teacher="self-shield",
+        dagger_fraction=1.0,
+        teacher_neighbours=neighbours,
+    )
     book = RunBook.open(cfg, tmp_path / "run", PPONets.create, resume=False)
     policy = load_policy(str(start_policy))
     for world in book.worlds:
-        np.testing.assert_allclose(book.teach([world])[0], policy.act(world.obs) + 7, atol=1e-5)
+        np.testing.assert_allclose(book.teach([world])[0], policy.act(world.obs) + mark, atol=1e-5)
 
 
 def test_a_self_shield_run_learns_resumes_and_keeps_its_start(tmp_path, start_policy):

@@ -458,3 +458,31 @@ def test_the_second_pass_is_skipped_where_the_first_passed_every_float64_proposa
     prop = rng.uniform(-1, 1, (4, 1))  # float64, not float32-exact
     d = shield(ShieldConfig(mode="on", passes=2), VEHICLE, swarm, none, prop)
     assert not d.intervened.any() and calls == [1]
+
+
+def test_straight_neighbours_make_each_decision_the_uavs_own():
+    """With ``neighbour_arcs="straight"`` each UAV keeps clear of its neighbours flying on at
+    their heading: its decision is the one-pass decision of a swarm whose other UAVs all propose
+    to fly straight on, whatever they do propose (so it is a function of what that UAV sees)."""
+    straight = ShieldConfig(mode="on", neighbour_arcs="straight")
+    one_pass = ShieldConfig(mode="on", passes=1)
+    changed = 0
+    for seed in range(12):
+        rng = np.random.default_rng(seed)
+        swarm, threats = random_world(rng, 8, 3, 2)
+        prop = rng.uniform(-1, 1, (8, 3))
+        got = shield(straight, VEHICLE, swarm, threats, prop)
+        for uav in range(3):
+            alone = np.zeros_like(prop)
+            alone[:, uav] = prop[:, uav]
+            want = shield(one_pass, VEHICLE, swarm, threats, alone)
+            np.testing.assert_array_equal(got.action[:, uav], want.action[:, uav])
+            np.testing.assert_array_equal(got.intervened[:, uav], want.intervened[:, uav])
+        proposals = shield(ShieldConfig(mode="on"), VEHICLE, swarm, threats, prop)
+        changed += int((proposals.action != got.action).sum())
+    assert changed > 0  # the two expectations do differ on these worlds
+
+
+def test_unknown_neighbour_arcs_are_refused():
+    with pytest.raises(ValueError, match="neighbour_arcs must be one of proposals, straight"):
+        ShieldConfig(neighbour_arcs="guess")  # type: ignore[arg-type]
