@@ -4,11 +4,12 @@
         [--round-minutes 13] [--start FILE] [--rounds K] [--dry-run]
 
 The recipe (docs/MODEL.md §20): ``remarl-fc train --generalist --seed 2 --teacher-horizon 10``
-for 60 minutes (DAgger on ORCA through the shield, then PPO), exported; then eight rounds of
+for 60 minutes (DAgger on ORCA through the shield, then PPO), exported; then nine rounds of
 DAgger whose teacher is the previous round's policy through the safety shield
 (``--teacher self-shield --dagger-fraction 1 --dagger-lr 3e-4``), each from the previous
 round's export, with the seeds of `ROUNDS` (the seventh flies the crowded families more often,
-`CROWDED`). Every step is a ``remarl-fc`` command, printed before it runs.
+`CROWDED`; the ninth charges the separation the student's own view predicts, `OWN_VIEW`).
+Every step is a ``remarl-fc`` command, printed before it runs.
 
 ``--rollout-processes 1`` flies each round's rollouts in a second process while the first
 learns (`policies.generalist_rollouts`): on a 2-core machine a round does in 13 minutes the
@@ -17,8 +18,8 @@ of training the start (the shipped recipe's start is the generalist of 2026-11-2
 
 Resumable: a step whose export exists is skipped; a round whose folder holds a checkpoint but
 no export is resumed. ``OUT/recipe.json`` records every step's command and wall minutes, and
-the whole recipe's; the last round's export is ``OUT/round-8.safetensors``, to be judged and
-shipped with ``python tools/ship_generalist.py OUT/round-8 --recipe "…"``.
+the whole recipe's; the last round's export is ``OUT/round-9.safetensors``, to be judged and
+shipped with ``python tools/ship_generalist.py OUT/round-9 --recipe "…"``.
 """
 
 from __future__ import annotations
@@ -55,6 +56,16 @@ CROWDED = (
 )
 """The seventh round's mixture: the crowded families two to three times as often."""
 
+OWN_VIEW = (
+    "--own-separation",
+    "0.1",
+    "--own-separation-intruders",
+    "--own-separation-intruder-horizon",
+    "10",
+)
+"""The ninth round's penalty: the separation its own observation predicts for the student's
+action, to its neighbours over 4 s and to the intruders over 10 s (docs/MODEL.md §20)."""
+
 ROUNDS: tuple[tuple[int, tuple[str, ...]], ...] = (
     (1, ()),
     (2, ()),
@@ -64,6 +75,7 @@ ROUNDS: tuple[tuple[int, tuple[str, ...]], ...] = (
     (8, ()),
     (12, CROWDED),
     (14, ()),
+    (42, OWN_VIEW),
 )
 """(seed, extra flags) of each round, in order: the shipped chain's."""
 

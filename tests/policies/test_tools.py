@@ -223,7 +223,7 @@ def test_the_recipe_chains_each_round_from_the_last_export_with_flags_train_take
 
     recipe = recipe_module()
     plan = recipe.steps(tmp_path, None, 1, 13.0)
-    assert [name for name, _, _ in plan] == ["start"] + [f"round-{k}" for k in range(1, 9)]
+    assert [name for name, _, _ in plan] == ["start"] + [f"round-{k}" for k in range(1, 10)]
     policy = None
     for number, (name, commands, made) in enumerate(plan):
         train, export = (c[len(recipe.remarl()) :] for c in commands)
@@ -242,6 +242,9 @@ def test_the_recipe_chains_each_round_from_the_last_export_with_flags_train_take
                 1,
             )
             assert bool(cfg.family_weights) == (number == 7)  # the crowded round
+            own_view = (cfg.dagger_separation_weight, cfg.dagger_separation_intruder_horizon_s)
+            assert own_view == ((0.1, 10.0) if number == 9 else (0.0, 0.0))  # the last round
+            assert cfg.dagger_separation_intruders == (number == 9)
         policy = made
 
 

@@ -72,6 +72,18 @@ def test_the_own_separation_generalist_records_the_penalty_it_was_trained_with()
     assert len(report["real_world"]["scenarios"]) == 8
 
 
+def test_the_default_generalist_records_its_last_round_and_the_recipe_names_it():
+    """The default is the round that charged its own view's separation, intruders over 10 s;
+    its recipe records that round after the eighth, as tools/generalist_recipe.py runs it."""
+    report = json.loads((zoo_dir() / "generalist.eval.json").read_text())
+    training = report["training"]
+    assert training["dagger_separation_weight"] == 0.1 and training["dagger_separation_intruders"]
+    assert training["dagger_separation_intruder_horizon_s"] == 10.0
+    assert training["teacher"] == "self-shield" and training["seed"] == 42
+    assert "--own-separation 0.1 --own-separation-intruders" in report["recipe"]
+    assert "--own-separation-intruder-horizon 10" in report["recipe"]
+
+
 def test_the_robust_3u2o_policy_carries_the_world_it_was_trained_in():
     policy = load_policy("robust/3u2o")
     cfg = load_scenario(zoo_dir() / "robust" / "3u2o.toml")
