@@ -259,7 +259,8 @@ def shield(
     """Check the proposed actions (B, N) and decide what to fly (the module docstring).
 
     ``cfg.passes`` passes: each after the first keeps every UAV clear of its neighbours'
-    proposals and of what the earlier passes decided for those it changed.
+    proposals and of what the earlier passes decided for those it changed. With
+    ``cfg.neighbour_arcs`` "straight", one pass against neighbours flying straight on.
     """
     prop = np.clip(np.asarray(proposed, dtype=np.float64), -1.0, 1.0)
     b, n = prop.shape

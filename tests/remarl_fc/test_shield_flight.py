@@ -403,6 +403,17 @@ def test_bad_shield_settings_are_refused(command, capsys):
     assert "passes must be >= 1" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         main([*base, "--shield", "sometimes"])
+    with pytest.raises(SystemExit):
+        main([*base, "--shield-neighbours", "guess"])
+
+
+def test_the_shield_flags_build_its_config():
+    from remarl_fc.cli import build_parser
+    from remarl_fc.cli.common import shield_from_args
+
+    args = build_parser().parse_args(["demo", "--shield-neighbours", "straight"])
+    assert shield_from_args(args).neighbour_arcs == "straight"
+    assert shield_from_args(build_parser().parse_args(["demo"])) == ShieldConfig(mode="on")
 
 
 # -- closed loop on the mock ---------------------------------------------------------------
