@@ -334,6 +334,13 @@ class GeneralistConfig:
     (`sim.shield.ShieldConfig`): a gap that opens only inside 4 s of an intruder may be too
     late for a turn-limited UAV."""
 
+    dagger_separation_intruder_weight: float = -1.0
+    """DAgger: the weight of the intruder rows' part of the own-view separation penalty
+    (``dagger_separation_intruders``); negative: ``dagger_separation_weight``, as the
+    neighbours'. The neighbour rows want a strong weight to keep UAVs apart, and the same
+    weight on the intruder rows looked at far ahead outweighs them (docs/MODEL.md §20,
+    "Further ahead for the intruders")."""
+
     learner: str = "ppo"
     """"ppo" (on-policy: clipped surrogate over rollouts of every world, GAE,
     `policies.generalist_ppo`) or "td3" (off-policy: one replay buffer of every UAV's
@@ -533,6 +540,11 @@ class GeneralistConfig:
         ):
             value = getattr(self, name)
             check(math.isfinite(value) and value >= 0, name, "must be finite and >= 0")
+        check(
+            math.isfinite(self.dagger_separation_intruder_weight),
+            "dagger_separation_intruder_weight",
+            "must be finite (negative: the neighbours' weight)",
+        )
         check(
             math.isfinite(self.dagger_turn_weight) and self.dagger_turn_weight >= 0,
             "dagger_turn_weight",

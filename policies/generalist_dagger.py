@@ -217,6 +217,9 @@ def separation_view(book: RunBook) -> OwnView | None:
     cfg = book.cfg
     if cfg.dagger_separation_weight <= 0:
         return None
+    intruder_weight = cfg.dagger_separation_intruder_weight
+    if intruder_weight < 0:
+        intruder_weight = cfg.dagger_separation_weight
     return OwnView.of(
         book.layout,
         [world.cfg for world in book.worlds],
@@ -225,6 +228,7 @@ def separation_view(book: RunBook) -> OwnView | None:
         cfg.dagger_separation_reciprocal,
         cfg.dagger_separation_intruders,
         cfg.dagger_separation_intruder_horizon_s,
+        intruder_weight / cfg.dagger_separation_weight,
     )
 
 

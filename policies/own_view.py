@@ -54,7 +54,8 @@ class OwnView:
             intruders: the intruder rows are charged too (each straight on at its velocity,
             as ADS-B traffic is predicted everywhere), after the neighbours.
             intruder_horizon_s: how far ahead the intruder rows are predicted, s (≥ dt_s);
-            ``horizon_s`` where not set.
+            ``horizon_s`` where not set. intruder_scale: the intruder rows' share of the
+            penalty against the neighbour rows' 1.
     """
 
     layout: ObservationLayout
@@ -66,6 +67,7 @@ class OwnView:
     reciprocal: bool = False
     intruders: bool = False
     intruder_horizon_s: float | None = None
+    intruder_scale: float = 1.0
 
     @classmethod
     def of(
@@ -77,6 +79,7 @@ class OwnView:
         reciprocal: bool = False,
         intruders: bool = False,
         intruder_horizon_s: float = 0.0,
+        intruder_scale: float = 1.0,
     ) -> OwnView:
         """The view of ``layout`` over worlds that share one decision step, turn limit and d_col.
 
@@ -108,6 +111,7 @@ class OwnView:
             reciprocal,
             intruders,
             max(intruder_horizon_s, dt_s) if intruder_horizon_s > 0 else None,
+            intruder_scale,
         )
 
     def time_points(
@@ -192,8 +196,10 @@ class OwnView:
         """
         d = self._closest(obs, action)
         scale = (self.factor - 1.0) * self.d_col_m
-        excess = torch.relu((self.factor * self.d_col_m - d) / scale)
-        return (excess**2).sum(dim=-1).to(obs.dtype)
+        excess = torch.relu((self.factor * self.d_col_m - d) / scale) ** 2
+        k = self.layout.max_neighbours  # the neighbour rows first, then the intruders'
+        total = excess[..., :k].sum(dim=-1) + self.intruder_scale * excess[..., k:].sum(dim=-1)
+        return total.to(obs.dtype)
 
 
 def segment_closest(rx: torch.Tensor, ry: torch.Tensor) -> torch.Tensor:

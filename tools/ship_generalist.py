@@ -87,6 +87,7 @@ TRAINING_KEPT = (
     "dagger_separation_intruders",
     "dagger_separation_reciprocal",
     "dagger_separation_intruder_horizon_s",
+    "dagger_separation_intruder_weight",
     "hidden",
     "pooling",
     "family_weights",

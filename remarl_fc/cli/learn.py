@@ -164,6 +164,12 @@ def add_train(sub: Any) -> None:
         "0: as --own-separation-horizon)",
     )
     p.add_argument(
+        "--own-separation-intruder-weight",
+        type=float,
+        metavar="W",
+        help="generalist: the weight of that penalty's intruder rows (default: --own-separation's)",
+    )
+    p.add_argument(
         "--sensing-aperture",
         type=float,
         metavar="DEG",
@@ -577,6 +583,7 @@ def generalist_flags(args: argparse.Namespace) -> dict[str, Any]:
         "dagger_separation_reciprocal": args.own_separation_reciprocal,
         "dagger_separation_intruders": args.own_separation_intruders,
         "dagger_separation_intruder_horizon_s": args.own_separation_intruder_horizon,
+        "dagger_separation_intruder_weight": args.own_separation_intruder_weight,
         "seed": args.seed or None,
     }
     if args.family_weight:

@@ -612,6 +612,7 @@ def test_a_bad_family_weight_flag_says_what_to_write(text):
         ("--own-separation", "-1", "dagger_separation_weight"),
         ("--own-separation-horizon", "-4", "dagger_separation_horizon_s"),
         ("--own-separation-intruder-horizon", "nan", "dagger_separation_intruder_horizon_s"),
+        ("--own-separation-intruder-weight", "inf", "dagger_separation_intruder_weight"),
         ("--max-neighbours", "-1", "max_neighbours"),
         ("--dagger-lr", "0", "dagger_lr"),
         ("--real-share", "1.5", "real_share"),
@@ -664,7 +665,7 @@ def test_train_generalist_flags_reach_the_config(tmp_path, monkeypatch):
     argv += ["--real-share", "0.5", "--real-error-tau", "10", "120", "--real-track-filter"]
     argv += ["--real-hover", "--own-separation", "0.3", "--own-separation-horizon", "6"]
     argv += ["--own-separation-reciprocal", "--own-separation-intruders"]
-    argv += ["--own-separation-intruder-horizon", "12"]
+    argv += ["--own-separation-intruder-horizon", "12", "--own-separation-intruder-weight", "0.1"]
     assert main([*argv, "--out", str(tmp_path / "run")]) == 0
     ((cfg, out, resume),) = seen
     assert cfg.swarm_field == "formation" and cfg.family_weights == (("swarms-*", 2.0),)
@@ -681,6 +682,7 @@ def test_train_generalist_flags_reach_the_config(tmp_path, monkeypatch):
     assert (cfg.dagger_separation_weight, cfg.dagger_separation_horizon_s) == (0.3, 6.0)
     assert cfg.dagger_separation_reciprocal and cfg.dagger_separation_intruders
     assert cfg.dagger_separation_intruder_horizon_s == 12.0
+    assert cfg.dagger_separation_intruder_weight == 0.1
     assert cfg.minutes == 2 and cfg.seed == 4 and out == tmp_path / "run" and not resume
     assert GeneralistConfig().swarm_field == "all"  # the paper's reward unless asked
     assert cfg.teacher_neighbours == "proposals"  # the shield as it flies unless asked

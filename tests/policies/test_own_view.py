@@ -245,6 +245,42 @@ def test_intruders_may_be_predicted_further_ahead_than_the_neighbours():
     assert same == short  # 0: as the neighbours
 
 
+def test_the_intruder_rows_carry_their_own_share_of_the_penalty():
+    """A neighbour 25 m ahead (0.25) and a head-on intruder (7.84): the intruder part scales
+    by ``intruder_scale``, the neighbour part does not."""
+    cfg = scenario()
+    obs = one_neighbour(25.0, 0.0)
+    blocks = LAYOUT.blocks()
+    intruder = np.array([60.0 / 200, 2.0 / 200, -20.0 / 10, 0.0, 60.0 / 200], dtype=np.float32)
+    obs[blocks["intruders"].start : blocks["intruders"].start + 5] = torch.from_numpy(intruder)
+    obs[blocks["intruder_mask"].start] = 1.0
+    straight = torch.tensor(0.0)
+    neighbour, head_on = 0.25, ((30 - 2) / 10) ** 2
+    for scale in (1.0, 1 / 3, 0.0):
+        view = OwnView.of(LAYOUT, [cfg], 4.0, 1.5, intruders=True, intruder_scale=scale)
+        got = float(view.penalty(obs, straight))
+        assert got == pytest.approx(neighbour + scale * head_on, rel=1e-4)
+
+
+@pytest.mark.parametrize(
+    ("weight", "intruder_weight", "scale"), [(0.3, -1.0, 1.0), (0.3, 0.1, 1 / 3)]
+)
+def test_the_run_gives_the_intruder_rows_their_weight(weight, intruder_weight, scale):
+    from types import SimpleNamespace
+
+    from policies.config import GeneralistConfig
+    from policies.generalist_dagger import separation_view
+
+    cfg = GeneralistConfig(
+        dagger_separation_weight=weight,
+        dagger_separation_intruders=True,
+        dagger_separation_intruder_weight=intruder_weight,
+    )
+    book = SimpleNamespace(cfg=cfg, layout=LAYOUT, worlds=[SimpleNamespace(cfg=scenario())])
+    view = separation_view(book)
+    assert view is not None and view.intruder_scale == pytest.approx(scale)
+
+
 @pytest.mark.parametrize("reciprocal", [False, True])
 def test_the_penalty_stays_on_the_observations_device(reciprocal):
     """Every tensor it makes follows the observations (a run on a GPU learns there): on torch's
