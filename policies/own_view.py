@@ -48,14 +48,14 @@ class OwnView:
         layout: the observations' layout (version 2). dt_s: the decision step, s. max_turn_rad:
             a_max, the heading change of a normalised action of 1 over one step. d_col_m:
             collision distance, m. horizon_s: how far ahead the paths are predicted, s
-            (≥ dt_s). factor: f, where the penalty starts, in d_col. reciprocal: each
+            (≥ dt_s). intruder_horizon_s: the same for the intruder rows (≥ dt_s; `of` sets
+            it to ``horizon_s`` unless asked otherwise). factor: f, where the penalty starts,
+            in d_col. reciprocal: each
             neighbour is predicted to turn as the UAV itself does, from its own course (a
             formation turning together keeps its spacing), rather than to fly straight on.
             intruders: the intruder rows are charged too (each straight on at its velocity,
-            as ADS-B traffic is predicted everywhere), after the neighbours.
-            intruder_horizon_s: how far ahead the intruder rows are predicted, s (≥ dt_s);
-            ``horizon_s`` where not set. intruder_scale: the intruder rows' share of the
-            penalty against the neighbour rows' 1.
+            as ADS-B traffic is predicted everywhere), after the neighbours. intruder_scale:
+            the intruder rows' share of the penalty against the neighbour rows' 1.
     """
 
     layout: ObservationLayout
@@ -63,10 +63,10 @@ class OwnView:
     max_turn_rad: float
     d_col_m: float
     horizon_s: float
+    intruder_horizon_s: float
     factor: float
     reciprocal: bool = False
     intruders: bool = False
-    intruder_horizon_s: float | None = None
     intruder_scale: float = 1.0
 
     @classmethod
@@ -102,16 +102,16 @@ class OwnView:
             )
         ((dt_s, max_turn_rad, d_col_m),) = kinds
         return cls(
-            layout,
-            dt_s,
-            max_turn_rad,
-            d_col_m,
-            max(horizon_s, dt_s),
-            factor,
-            reciprocal,
-            intruders,
-            max(intruder_horizon_s, dt_s) if intruder_horizon_s > 0 else None,
-            intruder_scale,
+            layout=layout,
+            dt_s=dt_s,
+            max_turn_rad=max_turn_rad,
+            d_col_m=d_col_m,
+            horizon_s=max(horizon_s, dt_s),
+            intruder_horizon_s=max(intruder_horizon_s or horizon_s, dt_s),
+            factor=factor,
+            reciprocal=reciprocal,
+            intruders=intruders,
+            intruder_scale=intruder_scale,
         )
 
     def time_points(
@@ -147,13 +147,16 @@ class OwnView:
         horizons = [self.horizon_s]
         if self.intruders:
             sets.append(("intruders", "intruder_mask", lay.max_obstacles, INTRUDER_COLUMNS))
-            horizons.append(self.intruder_horizon_s or self.horizon_s)
+            horizons.append(self.intruder_horizon_s)
+        # the UAV's own path in its heading frame (ψ = 0), (..., 1, P), and its instants (P,):
+        # once per look-ahead
+        own = {}
+        for horizon in set(horizons):
+            ox, oy = self._path(torch.zeros_like(speed), speed, turn, horizon)
+            own[horizon] = (ox[..., None, :], oy[..., None, :], self.time_points(x.device, horizon))
         out = []
         for (rows_name, mask_name, count, width), horizon in zip(sets, horizons, strict=True):
-            # the UAV's own path in its heading frame (ψ = 0): (..., 1, P)
-            ox, oy = self._path(torch.zeros_like(speed), speed, turn, horizon)
-            ox, oy = ox[..., None, :], oy[..., None, :]
-            t = self.time_points(x.device, horizon)  # (P,)
+            ox, oy, t = own[horizon]
             rows = x[..., blocks[rows_name]].unflatten(-1, (count, width))
             kept = x[..., blocks[mask_name]] > 0.5
             px, py = rows[..., 0] * lay.range_m, rows[..., 1] * lay.range_m  # (..., R)

@@ -24,6 +24,7 @@ import argparse
 import numpy as np
 import torch
 
+from policies.config import GeneralistConfig
 from policies.own_view import OwnView
 from remarl_fc.offline.rollout import PolicyFileAct, observe_for
 from remarl_fc.offline.suite import MethodSpec, resolve_method
@@ -58,7 +59,7 @@ def family_counts(
     act, why = resolve_method(MethodSpec.from_label(f"policy:{policy}"), family, cfg)
     if not isinstance(act, PolicyFileAct) or act.layout is None:
         raise SystemExit(f"{policy} is not a generalist that flies {family_name}: {why}")
-    view = OwnView.of(act.layout, [cfg], horizon_s, factor=1.5)
+    view = OwnView.of(act.layout, [cfg], horizon_s, factor=GeneralistConfig().separation_factor)
     sim = SwarmSim(cfg, scored=False)
     rng = np.random.default_rng(0)
     state = sim.start(batch, rng)

@@ -31,6 +31,7 @@ from remarl_fc.errors import ConfigError
 from sim.config import SWARM_FIELDS, TEACHERS
 from sim.evaluation import evaluation_seed
 from sim.setnet import POOLINGS
+from sim.shield import NEIGHBOUR_ARCS
 
 if TYPE_CHECKING:
     from policies.config import GeneralistConfig
@@ -220,7 +221,7 @@ def add_train(sub: Any) -> None:
     )
     p.add_argument(
         "--teacher-neighbours",
-        choices=["proposals", "straight"],
+        choices=list(NEIGHBOUR_ARCS),
         default=None,
         help="generalist: what the self-shield teacher expects of each UAV's neighbours: "
         "their proposals this step (default, the shield as it flies) or flying straight on "

@@ -275,10 +275,12 @@ def test_the_run_gives_the_intruder_rows_their_weight(weight, intruder_weight, s
         dagger_separation_weight=weight,
         dagger_separation_intruders=True,
         dagger_separation_intruder_weight=intruder_weight,
+        dagger_separation_intruder_horizon_s=10.0,
     )
     book = SimpleNamespace(cfg=cfg, layout=LAYOUT, worlds=[SimpleNamespace(cfg=scenario())])
     view = separation_view(book)
     assert view is not None and view.intruder_scale == pytest.approx(scale)
+    assert (view.horizon_s, view.intruder_horizon_s) == (4.0, 10.0)  # both looks reach it
 
 
 @pytest.mark.parametrize("reciprocal", [False, True])
