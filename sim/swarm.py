@@ -192,6 +192,7 @@ class SwarmSim:
         envs: BoolArray | None = None,
         heading_cos_sin: tuple[FloatArray, FloatArray] | None = None,
         layout: ObservationLayout | None = None,
+        commanded_heading_rad: FloatArray | None = None,
     ) -> Observations:
         """Every UAV's observation of the current state (the shared builder).
 
@@ -205,6 +206,10 @@ class SwarmSim:
                 them (None: computed).
             layout: the observation to build (None: the scenario's): a policy brings its own
                 (a generalist's version 2 on a scenario of version 1).
+            commanded_heading_rad: version 2: (B, N) of the observed environments, the heading
+                each UAV's neighbours see it commanded to fly (their Δψ). None: the heading it
+                flies, which is what the simulator's UAVs are commanded; another (e.g. the
+                heading after this step's proposal) asks what a different message would show.
         """
         sel: slice | BoolArray = slice(None) if envs is None else envs
         heading = state.heading_rad[sel]
@@ -227,7 +232,8 @@ class SwarmSim:
         neighbours: dict[str, Any] = {}
         if layout.version == 2:  # the other UAVs still in the episode, and where they head
             present = state.active[sel] | state.hovering(self.cfg.arrival)[sel]
-            neighbours = {"uav_valid": present, "commanded_heading_rad": heading}
+            told = heading if commanded_heading_rad is None else commanded_heading_rad
+            neighbours = {"uav_valid": present, "commanded_heading_rad": told}
             velocity = velocity * (state.speed_m_s[sel] / self.cfg.uav.speed_m_s)[..., None]
         return build_observations(
             layout,

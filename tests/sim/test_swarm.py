@@ -194,15 +194,21 @@ def test_the_unscored_simulator_flies_the_same_episodes_without_the_reward():
     assert not unscored.stats.total_return.any() and not unscored.levels.any()
 
 
-def test_a_policys_v2_layout_sees_the_other_uavs_of_a_v1_scenario():
+def v2_on_5u1o(envs):
+    """5u1o's simulator, a state of ``envs`` environments, a version-2 layout (4 and 2 rows)."""
     from sim.observation import ObservationLayout
 
     cfg = load_scenario("5u1o")
     sim = SwarmSim(cfg)
-    state = sim.initial_state(np.random.default_rng(0), 4)
+    state = sim.initial_state(np.random.default_rng(0), envs)
     layout = ObservationLayout(
         8, cfg.sensing.range_m, cfg.sensing.aperture_rad, cfg.uav.speed_m_s, 4, 2
     )
+    return sim, state, layout
+
+
+def test_a_policys_v2_layout_sees_the_other_uavs_of_a_v1_scenario():
+    sim, state, layout = v2_on_5u1o(4)
     obs = sim.observe(state, layout=layout)
     bl = layout.blocks()
     assert obs.storage.shape == (4, 5, layout.size)
@@ -210,6 +216,34 @@ def test_a_policys_v2_layout_sees_the_other_uavs_of_a_v1_scenario():
     own_v1 = sim.observe(state)  # the scenario's own observation is untouched
     assert own_v1.storage.shape[-1] == sim.obs_layout.size
     np.testing.assert_array_equal(obs.rows, own_v1.rows[:, :, :2])
+
+
+def test_a_commanded_heading_shows_in_the_neighbours_rows_only():
+    from sim.observation import NEIGHBOUR_COLUMNS
+
+    sim, state, layout = v2_on_5u1o(2)
+    flown = sim.observe(state, layout=layout).flat()
+    same = sim.observe(state, layout=layout, commanded_heading_rad=state.heading_rad).flat()
+    np.testing.assert_array_equal(flown, same)
+    turned = state.heading_rad.copy()
+    turned[:, 0] += 0.3  # UAV 0 is told to turn left
+    told = sim.observe(state, layout=layout, commanded_heading_rad=turned).flat()
+    bl = layout.blocks()
+    rows = lambda o: o[..., bl["neighbours"]].reshape(*o.shape[:2], 4, NEIGHBOUR_COLUMNS)  # noqa: E731
+    differs = np.abs(rows(told) - rows(flown)).max(axis=-1) > 1e-6  # (B, N, K)
+    assert not differs[:, 0].any()  # UAV 0 does not see itself, nor do its own rows change
+    assert differs[:, 1:].any()  # the others see it
+    np.testing.assert_array_equal(
+        np.delete(told, bl["neighbours"], -1), np.delete(flown, bl["neighbours"], -1)
+    )
+    # only the Δψ entries (cos, sin) change: positions, velocities, distance, "ψ known" do not
+    np.testing.assert_array_equal(
+        rows(told)[..., [0, 1, 2, 3, 4, 7]], rows(flown)[..., [0, 1, 2, 3, 4, 7]]
+    )
+    # the rows that differ show UAV 0's turn: its Δψ went up by 0.3 rad
+    a = np.arctan2(rows(told)[..., 6], rows(told)[..., 5])
+    b = np.arctan2(rows(flown)[..., 6], rows(flown)[..., 5])
+    np.testing.assert_allclose(np.angle(np.exp(1j * (a - b)))[differs], 0.3, atol=1e-5)
 
 
 def test_a_v2_scenario_trains_with_neighbours_in_its_observations():
