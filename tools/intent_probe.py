@@ -145,14 +145,32 @@ def actor_of(policy: str) -> SetNet:
     return actor
 
 
-def errors(
-    actor: SetNet, obs: torch.Tensor, label: torch.Tensor, rows: dict[str, torch.Tensor]
-) -> dict[str, float]:
-    """Mean squared error of ``actor`` on each named set of rows."""
+def actions_of(actor: SetNet, obs: torch.Tensor) -> torch.Tensor:
+    """``actor``'s actions on every row, in chunks."""
     with torch.no_grad():
-        action = torch.cat([actor(obs[i : i + 8192]) for i in range(0, len(obs), 8192)])
+        return torch.cat([actor(obs[i : i + 8192]) for i in range(0, len(obs), 8192)])
+
+
+def errors(
+    action: torch.Tensor, label: torch.Tensor, rows: dict[str, torch.Tensor]
+) -> dict[str, float]:
+    """Mean squared error of ``action`` on each named set of rows."""
     error = (action - label) ** 2
     return {name: float(error[mask].mean()) for name, mask in rows.items()}
+
+
+def toward(action: torch.Tensor, label: torch.Tensor, proposal: torch.Tensor) -> dict[str, float]:
+    """On some rows, how the fitted actor moved from the proposal relative to the teacher.
+
+    "toward": the share of rows where it moved to the label's side of the proposal (0.5 is a
+    coin's); "of the way": its mean move along the label's direction over the label's mean
+    distance from the proposal (1: all the way on average, 0: not at all).
+    """
+    moved, wanted = action - proposal, label - proposal
+    return {
+        "toward": float(((moved * wanted) > 0).float().mean()),
+        "of the way": float((moved * wanted.sign()).mean() / wanted.abs().mean().clamp_min(1e-12)),
+    }
 
 
 def probe(
@@ -164,6 +182,7 @@ def probe(
     held = rng.choice(episodes, max(1, round(HELD_OUT * len(episodes))), replace=False)
     val = torch.from_numpy(np.isin(data["episode"], held))
     label = torch.from_numpy(data["label"]).float()
+    proposal = torch.from_numpy(data["proposal"]).float()
     intervened = torch.from_numpy(np.abs(data["label"] - data["proposal"]) > INTERVENED)
     rows = {
         "kept": ~val,
@@ -183,7 +202,7 @@ def probe(
         torch.manual_seed(seed)
         actor = actor_of(policy)
         opt = torch.optim.Adam(actor.parameters(), lr=LEARNING_RATE)
-        before = errors(actor, obs, label, rows)
+        before = errors(actions_of(actor, obs), label, rows)
         t0 = time.perf_counter()
         for _ in range(steps):
             idx = train[torch.randint(0, len(train), (BATCH,))]
@@ -192,10 +211,12 @@ def probe(
             loss.backward()
             torch.nn.utils.clip_grad_norm_(list(actor.parameters()), CLIP)
             opt.step()
-        after = errors(actor, obs, label, rows)
+        fitted = actions_of(actor, obs)
+        held_iv = rows["held out, interventions"]
         report["variants"][variant] = {
             "before": before,
-            "after": after,
+            "after": errors(fitted, label, rows),
+            "held-out interventions": toward(fitted[held_iv], label[held_iv], proposal[held_iv]),
             "seconds": time.perf_counter() - t0,
         }
     return report
@@ -239,7 +260,11 @@ def main() -> None:
             f"{r['before'][k]:.4f} → {r['after'][k]:.4f}"
             for k in ("kept", "kept, interventions", "held out", "held out, interventions")
         )
-        print(f"{variant:10s} {cells}")
+        moved = r["held-out interventions"]
+        print(
+            f"{variant:10s} {cells} | held-out interventions: moved toward the label in "
+            f"{moved['toward']:.0%}, {moved['of the way']:.0%} of the way"
+        )
 
 
 if __name__ == "__main__":
