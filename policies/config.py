@@ -341,6 +341,16 @@ class GeneralistConfig:
     weight on the intruder rows looked at far ahead outweighs them (docs/MODEL.md §20,
     "Further ahead for the intruders")."""
 
+    dagger_safe_set_weight: float = 0.0
+    """DAgger with the "self-shield" teacher alone (``dagger_fraction`` 1): where the shield
+    changed the proposal and some candidate heading passes, the label is the set of headings
+    that pass (`sim.shield.ShieldDecision.safe_headings`) rather than the one nearest the
+    proposal, and the student's error there is this weight times its squared distance to the
+    nearest of them; elsewhere the error is the squared distance to the label, as before. 0:
+    off, every label one heading. Why (docs/MODEL.md §20, "A set for a label"): fitted to the
+    one heading, the student lands in the safe set on 2 % of the interventions of episodes it
+    did not see; fitted to the set, weighted 4, on 40 %."""
+
     learner: str = "ppo"
     """"ppo" (on-policy: clipped surrogate over rollouts of every world, GAE,
     `policies.generalist_ppo`) or "td3" (off-policy: one replay buffer of every UAV's
@@ -549,6 +559,17 @@ class GeneralistConfig:
             math.isfinite(self.dagger_turn_weight) and self.dagger_turn_weight >= 0,
             "dagger_turn_weight",
             "must be >= 0",
+        )
+        check(
+            math.isfinite(self.dagger_safe_set_weight) and self.dagger_safe_set_weight >= 0,
+            "dagger_safe_set_weight",
+            "must be finite and >= 0",
+        )
+        check(
+            self.dagger_safe_set_weight == 0
+            or (self.teacher == "self-shield" and self.dagger_fraction == 1),
+            "dagger_safe_set_weight",
+            'needs the "self-shield" teacher and DAgger for the whole run (dagger_fraction 1)',
         )
 
     def dagger_share(self) -> float:

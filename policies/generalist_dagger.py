@@ -39,6 +39,7 @@ from policies.config import GeneralistConfig
 from policies.own_view import OwnView
 from policies.train import optimiser_tensors, restore_optimiser
 from sim.orca import goal_turn_rad
+from sim.shield import ShieldConfig, candidate_grid
 
 if TYPE_CHECKING:
     from policies.generalist import SetNet
@@ -52,46 +53,72 @@ optimiser, kept while the phase lasts so that a run resumed inside it goes on wi
 
 @dataclass
 class Labels:
-    """The aggregated data set: the last ``capacity`` (observation, teacher action, weight) rows."""
+    """The aggregated data set: the last ``capacity`` (observation, teacher action, weight) rows.
+
+    With ``headings`` K > 0, each row also keeps the teacher's safe set: which of the shield's
+    K candidate headings pass there (all False where the label is its one heading).
+    """
 
     capacity: int
     size: int
     obs: NDArray[np.float32] = field(repr=False)
     action: NDArray[np.float32] = field(repr=False)
     weight: NDArray[np.float32] = field(repr=False)
+    safe: NDArray[np.bool_] = field(repr=False)
     count: int = 0
     head: int = 0
 
     @classmethod
-    def create(cls, capacity: int, size: int) -> Labels:
-        """An empty ring of ``capacity`` rows of observations of length ``size``."""
+    def create(cls, capacity: int, size: int, headings: int = 0) -> Labels:
+        """An empty ring of ``capacity`` rows of observations of length ``size``.
+
+        With ``headings`` K > 0 each row keeps a safe set of K candidates too.
+        """
         return cls(
             capacity,
             size,
             np.zeros((capacity, size), np.float32),
             np.zeros(capacity, np.float32),
             np.zeros(capacity, np.float32),
+            np.zeros((capacity, headings), bool),
         )
 
+    @property
+    def headings(self) -> int:
+        """K, the candidates of each row's safe set (0: no sets kept)."""
+        return int(self.safe.shape[1])
+
     def add(
-        self, obs: NDArray[np.float32], action: NDArray[np.float32], weight: NDArray[np.float32]
+        self,
+        obs: NDArray[np.float32],
+        action: NDArray[np.float32],
+        weight: NDArray[np.float32],
+        safe: NDArray[np.bool_] | None = None,
     ) -> None:
-        """Append rows (T, size), (T,) and (T,), overwriting the oldest when full."""
+        """Append rows (T, size), (T,), (T,) and safe sets (T, K), overwriting the oldest.
+
+        ``safe`` None: no set (every row's label its one heading).
+        """
+        if safe is None:
+            safe = np.zeros((action.shape[0], self.headings), bool)
         if (
             obs.shape[0] != action.shape[0]
             or weight.shape != action.shape
             or obs.shape[1:] != (self.size,)
+            or safe.shape != (action.shape[0], self.headings)
         ):
             raise ValueError(
-                f"labels: obs {obs.shape}, actions {action.shape} and weights {weight.shape}"
-                " do not match"
+                f"labels: obs {obs.shape}, actions {action.shape}, weights {weight.shape} and"
+                f" safe sets {safe.shape} do not match"
             )
         rows = obs.shape[0]
         if rows >= self.capacity:  # only the newest fit
             keep = slice(rows - self.capacity, rows)
-            obs, action, weight, rows = obs[keep], action[keep], weight[keep], self.capacity
+            obs, action, weight, safe = obs[keep], action[keep], weight[keep], safe[keep]
+            rows = self.capacity
         idx = (self.head + np.arange(rows)) % self.capacity
         self.obs[idx], self.action[idx], self.weight[idx] = obs, action, weight
+        self.safe[idx] = safe
         self.head = int((self.head + rows) % self.capacity)
         self.count = min(self.count + rows, self.capacity)
 
@@ -101,17 +128,31 @@ class Labels:
         Added in this order to an empty ring of the same capacity, they give a ring that holds
         the same rows and drops the same ones first.
         """
-        order = np.arange(self.head - self.count, self.head) % self.capacity
+        order = self._order()
         return self.obs[order], self.action[order], self.weight[order]
+
+    def safe_oldest_first(self) -> NDArray[np.bool_]:
+        """The rows' safe sets (count, K), in `oldest_first`'s order."""
+        return self.safe[self._order()]
+
+    def _order(self) -> NDArray[np.intp]:
+        return np.arange(self.head - self.count, self.head) % self.capacity
 
     def sample(
         self, batch: int, rng: np.random.Generator
     ) -> tuple[NDArray[np.float32], NDArray[np.float32], NDArray[np.float32]]:
         """``batch`` rows (observations, actions, weights) drawn uniformly with replacement."""
+        obs, action, weight, _ = self.sample_sets(batch, rng)
+        return obs, action, weight
+
+    def sample_sets(
+        self, batch: int, rng: np.random.Generator
+    ) -> tuple[NDArray[np.float32], NDArray[np.float32], NDArray[np.float32], NDArray[np.bool_]]:
+        """`sample`'s rows with their safe sets (batch, K)."""
         if self.count == 0:
             raise ValueError("labels: nothing to sample yet")
         idx = rng.integers(0, self.count, batch)
-        return self.obs[idx], self.action[idx], self.weight[idx]
+        return self.obs[idx], self.action[idx], self.weight[idx], self.safe[idx]
 
 
 def label_weights(
@@ -142,7 +183,8 @@ class Dagger:
     def create(cls, cfg: GeneralistConfig, size: int, nets: PPONets) -> Dagger:
         """Empty labels of observations of length ``size``; Adam over ``nets.actor``."""
         opt = torch.optim.Adam(nets.actor.parameters(), lr=cfg.dagger_lr)
-        return cls(Labels.create(cfg.dagger_rows, size), opt)
+        headings = ShieldConfig().headings if cfg.dagger_safe_set_weight > 0 else 0
+        return cls(Labels.create(cfg.dagger_rows, size, headings), opt)
 
     def state_tensors(self) -> dict[str, torch.Tensor]:
         """The labels (oldest first) and the optimiser's moments, as checkpoint tensors.
@@ -150,10 +192,15 @@ class Dagger:
         Named `CHECKPOINT_PREFIX`…: `policies.train.save_checkpoint`'s ``extra``.
         """
         obs, action, weight = self.labels.oldest_first()
+        sets = {}
+        if self.labels.headings:
+            safe = torch.from_numpy(self.labels.safe_oldest_first().astype(np.uint8))
+            sets = {f"{CHECKPOINT_PREFIX}labels.safe": safe}
         return {
             f"{CHECKPOINT_PREFIX}labels.obs": torch.from_numpy(obs),
             f"{CHECKPOINT_PREFIX}labels.action": torch.from_numpy(action),
             f"{CHECKPOINT_PREFIX}labels.weight": torch.from_numpy(weight),
+            **sets,
             **optimiser_tensors(f"{CHECKPOINT_PREFIX}opt", self.opt),
         }
 
@@ -174,10 +221,21 @@ class Dagger:
                 f"checkpoint: DAgger labels of shape {tuple(obs.shape)}, this run's observations"
                 f" have {self.labels.size} entries; resume the run with its own settings"
             )
+        safe = None
+        if self.labels.headings:
+            kept = tensors.get(f"{CHECKPOINT_PREFIX}labels.safe")
+            if kept is None or tuple(kept.shape) != (obs.shape[0], self.labels.headings):
+                raise ValueError(
+                    "checkpoint: its DAgger labels hold no safe sets of "
+                    f"{self.labels.headings} headings; resume the run with its own settings"
+                    " (--safe-set-weight)"
+                )
+            safe = kept.numpy().astype(bool)
         self.labels.add(
             obs,
             tensors[f"{CHECKPOINT_PREFIX}labels.action"].numpy(),
             tensors[f"{CHECKPOINT_PREFIX}labels.weight"].numpy(),
+            safe,
         )
         restore_optimiser(f"{CHECKPOINT_PREFIX}opt", self.opt, tensors)
         return int(obs.shape[0])
@@ -191,15 +249,21 @@ def clone_update(
     clip: float,
     weight: torch.Tensor | None = None,
     separation: tuple[OwnView, float] | None = None,
+    safe: tuple[torch.Tensor, float] | None = None,
 ) -> float:
     """One supervised step of ``actor`` toward the teacher's actions; returns the imitation loss.
 
-    The mean squared error, weighted by ``weight`` (Σ w·e² / Σ w) where given. With
-    ``separation`` (view, w): plus w times the mean own-view separation penalty of the actor's
-    actions (`policies.own_view`; ``dagger_separation_weight``).
+    The mean squared error, weighted by ``weight`` (Σ w·e² / Σ w) where given. With ``safe``
+    (sets (batch, K) bool, w): in the rows whose set holds a heading, w times the squared
+    distance to its nearest (`safe_set_error`) instead. With ``separation`` (view, w): plus w
+    times the mean own-view separation penalty of the actor's actions (`policies.own_view`;
+    ``dagger_separation_weight``).
     """
     action = actor(obs)
     error = (action - teacher) ** 2
+    if safe is not None:
+        sets, w = safe
+        error = torch.where(sets.any(dim=-1), w * safe_set_error(action, sets), error)
     loss = error.mean() if weight is None else (weight * error).sum() / weight.sum()
     total = loss
     if separation is not None:
@@ -210,6 +274,31 @@ def clone_update(
     nn.utils.clip_grad_norm_(list(actor.parameters()), clip)
     opt.step()
     return float(loss.detach())
+
+
+NOT_SAFE = 16.0
+"""Squared distance standing in for a heading outside the set: above any two actions' (2² = 4),
+finite, so that no gradient meets an infinity."""
+
+
+def safe_set_error(action: torch.Tensor, sets: torch.Tensor) -> torch.Tensor:
+    """(B,) squared distance of each action (B,) to the nearest heading of its set (B, K).
+
+    The headings are the shield's candidates (`sim.shield.candidate_grid`); a row with an
+    empty set gets `NOT_SAFE`.
+    """
+    grid = torch.from_numpy(candidate_grid(sets.shape[-1])).to(action)
+    gap = (action[:, None] - grid[None, :]) ** 2
+    return torch.where(sets, gap, torch.full_like(gap, NOT_SAFE)).min(dim=-1).values
+
+
+def label_of(taught: NDArray[np.float32]) -> NDArray[np.float32]:
+    """The teacher's action (B, N) of what `teach` gave.
+
+    Itself, or ``[..., 0]`` of (B, N, 1 + K) labels with their safe sets
+    (`policies.generalist_train.shielded_sets`).
+    """
+    return taught[..., 0] if taught.ndim == 3 else taught
 
 
 def separation_view(book: RunBook) -> OwnView | None:
@@ -304,14 +393,15 @@ def fly_dagger(
     transitions = 0
     for _ in range(cfg.ppo_rollout):
         student = per_world(actor_actions(actor, joint_obs(worlds, size), device), worlds)
-        for k, (world, own, taught) in enumerate(zip(worlds, student, teach(worlds), strict=True)):
+        for k, (world, own, full) in enumerate(zip(worlds, student, teach(worlds), strict=True)):
+            taught = label_of(full)
             pick = rng.random(own.shape) < beta
             noise = rng.normal(0.0, TEACHER_NOISE, own.shape)
             action = np.clip(np.where(pick, taught, own) + noise, -1.0, 1.0).astype(np.float32)
             goal = goal_turn_rad(world.state, world.cfg) / world.cfg.uav.max_turn_rad
             step, finished = advance_world(world, action, cfg, goal_value, rng)
             weights[k].append(label_weights(taught, goal, cfg.dagger_turn_weight))
-            flown[k].append((step, action, np.zeros_like(action), taught.astype(np.float32)))
+            flown[k].append((step, action, np.zeros_like(action), full.astype(np.float32)))
             transitions += int(step.acted.sum())
             ended += [{"family": world.family.name, **row} for row in finished]
     return DaggerRollout(flown, weights, ended, transitions, [w.drawn for w in worlds], beta)
@@ -375,9 +465,10 @@ def learn_dagger(
     labels = dagger.labels
     for t in range(cfg.ppo_rollout):
         for rows, weights in zip(rollout.flown, rollout.weights, strict=True):
-            step, taught, weight = rows[t][0], rows[t][3], weights[t]
+            step, full, weight = rows[t][0], rows[t][3], weights[t]
             acted = step.acted
-            labels.add(step.obs[acted], taught[acted], weight[acted])
+            sets = full[acted][:, 1:] > 0.5 if full.ndim == 3 else None
+            labels.add(step.obs[acted], label_of(full)[acted], weight[acted], sets)
     for world, drawn in zip(book.worlds, rollout.drawn, strict=True):
         world.drawn = drawn
     book.transitions += rollout.transitions
@@ -393,7 +484,7 @@ def learn_dagger(
         view = separation_view(book)
         separation = None if view is None else (view, cfg.dagger_separation_weight)
         for _ in range(cfg.dagger_updates):
-            obs, taught, weight = labels.sample(cfg.dagger_batch, rng)
+            obs, taught, weight, sets = labels.sample_sets(cfg.dagger_batch, rng)
             clone_loss = clone_update(
                 nets.actor,
                 dagger.opt,
@@ -402,6 +493,9 @@ def learn_dagger(
                 cfg.grad_clip,
                 torch.from_numpy(weight).to(device) if cfg.dagger_turn_weight > 0 else None,
                 separation,
+                (torch.from_numpy(sets).to(device), cfg.dagger_safe_set_weight)
+                if labels.headings
+                else None,
             )
             book.updates += 1
         if separation is not None and cfg.dagger_updates:  # the last minibatch's, after them

@@ -65,7 +65,14 @@ from sim.oracle import oracle_actions
 from sim.orca import HORIZON_S as ORCA_HORIZON_S
 from sim.orca import orca_actions
 from sim.scenarios import REAL_WORLD
-from sim.shield import NeighbourArcs, ShieldConfig, Vehicle, shield_state, vehicle_of
+from sim.shield import (
+    NeighbourArcs,
+    ShieldConfig,
+    ShieldDecision,
+    Vehicle,
+    shield_state,
+    vehicle_of,
+)
 from sim.spawn import EpisodeStart, spawn_episodes
 from sim.state import SwarmState, merge_where
 from sim.suite import load_suite
@@ -436,9 +443,39 @@ def shielded(
     A teacher commands no speed: the default `ShieldConfig` but for ``neighbour_arcs``,
     ``vehicle`` (`teacher_vehicle` of ``cfg`` where None; a `World` holds its own).
     """
+    return teacher_decision(state, cfg, proposed, vehicle, neighbour_arcs).action
+
+
+def teacher_decision(
+    state: SwarmState,
+    cfg: ScenarioConfig,
+    proposed: NDArray[np.float32],
+    vehicle: Vehicle | None,
+    neighbour_arcs: NeighbourArcs,
+) -> ShieldDecision:
+    """The shield's whole decision behind `shielded` and `shielded_sets`."""
     vehicle = vehicle or teacher_vehicle(cfg)
     shield_cfg = ShieldConfig(mode="on", neighbour_arcs=neighbour_arcs)
-    return shield_state(shield_cfg, cfg, state, proposed, vehicle).action
+    return shield_state(shield_cfg, cfg, state, proposed, vehicle)
+
+
+def shielded_sets(
+    state: SwarmState,
+    cfg: ScenarioConfig,
+    proposed: NDArray[np.float32],
+    vehicle: Vehicle | None = None,
+    neighbour_arcs: NeighbourArcs = "proposals",
+) -> NDArray[np.float32]:
+    """`shielded`'s labels with their safe sets: (B, N, 1 + K) float32.
+
+    ``[..., 0]`` the label (`shielded`'s action); ``[..., 1:]`` 1 for each of the shield's K
+    candidate headings (`sim.shield.candidate_grid`) that passes where the shield changed the
+    proposal (`ShieldDecision.safe_headings`), all 0 where it let the proposal pass.
+    """
+    decision = teacher_decision(state, cfg, proposed, vehicle, neighbour_arcs)
+    return np.concatenate(
+        [decision.action[..., None], decision.safe_headings.astype(np.float32)], axis=-1
+    )
 
 
 def teach(
@@ -448,13 +485,16 @@ def teach(
 
     "self-shield": ``anchor``'s proposals (the ``init`` policy's actor, frozen) at the worlds'
     observations, all of them in one batch, each world's through the safety shield
-    (`shielded`); any other teacher, where ``anchor`` is None: `teacher_actions`.
+    (`shielded`; with ``dagger_safe_set_weight`` > 0, `shielded_sets`: (B, N, 1 + K), the
+    labels with their safe sets); any other teacher, where ``anchor`` is None:
+    `teacher_actions`.
     """
     if anchor is not None:
         size = worlds[0].obs.shape[-1]
         proposals = per_world(actor_actions(anchor, joint_obs(worlds, size), device), worlds)
+        label = shielded_sets if cfg.dagger_safe_set_weight > 0 else shielded
         return [
-            shielded(
+            label(
                 teacher_state(w, cfg.teacher_truth),
                 w.cfg,
                 proposed,

@@ -175,6 +175,10 @@ class ShieldDecision:
             mode).
         shield_action, shield_speed_m_s: what the shield would fly (= action and speed_m_s when
             on).
+        safe_headings: (B, N, K) of the UAVs whose proposal did not pass, which of the
+            `ShieldConfig.headings` candidates (`candidate_grid`) pass at the cruise speed;
+            all False for the others (their proposal passed, or the shield is off). The set a
+            teacher's label is one point of (`policies.generalist_dagger`, safe sets).
     """
 
     action: NDArray[np.float32]
@@ -185,6 +189,12 @@ class ShieldDecision:
     flown_cpa_m: FloatArray
     shield_action: NDArray[np.float32]
     shield_speed_m_s: FloatArray
+    safe_headings: BoolArray
+
+
+def candidate_grid(headings: int) -> FloatArray:
+    """(K,) the shield's candidate heading changes, normalised to [−1, 1], evenly spaced."""
+    return np.linspace(-1.0, 1.0, headings)
 
 
 @dataclass(frozen=True)
@@ -269,7 +279,8 @@ def shield(
         inf = np.full((b, n), np.inf)
         no = np.zeros((b, n), dtype=bool)
         act = prop.astype(np.float32)
-        return ShieldDecision(act, full, no, ~no, inf, inf, act, full)
+        none = np.zeros((b, n, cfg.headings), dtype=bool)
+        return ShieldDecision(act, full, no, ~no, inf, inf, act, full, none)
     everyone = np.ones((b, n), dtype=bool)
     if cfg.neighbour_arcs == "straight":  # what each UAV sees: its neighbours flying on
         arcs = [Commitment(np.zeros_like(prop), swarm.speed_m_s, everyone)]
@@ -292,7 +303,11 @@ def shield(
         if keep.any():
             decision = ShieldDecision(
                 **{
-                    f.name: np.where(keep, getattr(earlier, f.name), getattr(decision, f.name))
+                    f.name: np.where(
+                        keep if f.name != "safe_headings" else keep[..., None],
+                        getattr(earlier, f.name),
+                        getattr(decision, f.name),
+                    )
                     for f in dataclasses.fields(ShieldDecision)
                 }
             )
@@ -370,9 +385,10 @@ def _decide(
     fails = deciding & (clear[..., 0] < 0.0)
     turn, speed, flown_cpa = prop.copy(), full.copy(), proposed_cpa.copy()
     found = ~fails
+    safe_headings = np.zeros((b, n, cfg.headings), dtype=bool)
     if fails.any():
         # 2. The failing UAVs' bands: every heading change at full speed, then slower ones.
-        grid = np.broadcast_to(np.linspace(-1.0, 1.0, cfg.headings), (b, n, cfg.headings))
+        grid = np.broadcast_to(candidate_grid(cfg.headings), (b, n, cfg.headings))
         unit_x, unit_y = _time_first(
             _at_times(
                 displacements(
@@ -396,6 +412,8 @@ def _decide(
                 unit_x, unit_y, row[mine.owner], v, mine, (b, n), cruise, vehicle.d_col_m
             )
             ok = (c >= 0.0) & todo[..., None]
+            if v == cruise:
+                safe_headings = ok
             pick = np.where(ok, np.abs(grid - prop[..., None]), np.inf).argmin(axis=-1)
             now = ok.any(axis=-1)
             turn = np.where(now, _at(grid, pick), turn)
@@ -429,6 +447,7 @@ def _decide(
         flown_cpa_m=np.where(deciding, flown_cpa, np.inf),
         shield_action=shield_action,
         shield_speed_m_s=speed,
+        safe_headings=safe_headings,
     )
 
 

@@ -88,6 +88,7 @@ TRAINING_KEPT = (
     "dagger_separation_reciprocal",
     "dagger_separation_intruder_horizon_s",
     "dagger_separation_intruder_weight",
+    "dagger_safe_set_weight",
     "hidden",
     "pooling",
     "family_weights",

@@ -171,6 +171,13 @@ def add_train(sub: Any) -> None:
         help="generalist: the weight of that penalty's intruder rows (default: --own-separation's)",
     )
     p.add_argument(
+        "--safe-set-weight",
+        type=float,
+        metavar="W",
+        help="generalist, self-shield DAgger alone: where the shield intervened, fit the set of "
+        "headings that pass, at this weight, instead of its one label (default 0: off)",
+    )
+    p.add_argument(
         "--sensing-aperture",
         type=float,
         metavar="DEG",
@@ -585,6 +592,7 @@ def generalist_flags(args: argparse.Namespace) -> dict[str, Any]:
         "dagger_separation_intruders": args.own_separation_intruders,
         "dagger_separation_intruder_horizon_s": args.own_separation_intruder_horizon,
         "dagger_separation_intruder_weight": args.own_separation_intruder_weight,
+        "dagger_safe_set_weight": args.safe_set_weight,
         "seed": args.seed or None,
     }
     if args.family_weight:

@@ -613,6 +613,8 @@ def test_a_bad_family_weight_flag_says_what_to_write(text):
         ("--own-separation-horizon", "-4", "dagger_separation_horizon_s"),
         ("--own-separation-intruder-horizon", "nan", "dagger_separation_intruder_horizon_s"),
         ("--own-separation-intruder-weight", "inf", "dagger_separation_intruder_weight"),
+        ("--safe-set-weight", "-1", "dagger_safe_set_weight"),
+        ("--safe-set-weight", "4", "dagger_safe_set_weight"),  # orca-shield: refused
         ("--max-neighbours", "-1", "max_neighbours"),
         ("--dagger-lr", "0", "dagger_lr"),
         ("--real-share", "1.5", "real_share"),
@@ -691,6 +693,11 @@ def test_train_generalist_flags_reach_the_config(tmp_path, monkeypatch):
     argv += ["self-shield", "--teacher-neighbours", "straight", "--out", str(tmp_path / "sv")]
     assert main(argv) == 0
     assert seen[0][0].teacher_neighbours == "straight"
+    seen.clear()
+    argv = ["train", "--generalist", "--json", "--init", "generalist", "--teacher", "self-shield"]
+    argv += ["--dagger-fraction", "1", "--safe-set-weight", "4", "--out", str(tmp_path / "ss")]
+    assert main(argv) == 0
+    assert seen[0][0].dagger_safe_set_weight == 4.0
     seen.clear()
     assert main(["train", "--generalist", "--json", "--out", str(tmp_path / "plain")]) == 0
     assert seen[0][0] == GeneralistConfig(seed=seen[0][0].seed)  # no flag: every default

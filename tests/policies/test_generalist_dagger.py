@@ -12,13 +12,16 @@ from test_generalist_ppo import LAYOUT, spy_teacher_horizons, tiny_ppo_run
 from policies.config import GeneralistConfig
 from policies.generalist_dagger import (
     CHECKPOINT_PREFIX,
+    NOT_SAFE,
     Dagger,
     Labels,
     clone_update,
     dagger_beta,
     label_weights,
+    safe_set_error,
 )
 from policies.generalist_ppo import PPONets
+from sim.shield import ShieldConfig
 
 
 @settings(max_examples=50, deadline=None)
@@ -84,6 +87,13 @@ def test_dagger_applies_only_to_ppo_with_a_teacher():
         ({"dagger_separation_weight": -0.5}, ">= 0"),
         ({"dagger_separation_weight": float("nan")}, ">= 0"),
         ({"dagger_separation_horizon_s": -1.0}, ">= 0"),
+        ({"dagger_safe_set_weight": -1.0}, ">= 0"),
+        ({"dagger_safe_set_weight": float("nan")}, ">= 0"),
+        ({"dagger_safe_set_weight": 4.0, "teacher": "orca-shield"}, "self-shield"),
+        (
+            {"dagger_safe_set_weight": 4.0, "teacher": "self-shield", "init": "generalist"},
+            "dagger_fraction 1",
+        ),
     ],
 )
 def test_bad_dagger_settings_are_refused_by_name(changes, message):
@@ -182,13 +192,13 @@ def test_dagger_weighs_its_labels_by_the_runs_turn_weight(tmp_path, monkeypatch,
     stepped: list[torch.Tensor | None] = []
     add, step = generalist_dagger.Labels.add, generalist_dagger.clone_update
 
-    def spied_add(self, obs, action, weight):
+    def spied_add(self, obs, action, weight, safe=None):
         added.append(weight.copy())
-        return add(self, obs, action, weight)
+        return add(self, obs, action, weight, safe)
 
-    def spied_step(actor, opt, obs, teacher, clip, weight=None, separation=None):
+    def spied_step(actor, opt, obs, teacher, clip, weight=None, separation=None, safe=None):
         stepped.append(weight)
-        return step(actor, opt, obs, teacher, clip, weight, separation)
+        return step(actor, opt, obs, teacher, clip, weight, separation, safe)
 
     monkeypatch.setattr(generalist_dagger.Labels, "add", spied_add)
     monkeypatch.setattr(generalist_dagger, "clone_update", spied_step)
@@ -207,6 +217,91 @@ def test_dagger_weighs_its_labels_by_the_runs_turn_weight(tmp_path, monkeypatch,
     else:  # 1 where the teacher flies straight for the target, up to 1 + 2κ
         assert weights.min() == 1.0 and 1.0 < weights.max() <= 1.0 + 2 * turn_weight
         assert all(w is not None and w.shape == (16,) for w in stepped)
+
+
+def test_the_safe_set_error_is_the_squared_distance_to_the_nearest_safe_heading():
+    sets = torch.zeros((4, 5), dtype=torch.bool)  # headings −1, −0.5, 0, 0.5, 1
+    sets[0, [0, 4]] = True  # either hard turn
+    sets[1, 2] = True  # straight on only
+    sets[2, [3, 4]] = True
+    action = torch.tensor([0.2, 0.2, 0.5, 0.0])
+    error = safe_set_error(action, sets)
+    expected = [0.8**2, 0.2**2, 0.0, NOT_SAFE]  # the last row: no heading passes
+    np.testing.assert_allclose(error.numpy(), expected, rtol=1e-6)
+
+
+def test_a_safe_set_replaces_its_rows_label_and_leaves_the_others_alone():
+    obs = torch.from_numpy(np.random.default_rng(2).normal(0, 1, (8, LAYOUT.size)).astype("f4"))
+    teacher = torch.linspace(-1, 1, 8)
+    k = ShieldConfig().headings
+    sets = torch.zeros((8, k), dtype=torch.bool)
+    sets[:4, : k // 2] = True  # the first four: any turn to the right of straight on
+
+    def loss(labels: torch.Tensor, weight: float, given: torch.Tensor | None = sets) -> float:
+        torch.manual_seed(0)
+        nets = PPONets.create(LAYOUT, GeneralistConfig(hidden=16), "cpu")
+        opt = torch.optim.Adam(nets.actor.parameters(), lr=1e-3)
+        safe = None if given is None else (given, weight)
+        return clone_update(nets.actor, opt, obs, labels, 1.0, None, None, safe)
+
+    moved = teacher.clone()
+    moved[:4] = 0.9  # the rows with a set: their one label does not count
+    assert loss(moved, 4.0) == pytest.approx(loss(teacher, 4.0), rel=1e-6)
+    moved = teacher.clone()
+    moved[4:] = 0.9  # the others': it does
+    assert loss(moved, 4.0) != pytest.approx(loss(teacher, 4.0), rel=1e-3)
+    # no row with a set: the plain step
+    empty = torch.zeros_like(sets)
+    assert loss(teacher, 4.0, empty) == pytest.approx(loss(teacher, 4.0, None), rel=1e-6)
+    with torch.no_grad():
+        torch.manual_seed(0)
+        nets = PPONets.create(LAYOUT, GeneralistConfig(hidden=16), "cpu")
+        action = nets.actor(obs)
+    gap = safe_set_error(action, sets)
+    plain = (action - teacher) ** 2
+    for weight in (1.0, 4.0):
+        want = torch.where(sets.any(-1), weight * gap, plain).mean()
+        assert loss(teacher, weight) == pytest.approx(float(want), rel=1e-5)
+
+
+def test_safe_sets_come_back_whole_from_the_checkpoint_and_a_setless_one_is_refused():
+    cfg = GeneralistConfig(
+        hidden=8,
+        dagger_rows=5,
+        teacher="self-shield",
+        init="generalist",
+        dagger_fraction=1.0,
+        dagger_safe_set_weight=4.0,
+    )
+    nets = PPONets.create(LAYOUT, cfg, "cpu")
+    dagger = Dagger.create(cfg, LAYOUT.size, nets)
+    k = dagger.labels.headings
+    assert k == ShieldConfig().headings
+    rng = np.random.default_rng(3)
+    for count in (3, 4):
+        obs = rng.normal(size=(count, LAYOUT.size)).astype(np.float32)
+        safe = rng.random((count, k)) < 0.3
+        dagger.labels.add(obs, np.zeros(count, np.float32), np.ones(count, np.float32), safe)
+        last = safe
+    np.testing.assert_array_equal(dagger.labels.safe_oldest_first()[-4:], last)
+    again = Dagger.create(cfg, LAYOUT.size, PPONets.create(LAYOUT, cfg, "cpu"))
+    assert again.restore(dagger.state_tensors()) == 5
+    np.testing.assert_array_equal(
+        again.labels.safe_oldest_first(), dagger.labels.safe_oldest_first()
+    )
+    _, _, _, sets = again.labels.sample_sets(16, rng)
+    assert sets.shape == (16, k)
+    plain = Dagger.create(GeneralistConfig(hidden=8, dagger_rows=5), LAYOUT.size, nets)
+    plain.labels.add(np.zeros((2, LAYOUT.size), np.float32), np.zeros(2, "f4"), np.ones(2, "f4"))
+    with pytest.raises(ValueError, match="--safe-set-weight"):
+        again.restore(plain.state_tensors())
+    with pytest.raises(ValueError, match="safe sets"):
+        again.labels.add(
+            np.zeros((1, LAYOUT.size), "f4"),
+            np.zeros(1, "f4"),
+            np.ones(1, "f4"),
+            np.zeros((1, k + 1), bool),
+        )
 
 
 @settings(max_examples=40, deadline=None)

@@ -10,6 +10,7 @@ import torch
 from tiny_policy import tiny_run_cfg as tiny_cfg
 
 from policies.config import GeneralistConfig
+from policies.generalist_dagger import label_of
 from policies.generalist_init import INIT_FILE
 from policies.generalist_ppo import PPONets
 from policies.generalist_train import (
@@ -20,6 +21,7 @@ from policies.generalist_train import (
 from policies.train import load_checkpoint
 from remarl_fc.policy_io import load_policy
 from sim.errors import ConfigError
+from sim.shield import ShieldConfig, shield_state
 
 
 def test_a_run_from_a_policy_file_starts_from_its_actor_and_value_network(tmp_path, start_policy):
@@ -47,6 +49,30 @@ def test_the_self_shield_teacher_is_the_start_policy_through_the_shield(tmp_path
         proposed = policy.act(world.obs).astype(np.float32)
         expected = shielded(world.state, world.cfg, proposed)
         np.testing.assert_allclose(book.teach([world])[0], expected, atol=1e-5)
+
+
+def test_with_safe_sets_the_self_shield_teacher_gives_each_label_its_set(tmp_path, start_policy):
+    cfg = tiny_cfg(
+        tmp_path,
+        init=str(start_policy),
+        teacher="self-shield",
+        dagger_fraction=1.0,
+        dagger_safe_set_weight=4.0,
+    )
+    book = RunBook.open(cfg, tmp_path / "run", PPONets.create, resume=False)
+    policy = load_policy(str(start_policy))
+    k = ShieldConfig().headings
+    for world in book.worlds:
+        proposed = policy.act(world.obs).astype(np.float32)
+        (taught,) = book.teach([world])
+        assert taught.shape == (*proposed.shape, 1 + k)
+        np.testing.assert_allclose(
+            label_of(taught), shielded(world.state, world.cfg, proposed), atol=1e-5
+        )
+        decision = shield_state(
+            ShieldConfig(mode="on"), world.cfg, world.state, proposed, world.teacher_vehicle
+        )
+        np.testing.assert_array_equal(taught[..., 1:] > 0.5, decision.safe_headings)
 
 
 @pytest.mark.parametrize(("neighbours", "mark"), [("proposals", 7.0), ("straight", 9.0)])

@@ -22,6 +22,7 @@ from sim.shield import (
     Vehicle,
     _rank,
     _severity,
+    candidate_grid,
     shield,
     shield_state,
 )
@@ -155,6 +156,40 @@ def test_where_some_admissible_action_keeps_separation_the_shielded_one_does(see
             )
             if best >= 1.0:  # some admissible action keeps separation, with room
                 assert flown >= -0.5, (e, i, flown, best)
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1))
+def test_the_safe_headings_are_the_candidates_that_pass_at_cruise(seed):
+    """Lone UAVs (one pass decides): where the proposal fails, every candidate heading the
+    decision calls safe keeps separation in the dense simulation at the cruise speed, every one
+    it calls unsafe does not (0.5 m either way for the chords), and a decision at cruise speed
+    is one of them; where the proposal passes, the set is empty."""
+    rng = np.random.default_rng(seed)
+    cfg = ShieldConfig(mode="on", track_growth_m_s=0.0, headings=11)
+    b, m = 16, int(rng.integers(1, 5))
+    swarm, threats = random_world(rng, b, 1, m)
+    prop = rng.uniform(-1, 1, (b, 1))
+    d = shield(cfg, VEHICLE, swarm, threats, prop)
+    grid = candidate_grid(cfg.headings)
+    assert d.safe_headings.shape == (b, 1, cfg.headings)
+    assert not d.safe_headings[~d.intervened].any()
+    for e in np.flatnonzero(d.intervened[:, 0]):
+        clear = [
+            dense_clearance(cfg, swarm, threats, e, 0, a, VEHICLE.cruise_m_s, prop) for a in grid
+        ]
+        for k, c in enumerate(clear):
+            assert (c >= -0.5) if d.safe_headings[e, 0, k] else (c < 0.5), (e, k, c)
+        if d.speed_m_s[e, 0] == VEHICLE.cruise_m_s and d.safe_exists[e, 0]:
+            assert d.safe_headings[e, 0, np.argmin(np.abs(grid - d.action[e, 0]))]
+
+
+def test_off_keeps_no_safe_headings():
+    rng = np.random.default_rng(1)
+    swarm, threats = random_world(rng, 4, 3, 2)
+    d = shield(ShieldConfig(mode="off"), VEHICLE, swarm, threats, rng.uniform(-1, 1, (4, 3)))
+    assert d.safe_headings.shape == (4, 3, ShieldConfig().headings)
+    assert not d.safe_headings.any()
 
 
 def lone_uav() -> Swarm:
