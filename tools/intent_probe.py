@@ -2,7 +2,7 @@
 
     OMP_NUM_THREADS=1 python tools/intent_probe.py [--policy generalist]
         [--families 'beyond-50u8o,dense-10u,...'] [--episodes 30] [--steps 4000]
-        [--variants heading,proposal,last-turn] [--seed 0] [--json]
+        [--variants heading,proposal,last-turn] [--safe-set-weight 0] [--seed 0] [--json]
 
 The "self-shield" teacher of `remarl-fc train --generalist` labels each state with the policy's
 own proposals through the safety shield. The shield decides on every neighbour's proposal for
@@ -27,7 +27,12 @@ clipped to 1: a DAgger round's own step) of squared error on the four fifths. Pr
 error on the held-out fifth before and after, over all rows and over the rows where the teacher
 changed the policy's proposal by more than `INTERVENED` (the interventions), for each variant.
 If a variant's held-out error on the interventions falls well below the others', that variant's
-message is worth adding to the observation.
+message is worth adding to the observation. Also printed, for the held-out interventions: how
+the fitted actor moved from the proposal (toward the label's side in what share, how far along
+the way) and in what share it landed in the shield's safe set (the candidate heading nearest its
+action passes: `sim.shield.ShieldDecision.safe_headings`). ``--safe-set-weight W`` fits those
+sets instead of the labels where the shield intervened, as ``remarl-fc train --generalist
+--safe-set-weight W`` does (`policies.generalist_dagger.safe_set_error`).
 """
 
 from __future__ import annotations
@@ -41,12 +46,14 @@ import numpy as np
 import torch
 
 from policies.generalist import SetNet
+from policies.generalist_dagger import safe_set_error
 from policies.generalist_init import init_path
-from policies.generalist_train import shielded, teacher_vehicle
+from policies.generalist_train import shielded_sets, teacher_vehicle
 from remarl_fc.offline.suite import MethodSpec, resolve_method
 from sim.encounters import sample_family
 from sim.policy_file import read_policy_file, verify_policy
 from sim.policy_metadata import observation_layout, pooling_of
+from sim.shield import candidate_grid
 from sim.suite import load_suite
 from sim.swarm import SwarmSim
 
@@ -82,6 +89,7 @@ def collect(policy: str, families: list[str], episodes: int) -> dict[str, Any]:
     """
     suite = load_suite("standard")
     out: dict[str, Any] = {"obs": {v: [] for v in VARIANTS}, "label": [], "proposal": []}
+    out["safe"] = []
     out["episode"] = []
     for k, name in enumerate(families):
         family = suite.family(name)
@@ -101,7 +109,8 @@ def collect(policy: str, families: list[str], episodes: int) -> dict[str, Any]:
         for _ in range(cfg.max_steps):
             seen = sim.observe(state, layout=layout).flat()
             proposal = np.clip(np.asarray(act(seen, state, cfg), np.float32), -1.0, 1.0)
-            label = shielded(state, cfg, proposal, vehicle, "proposals")
+            taught = shielded_sets(state, cfg, proposal, vehicle, "proposals")
+            label, safe = taught[..., 0], taught[..., 1:] > 0.5
             told = {
                 "heading": seen,
                 "proposal": sim.observe(
@@ -117,6 +126,7 @@ def collect(policy: str, families: list[str], episodes: int) -> dict[str, Any]:
             for v in VARIANTS:
                 out["obs"][v].append(told[v][rows])
             out["label"].append(label[rows])
+            out["safe"].append(safe[rows])
             out["proposal"].append(proposal[rows])
             ids = k * episodes + np.arange(episodes)
             out["episode"].append(np.broadcast_to(ids[:, None], rows.shape)[rows])
@@ -126,7 +136,7 @@ def collect(policy: str, families: list[str], episodes: int) -> dict[str, Any]:
                 break
     return {
         "obs": {v: np.concatenate(rows) for v, rows in out["obs"].items()},
-        **{key: np.concatenate(out[key]) for key in ("label", "proposal", "episode")},
+        **{key: np.concatenate(out[key]) for key in ("label", "proposal", "episode", "safe")},
     }
 
 
@@ -159,6 +169,13 @@ def errors(
     return {name: float(error[mask].mean()) for name, mask in rows.items()}
 
 
+def landed_safe(action: torch.Tensor, safe: torch.Tensor) -> float:
+    """The share of rows whose action lies nearest a candidate heading of its safe set (K)."""
+    grid = torch.from_numpy(candidate_grid(safe.shape[-1])).to(action)
+    nearest = (action[:, None] - grid[None, :]).abs().argmin(dim=-1)
+    return float(safe.gather(1, nearest[:, None])[:, 0].float().mean())
+
+
 def toward(action: torch.Tensor, label: torch.Tensor, proposal: torch.Tensor) -> dict[str, float]:
     """On some rows, how the fitted actor moved from the proposal relative to the teacher.
 
@@ -174,15 +191,26 @@ def toward(action: torch.Tensor, label: torch.Tensor, proposal: torch.Tensor) ->
 
 
 def probe(
-    policy: str, data: dict[str, Any], variants: list[str], steps: int, seed: int
+    policy: str,
+    data: dict[str, Any],
+    variants: list[str],
+    steps: int,
+    seed: int,
+    safe_set_weight: float = 0.0,
 ) -> dict[str, Any]:
-    """Fit a copy of the actor per variant on the kept episodes; the errors before and after."""
+    """Fit a copy of the actor per variant on the kept episodes; the errors before and after.
+
+    ``safe_set_weight`` > 0: where the teacher intervened and some heading passes, the fit is
+    to the nearest heading of the set, at that weight (a round's ``--safe-set-weight``).
+    """
     rng = np.random.default_rng(seed)
     episodes = np.unique(data["episode"])
     held = rng.choice(episodes, max(1, round(HELD_OUT * len(episodes))), replace=False)
     val = torch.from_numpy(np.isin(data["episode"], held))
     label = torch.from_numpy(data["label"]).float()
     proposal = torch.from_numpy(data["proposal"]).float()
+    safe = torch.from_numpy(data["safe"])
+    has_set = safe.any(dim=-1)
     intervened = torch.from_numpy(np.abs(data["label"] - data["proposal"]) > INTERVENED)
     rows = {
         "kept": ~val,
@@ -206,17 +234,24 @@ def probe(
         t0 = time.perf_counter()
         for _ in range(steps):
             idx = train[torch.randint(0, len(train), (BATCH,))]
-            loss = ((actor(obs[idx]) - label[idx]) ** 2).mean()
+            action = actor(obs[idx])
+            error = (action - label[idx]) ** 2
+            if safe_set_weight > 0:
+                to_set = safe_set_weight * safe_set_error(action, safe[idx])
+                error = torch.where(has_set[idx], to_set, error)
+            loss = error.mean()
             opt.zero_grad(set_to_none=True)
             loss.backward()
             torch.nn.utils.clip_grad_norm_(list(actor.parameters()), CLIP)
             opt.step()
         fitted = actions_of(actor, obs)
         held_iv = rows["held out, interventions"]
+        landed = held_iv & has_set
+        moved = toward(fitted[held_iv], label[held_iv], proposal[held_iv])
         report["variants"][variant] = {
             "before": before,
             "after": errors(fitted, label, rows),
-            "held-out interventions": toward(fitted[held_iv], label[held_iv], proposal[held_iv]),
+            "held-out interventions": moved | {"safe": landed_safe(fitted[landed], safe[landed])},
             "seconds": time.perf_counter() - t0,
         }
     return report
@@ -230,6 +265,12 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=4000, help="Adam steps per variant")
     parser.add_argument("--variants", default=",".join(VARIANTS), help=f"of {', '.join(VARIANTS)}")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument(
+        "--safe-set-weight",
+        type=float,
+        default=0.0,
+        help="fit the shield's safe sets where it intervened, at this weight (default 0: labels)",
+    )
     parser.add_argument("--json", action="store_true", help="print the report as JSON")
     args = parser.parse_args()
     variants = args.variants.split(",")
@@ -241,8 +282,9 @@ def main() -> None:
     t0 = time.perf_counter()
     data = collect(args.policy, args.families.split(","), args.episodes)
     flying = time.perf_counter() - t0
-    report = probe(args.policy, data, variants, args.steps, args.seed)
+    report = probe(args.policy, data, variants, args.steps, args.seed, args.safe_set_weight)
     report |= {"policy": args.policy, "families": args.families.split(","), "steps": args.steps}
+    report["safe_set_weight"] = args.safe_set_weight
     report["flying_seconds"] = flying
     if args.json:
         print(json.dumps(report, indent=1))
@@ -263,7 +305,8 @@ def main() -> None:
         moved = r["held-out interventions"]
         print(
             f"{variant:10s} {cells} | held-out interventions: moved toward the label in "
-            f"{moved['toward']:.0%}, {moved['of the way']:.0%} of the way"
+            f"{moved['toward']:.0%}, {moved['of the way']:.0%} of the way; landed in the safe "
+            f"set in {moved['safe']:.0%}"
         )
 
 
