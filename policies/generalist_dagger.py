@@ -12,7 +12,10 @@ the aggregated data set of the states the student's own mixture visits). Then:
   weighted by ``dagger_turn_weight`` where it is > 0: `label_weights`; Adam of its own at
   ``dagger_lr``) on minibatches of ``dagger_batch`` drawn from all of it, plus, where
   ``dagger_separation_weight`` is > 0, that weight times the own-view separation penalty of
-  the actor's actions (`policies.own_view`);
+  the actor's actions (`policies.own_view`); where ``dagger_safe_set_weight`` is > 0 (the
+  "self-shield" teacher alone), each label keeps the set of headings the shield let pass where
+  it intervened, and there the error is that weight times the squared distance to the nearest
+  of them (`safe_set_error`);
 - where PPO follows (``dagger_fraction`` < 1), the value network learns the rollout's GAE
   targets (``ppo_epochs`` passes, the value loss alone: `warm_critic`), so that PPO starts from
   a critic of the policy it inherits. A run that is DAgger from end to end skips them: its
