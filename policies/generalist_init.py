@@ -21,6 +21,7 @@ import numpy as np
 import torch
 
 from policies.config import GeneralistConfig
+from policies.generalist import SetNet
 from sim.errors import ConfigError
 from sim.observation import ObservationLayout
 from sim.policy_file import PolicyFileError, read_policy_file, verify_policy
@@ -110,3 +111,30 @@ def init_states(
         }
 
     return state("actor"), state("critic")
+
+
+def load_actor(name: str) -> SetNet:
+    """The actor of policy file ``name`` (`init_path`: a path or a zoo name) as a torch `SetNet`.
+
+    Verified as `init_states` verifies it; its own observation, width and pooling.
+
+    Raises:
+        ConfigError: no such file, or not a valid generalist policy file.
+    """
+    path = init_path(name)
+    try:
+        tensors, _, meta = read_policy_file(path)
+        meta = verify_policy(tensors, meta)
+    except PolicyFileError as exc:
+        raise ConfigError(f"{path} is not a valid policy file: {exc}") from exc
+    if network_of(meta) != "set":
+        raise ConfigError(f"{path} is a per-slot zoo policy, not a generalist")
+    actor = SetNet(observation_layout(meta), int(meta["hidden"]), False, pooling_of(meta))
+    actor.load_state_dict(
+        {
+            key.removeprefix("actor."): torch.from_numpy(np.array(value, dtype=np.float32))
+            for key, value in tensors.items()
+            if key.startswith("actor.")
+        }
+    )
+    return actor

@@ -47,12 +47,10 @@ import torch
 
 from policies.generalist import SetNet
 from policies.generalist_dagger import safe_set_error
-from policies.generalist_init import init_path
+from policies.generalist_init import load_actor
 from policies.generalist_train import shielded_sets, teacher_vehicle
 from remarl_fc.offline.suite import MethodSpec, resolve_method
 from sim.encounters import sample_family
-from sim.policy_file import read_policy_file, verify_policy
-from sim.policy_metadata import observation_layout, pooling_of
 from sim.shield import candidate_grid
 from sim.suite import load_suite
 from sim.swarm import SwarmSim
@@ -140,21 +138,6 @@ def collect(policy: str, families: list[str], episodes: int) -> dict[str, Any]:
     }
 
 
-def actor_of(policy: str) -> SetNet:
-    """The policy file's actor as a trainable `SetNet`."""
-    tensors, _, meta = read_policy_file(init_path(policy))
-    meta = verify_policy(tensors, meta)
-    actor = SetNet(observation_layout(meta), int(meta["hidden"]), False, pooling_of(meta))
-    actor.load_state_dict(
-        {
-            key.removeprefix("actor."): torch.from_numpy(np.array(value, dtype=np.float32))
-            for key, value in tensors.items()
-            if key.startswith("actor.")
-        }
-    )
-    return actor
-
-
 def actions_of(actor: SetNet, obs: torch.Tensor) -> torch.Tensor:
     """``actor``'s actions on every row, in chunks."""
     with torch.no_grad():
@@ -228,7 +211,7 @@ def probe(
     for variant in variants:
         obs = torch.from_numpy(data["obs"][variant]).float()
         torch.manual_seed(seed)
-        actor = actor_of(policy)
+        actor = load_actor(policy)
         opt = torch.optim.Adam(actor.parameters(), lr=LEARNING_RATE)
         before = errors(actions_of(actor, obs), label, rows)
         t0 = time.perf_counter()

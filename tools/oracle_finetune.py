@@ -51,6 +51,7 @@ from policies.config import GeneralistConfig
 from policies.export import export_generalist
 from policies.generalist import SetNet
 from policies.generalist_dagger import Labels, clone_update
+from policies.generalist_init import load_actor as load_generalist_actor
 from policies.generalist_train import (
     TEACHER_NOISE,
     advance_world,
@@ -96,14 +97,7 @@ EXPORT_MINUTES = 15.0
 
 def load_actor(name: str) -> tuple[SetNet, Any]:
     """The actor of a generalist policy file as a torch `SetNet`, and the loaded policy."""
-    policy = load_policy(name)
-    net = SetNet(policy.layout, int(policy.meta["hidden"]), critic=False)
-    state = {}
-    for layer, (weight, bias) in policy.actor.items():
-        state[f"{layer}.weight"] = torch.from_numpy(np.asarray(weight, dtype=np.float32))
-        state[f"{layer}.bias"] = torch.from_numpy(np.asarray(bias, dtype=np.float32))
-    net.load_state_dict(state)
-    return net, policy
+    return load_generalist_actor(name), load_policy(name)
 
 
 def act(net: SetNet, obs: np.ndarray) -> np.ndarray:

@@ -184,3 +184,16 @@ def test_the_self_shield_teacher_labels_the_worlds_together_as_each_alone(tmp_pa
     together = book.teach(book.worlds)
     for world, labels in zip(book.worlds, together, strict=True):
         np.testing.assert_allclose(labels, book.teach([world])[0], atol=1e-5)
+
+
+def test_load_actor_gives_the_files_actor_and_refuses_a_per_slot_policy():
+    from policies.generalist_init import load_actor
+
+    actor = load_actor("generalist")
+    policy = load_policy("generalist")
+    obs = np.random.default_rng(0).normal(size=(9, policy.layout.size)).astype(np.float32)
+    with torch.no_grad():
+        ours = actor(torch.from_numpy(obs)).numpy()
+    np.testing.assert_allclose(ours, policy.act(obs), atol=1e-5)
+    with pytest.raises(ConfigError, match="per-slot"):
+        load_actor("3u2o")
