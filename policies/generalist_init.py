@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import shutil
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import torch
@@ -78,13 +79,7 @@ def init_states(
             otherwise than the run (each named, with what to pass).
     """
     where = f"train --generalist --init {cfg.init}"
-    try:
-        tensors, _, meta = read_policy_file(path)
-        meta = verify_policy(tensors, meta)
-    except PolicyFileError as exc:
-        raise ConfigError(f"{where}: {path} is not a valid policy file: {exc}") from exc
-    if network_of(meta) != "set":
-        raise ConfigError(f"{where}: {path} is a per-slot zoo policy, not a generalist")
+    tensors, meta = _generalist_file(path, where)
     theirs = observation_layout(meta)
     clash = [
         f"{name} {getattr(theirs, name)!r} (the run's: {getattr(layout, name)!r})"
@@ -103,14 +98,7 @@ def init_states(
             "--pooling)"
         )
 
-    def state(prefix: str) -> dict[str, torch.Tensor]:
-        return {
-            key[len(prefix) + 1 :]: torch.from_numpy(np.array(value, dtype=np.float32))
-            for key, value in tensors.items()
-            if key.startswith(f"{prefix}.")
-        }
-
-    return state("actor"), state("critic")
+    return _prefixed(tensors, "actor"), _prefixed(tensors, "critic")
 
 
 def load_actor(name: str) -> SetNet:
@@ -122,19 +110,32 @@ def load_actor(name: str) -> SetNet:
         ConfigError: no such file, or not a valid generalist policy file.
     """
     path = init_path(name)
+    tensors, meta = _generalist_file(path, name)
+    actor = SetNet(observation_layout(meta), int(meta["hidden"]), False, pooling_of(meta))
+    actor.load_state_dict(_prefixed(tensors, "actor"))
+    return actor
+
+
+def _generalist_file(path: Path, where: str) -> tuple[dict[str, Any], dict[str, Any]]:
+    """(tensors, metadata) of the verified generalist policy file ``path``.
+
+    Raises:
+        ConfigError: it fails verification, or is a per-slot zoo policy (``where`` leads).
+    """
     try:
         tensors, _, meta = read_policy_file(path)
         meta = verify_policy(tensors, meta)
     except PolicyFileError as exc:
-        raise ConfigError(f"{path} is not a valid policy file: {exc}") from exc
+        raise ConfigError(f"{where}: {path} is not a valid policy file: {exc}") from exc
     if network_of(meta) != "set":
-        raise ConfigError(f"{path} is a per-slot zoo policy, not a generalist")
-    actor = SetNet(observation_layout(meta), int(meta["hidden"]), False, pooling_of(meta))
-    actor.load_state_dict(
-        {
-            key.removeprefix("actor."): torch.from_numpy(np.array(value, dtype=np.float32))
-            for key, value in tensors.items()
-            if key.startswith("actor.")
-        }
-    )
-    return actor
+        raise ConfigError(f"{where}: {path} is a per-slot zoo policy, not a generalist")
+    return tensors, meta
+
+
+def _prefixed(tensors: dict[str, Any], prefix: str) -> dict[str, torch.Tensor]:
+    """The float32 tensors named ``prefix``.…, without the prefix: a network's ``state_dict``."""
+    return {
+        key[len(prefix) + 1 :]: torch.from_numpy(np.array(value, dtype=np.float32))
+        for key, value in tensors.items()
+        if key.startswith(f"{prefix}.")
+    }
