@@ -352,6 +352,13 @@ class GeneralistConfig:
     did not see; fitted to the set, weighted 4, on 40 % (`tools/intent_probe.py`). In flight
     a round so taught was level with its plain twin, not better."""
 
+    dagger_safe_set_side: bool = False
+    """With ``dagger_safe_set_weight``: each safe set cut to the side the shield turned to —
+    the run of passing headings that holds its label, no failing heading between
+    (`sim.shield.passing_side`). Where threats leave a gap on either side the whole set lets
+    the student pick a heading on one side at one decision and on the other at the next; the
+    shield's label keeps one side (docs/MODEL.md §20, "The side the shield keeps")."""
+
     learner: str = "ppo"
     """"ppo" (on-policy: clipped surrogate over rollouts of every world, GAE,
     `policies.generalist_ppo`) or "td3" (off-policy: one replay buffer of every UAV's
@@ -571,6 +578,11 @@ class GeneralistConfig:
             or (self.teacher == "self-shield" and self.dagger_fraction == 1),
             "dagger_safe_set_weight",
             'needs the "self-shield" teacher and DAgger for the whole run (dagger_fraction 1)',
+        )
+        check(
+            not self.dagger_safe_set_side or self.dagger_safe_set_weight > 0,
+            "dagger_safe_set_side",
+            "cuts the safe sets: it needs dagger_safe_set_weight > 0 (--safe-set-weight W)",
         )
 
     def dagger_share(self) -> float:

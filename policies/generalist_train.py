@@ -70,6 +70,7 @@ from sim.shield import (
     ShieldConfig,
     ShieldDecision,
     Vehicle,
+    passing_side,
     shield_state,
     vehicle_of,
 )
@@ -465,17 +466,20 @@ def shielded_sets(
     proposed: NDArray[np.float32],
     vehicle: Vehicle | None = None,
     neighbour_arcs: NeighbourArcs = "proposals",
+    side: bool = False,
 ) -> NDArray[np.float32]:
     """`shielded`'s labels with their safe sets: (B, N, 1 + K) float32.
 
     ``[..., 0]`` the label (`shielded`'s action); ``[..., 1:]`` 1 for each of the shield's K
     candidate headings (`sim.shield.candidate_grid`) that passes where the shield changed the
-    proposal (`ShieldDecision.safe_headings`), all 0 where it let the proposal pass.
+    proposal (`ShieldDecision.safe_headings`), all 0 where it let the proposal pass. ``side``:
+    only those on the label's side, no failing heading between (`sim.shield.passing_side`).
     """
     decision = teacher_decision(state, cfg, proposed, vehicle, neighbour_arcs)
-    return np.concatenate(
-        [decision.action[..., None], decision.safe_headings.astype(np.float32)], axis=-1
-    )
+    safe = decision.safe_headings
+    if side:
+        safe = passing_side(safe, decision.action)
+    return np.concatenate([decision.action[..., None], safe.astype(np.float32)], axis=-1)
 
 
 def teach(
@@ -486,21 +490,28 @@ def teach(
     "self-shield": ``anchor``'s proposals (the ``init`` policy's actor, frozen) at the worlds'
     observations, all of them in one batch, each world's through the safety shield
     (`shielded`; with ``dagger_safe_set_weight`` > 0, `shielded_sets`: (B, N, 1 + K), the
-    labels with their safe sets); any other teacher, where ``anchor`` is None:
+    labels with their safe sets, cut to the label's side with ``dagger_safe_set_side``); any
+    other teacher, where ``anchor`` is None:
     `teacher_actions`.
     """
     if anchor is not None:
         size = worlds[0].obs.shape[-1]
         proposals = per_world(actor_actions(anchor, joint_obs(worlds, size), device), worlds)
-        label = shielded_sets if cfg.dagger_safe_set_weight > 0 else shielded
+        arcs = cast(NeighbourArcs, cfg.teacher_neighbours)
+        if cfg.dagger_safe_set_weight > 0:
+            return [
+                shielded_sets(
+                    teacher_state(w, cfg.teacher_truth),
+                    w.cfg,
+                    proposed,
+                    w.teacher_vehicle,
+                    arcs,
+                    cfg.dagger_safe_set_side,
+                )
+                for w, proposed in zip(worlds, proposals, strict=True)
+            ]
         return [
-            label(
-                teacher_state(w, cfg.teacher_truth),
-                w.cfg,
-                proposed,
-                w.teacher_vehicle,
-                cast(NeighbourArcs, cfg.teacher_neighbours),
-            )
+            shielded(teacher_state(w, cfg.teacher_truth), w.cfg, proposed, w.teacher_vehicle, arcs)
             for w, proposed in zip(worlds, proposals, strict=True)
         ]
     return [

@@ -197,6 +197,27 @@ def candidate_grid(headings: int) -> FloatArray:
     return np.linspace(-1.0, 1.0, headings)
 
 
+def passing_side(safe: BoolArray, heading: FloatArray | Float32Array) -> BoolArray:
+    """(..., K) the run of ``safe``'s passing candidates that holds ``heading``.
+
+    ``safe`` (..., K): which of the candidates (`candidate_grid`) pass, as
+    `ShieldDecision.safe_headings`; ``heading`` (...): a normalised heading change, the
+    shield's choice among them. Kept: the candidates that pass with no failing one between
+    them and the candidate nearest ``heading`` — the side of the threats the shield turned
+    to, where passing headings lie on both. All False where that candidate itself fails.
+    """
+    k = safe.shape[-1]
+    index = np.arange(k)
+    offset = np.asarray(heading, dtype=np.float64)[..., None] - candidate_grid(k)
+    at = np.abs(offset).argmin(axis=-1)[..., None]  # (..., 1) the candidate chosen
+    fails = ~safe
+    below = np.where(fails & (index < at), index, -1).max(axis=-1, keepdims=True)
+    above = np.where(fails & (index > at), index, k).min(axis=-1, keepdims=True)
+    holds = np.take_along_axis(safe, at, axis=-1)
+    kept: BoolArray = safe & (index > below) & (index < above) & holds
+    return kept
+
+
 @dataclass(frozen=True)
 class Threats:
     """What one decision knows of the other vehicles.

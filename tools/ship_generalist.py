@@ -89,6 +89,7 @@ TRAINING_KEPT = (
     "dagger_separation_intruder_horizon_s",
     "dagger_separation_intruder_weight",
     "dagger_safe_set_weight",
+    "dagger_safe_set_side",
     "hidden",
     "pooling",
     "family_weights",

@@ -178,6 +178,13 @@ def add_train(sub: Any) -> None:
         "headings that pass, at this weight, instead of its one label (default 0: off)",
     )
     p.add_argument(
+        "--safe-set-side",
+        action="store_true",
+        default=None,
+        help="generalist, with --safe-set-weight: each safe set only the side the shield "
+        "turned to (the passing headings next to its label; default: every passing heading)",
+    )
+    p.add_argument(
         "--sensing-aperture",
         type=float,
         metavar="DEG",
@@ -593,6 +600,7 @@ def generalist_flags(args: argparse.Namespace) -> dict[str, Any]:
         "dagger_separation_intruder_horizon_s": args.own_separation_intruder_horizon,
         "dagger_separation_intruder_weight": args.own_separation_intruder_weight,
         "dagger_safe_set_weight": args.safe_set_weight,
+        "dagger_safe_set_side": args.safe_set_side,
         "seed": args.seed or None,
     }
     if args.family_weight:

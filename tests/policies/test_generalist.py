@@ -615,6 +615,7 @@ def test_a_bad_family_weight_flag_says_what_to_write(text):
         ("--own-separation-intruder-weight", "inf", "dagger_separation_intruder_weight"),
         ("--safe-set-weight", "-1", "dagger_safe_set_weight"),
         ("--safe-set-weight", "4", "dagger_safe_set_weight"),  # orca-shield: refused
+        ("--safe-set-weight 0", "--safe-set-side", "dagger_safe_set_side"),  # no sets to cut
         ("--max-neighbours", "-1", "max_neighbours"),
         ("--dagger-lr", "0", "dagger_lr"),
         ("--real-share", "1.5", "real_share"),
@@ -695,9 +696,9 @@ def test_train_generalist_flags_reach_the_config(tmp_path, monkeypatch):
     assert seen[0][0].teacher_neighbours == "straight"
     seen.clear()
     argv = ["train", "--generalist", "--json", "--init", "generalist", "--teacher", "self-shield"]
-    argv += ["--dagger-fraction", "1", "--safe-set-weight", "4", "--out", str(tmp_path / "ss")]
-    assert main(argv) == 0
-    assert seen[0][0].dagger_safe_set_weight == 4.0
+    argv += ["--dagger-fraction", "1", "--safe-set-weight", "4", "--safe-set-side"]
+    assert main([*argv, "--out", str(tmp_path / "ss")]) == 0
+    assert seen[0][0].dagger_safe_set_weight == 4.0 and seen[0][0].dagger_safe_set_side
     seen.clear()
     assert main(["train", "--generalist", "--json", "--out", str(tmp_path / "plain")]) == 0
     assert seen[0][0] == GeneralistConfig(seed=seen[0][0].seed)  # no flag: every default

@@ -90,6 +90,7 @@ def test_dagger_applies_only_to_ppo_with_a_teacher():
         ({"dagger_safe_set_weight": -1.0}, ">= 0"),
         ({"dagger_safe_set_weight": float("nan")}, ">= 0"),
         ({"dagger_safe_set_weight": 4.0, "teacher": "orca-shield"}, "self-shield"),
+        ({"dagger_safe_set_side": True}, "dagger_safe_set_weight > 0"),
         (
             {"dagger_safe_set_weight": 4.0, "teacher": "self-shield", "init": "generalist"},
             "dagger_fraction 1",

@@ -21,7 +21,7 @@ from policies.generalist_train import (
 from policies.train import load_checkpoint
 from remarl_fc.policy_io import load_policy
 from sim.errors import ConfigError
-from sim.shield import ShieldConfig, shield_state
+from sim.shield import ShieldConfig, passing_side, shield_state
 
 
 def test_a_run_from_a_policy_file_starts_from_its_actor_and_value_network(tmp_path, start_policy):
@@ -51,15 +51,24 @@ def test_the_self_shield_teacher_is_the_start_policy_through_the_shield(tmp_path
         np.testing.assert_allclose(book.teach([world])[0], expected, atol=1e-5)
 
 
-def test_with_safe_sets_the_self_shield_teacher_gives_each_label_its_set(tmp_path, start_policy):
+def safe_set_book(out, start_policy, side: bool) -> RunBook:
+    """A self-shield run's book with safe sets at weight 4, cut to a side or not."""
     cfg = tiny_cfg(
-        tmp_path,
+        out.parent,
         init=str(start_policy),
         teacher="self-shield",
         dagger_fraction=1.0,
         dagger_safe_set_weight=4.0,
+        dagger_safe_set_side=side,
     )
-    book = RunBook.open(cfg, tmp_path / "run", PPONets.create, resume=False)
+    return RunBook.open(cfg, out, PPONets.create, resume=False)
+
+
+@pytest.mark.parametrize("side", [False, True])
+def test_with_safe_sets_the_self_shield_teacher_gives_each_label_its_set(
+    tmp_path, start_policy, side
+):
+    book = safe_set_book(tmp_path / "run", start_policy, side)
     policy = load_policy(str(start_policy))
     k = ShieldConfig().headings
     for world in book.worlds:
@@ -72,7 +81,23 @@ def test_with_safe_sets_the_self_shield_teacher_gives_each_label_its_set(tmp_pat
         decision = shield_state(
             ShieldConfig(mode="on"), world.cfg, world.state, proposed, world.teacher_vehicle
         )
-        np.testing.assert_array_equal(taught[..., 1:] > 0.5, decision.safe_headings)
+        want = decision.safe_headings
+        if side:
+            want = passing_side(want, decision.action)
+        np.testing.assert_array_equal(taught[..., 1:] > 0.5, want)
+
+
+def test_the_side_option_cuts_every_set_through_passing_side(tmp_path, start_policy, monkeypatch):
+    """Where the shield intervenes nowhere the test above cannot tell the cut was made: a cut
+    that keeps every heading shows each set went through it, and only with the option."""
+    import policies.generalist_train as generalist_train
+
+    monkeypatch.setattr(generalist_train, "passing_side", lambda safe, heading: safe | True)
+    for side in (False, True):
+        book = safe_set_book(tmp_path / f"run-{side}", start_policy, side)
+        for world in book.worlds:
+            (taught,) = book.teach([world])
+            assert (taught[..., 1:] > 0.5).all() == side
 
 
 @pytest.mark.parametrize(("neighbours", "mark"), [("proposals", 7.0), ("straight", 9.0)])

@@ -23,6 +23,7 @@ from sim.shield import (
     _rank,
     _severity,
     candidate_grid,
+    passing_side,
     shield,
     shield_state,
 )
@@ -182,6 +183,43 @@ def test_the_safe_headings_are_the_candidates_that_pass_at_cruise(seed):
             assert (c >= -0.5) if d.safe_headings[e, 0, k] else (c < 0.5), (e, k, c)
         if d.speed_m_s[e, 0] == VEHICLE.cruise_m_s and d.safe_exists[e, 0]:
             assert d.safe_headings[e, 0, np.argmin(np.abs(grid - d.action[e, 0]))]
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    safe=st.lists(st.booleans(), min_size=1, max_size=25),
+    heading=st.floats(-1.0, 1.0, allow_nan=False),
+)
+def test_the_passing_side_is_the_run_of_passing_candidates_around_the_choice(safe, heading):
+    """Written out one candidate at a time: from the candidate nearest the heading, walk each
+    way while the candidates pass; nothing is kept where that candidate fails."""
+    row = np.array(safe)
+    at = int(np.argmin(np.abs(candidate_grid(row.size) - heading)))
+    want = np.zeros_like(row)
+    if row[at]:
+        lo, hi = at, at
+        while lo > 0 and row[lo - 1]:
+            lo -= 1
+        while hi < row.size - 1 and row[hi + 1]:
+            hi += 1
+        want[lo : hi + 1] = True
+    got = passing_side(row, np.float64(heading))
+    assert got.shape == row.shape and (got == want).all()
+    assert not (got & ~row).any()  # a subset of the passing candidates
+
+
+def test_the_passing_side_is_batched_and_keeps_the_side_the_shield_chose():
+    """(B, N, K) at once: a threat straight ahead leaves both sides passing; each row keeps
+    the side of its own choice, whole, and drops the other."""
+    both = np.array([1, 1, 1, 0, 0, 0, 1, 1, 1], dtype=bool)  # K = 9: -1 ... 1
+    grid = candidate_grid(9)
+    safe = np.broadcast_to(both, (2, 3, 9)).copy()
+    safe[1, 2] = False  # nothing passes: nothing kept
+    heading = np.array([[grid[2], grid[6], grid[0]], [grid[8], grid[1], 0.0]])
+    got = passing_side(safe, heading)
+    left, right = both & (np.arange(9) < 3), both & (np.arange(9) > 5)
+    assert (got[0, 0] == left).all() and (got[0, 1] == right).all() and (got[0, 2] == left).all()
+    assert (got[1, 0] == right).all() and (got[1, 1] == left).all() and not got[1, 2].any()
 
 
 def test_off_keeps_no_safe_headings():
