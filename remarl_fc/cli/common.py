@@ -104,9 +104,9 @@ def progress_bar(*, enabled: bool, unit: str = "steps", digits: int = 0) -> Any:
 
 
 def add_shield_flags(p: Any, default: str) -> None:
-    """Add ``--shield off|monitor|on`` (default ``default``), its horizon, margin and passes.
+    """Add ``--shield off|monitor|on`` (default ``default``), its horizons, margin and passes.
 
-    The defaults of the horizon, margin and passes are `sim.shield.ShieldConfig`'s.
+    The defaults of the horizons, margin and passes are `sim.shield.ShieldConfig`'s.
     """
     from sim.shield import NEIGHBOUR_ARCS, SHIELD_MODES, ShieldConfig
 
@@ -131,6 +131,13 @@ def add_shield_flags(p: Any, default: str) -> None:
         default=base.track_horizon_s,
         help="shield look-ahead against tracked intruders (ADS-B reports: every intruder of "
         f"fly), seconds (default {base.track_horizon_s:g})",
+    )
+    p.add_argument(
+        "--shield-neighbour-horizon",
+        type=float,
+        default=base.neighbour_horizon_s,
+        help="shield look-ahead against the swarm's own UAVs, which re-plan every step, seconds "
+        f"(default {base.neighbour_horizon_s:g})",
     )
     p.add_argument(
         "--shield-margin",
@@ -163,6 +170,7 @@ def shield_from_args(args: argparse.Namespace) -> Any:
             mode=args.shield,
             horizon_s=args.shield_horizon,
             track_horizon_s=args.shield_track_horizon,
+            neighbour_horizon_s=args.shield_neighbour_horizon,
             margin_m=args.shield_margin,
             passes=args.shield_passes,
             neighbour_arcs=args.shield_neighbours,

@@ -399,6 +399,8 @@ def test_bad_shield_settings_are_refused(command, capsys):
             "docs/examples/mission-3u2o.toml"] if command == "fly" else ["demo"]  # fmt: skip
     assert main([*base, "--shield-horizon", "-1"]) == 2
     assert "--shield" in capsys.readouterr().err
+    assert main([*base, "--shield-neighbour-horizon", "nan"]) == 2
+    assert "neighbour_horizon_s" in capsys.readouterr().err
     assert main([*base, "--shield-passes", "0"]) == 2
     assert "passes must be >= 1" in capsys.readouterr().err
     with pytest.raises(SystemExit):
@@ -413,6 +415,9 @@ def test_the_shield_flags_build_its_config():
 
     args = build_parser().parse_args(["demo", "--shield-neighbours", "straight"])
     assert shield_from_args(args).neighbour_arcs == "straight"
+    for command in ("demo", "eval"):
+        args = build_parser().parse_args([command, "--shield-neighbour-horizon", "6"])
+        assert shield_from_args(args).neighbour_horizon_s == 6.0
     assert shield_from_args(build_parser().parse_args(["demo"])) == ShieldConfig(mode="on")
 
 
