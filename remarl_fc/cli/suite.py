@@ -7,6 +7,7 @@ controllers.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 from pathlib import Path
 from typing import Any
@@ -154,6 +155,7 @@ def cmd_eval_suite(args: argparse.Namespace) -> int:
         specs.append(MethodSpec("policy", args.policy))
     if not specs:
         raise ConfigError("eval --suite: give --method NAME[,NAME...] and/or --policy NAME|PATH")
+    shield = shield_from_args(args)
     results = evaluate_suite(
         s,
         specs,
@@ -161,12 +163,13 @@ def cmd_eval_suite(args: argparse.Namespace) -> int:
         episodes=args.episodes,
         workers=args.workers,
         ray_address=args.ray_address,
-        shield=shield_from_args(args),
+        shield=shield,
     )
     payload: dict[str, Any] = {
         "suite": s.name,
         "version": s.version,
         "seed": s.seed,
+        "shield_settings": dataclasses.asdict(shield),  # what --shield* asked, to reproduce it
         "results": [_json_ready(r) for r in results],
     }
     if args.plot:

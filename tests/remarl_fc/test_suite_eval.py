@@ -6,6 +6,7 @@ import pytest
 from tiny_policy import write_tiny_generalist
 
 from remarl_fc.cli import main
+from sim.shield import ShieldConfig
 
 VOLATILE = {"seconds", "reaction_time_median_ms", "reaction_time_p99_ms"}
 
@@ -65,6 +66,19 @@ def test_eval_suite_is_reproducible_and_complete(capsys):
     assert cells[("orca", "paper-3u2o")]["success_rate"] == 1.0
     again = run_json(capsys, argv)
     assert steady(again["results"]) == steady(first["results"])
+
+
+def test_eval_suite_records_the_shield_it_flew_behind(capsys):
+    argv = ["eval", "--suite", "smoke", "--method", "straight", "--families", "head-on-1u"]
+    plain = run_json(capsys, argv)
+    assert plain["shield_settings"]["mode"] == "off" and plain["results"][0]["shield"] == "off"
+    argv += ["--shield", "on", "--shield-neighbour-horizon", "6", "--shield-margin", "2"]
+    shielded = run_json(capsys, argv)
+    settings = shielded["shield_settings"]
+    assert settings["mode"] == "on" and shielded["results"][0]["shield"] == "on"
+    assert settings["neighbour_horizon_s"] == 6.0 and settings["margin_m"] == 2.0
+    base = ShieldConfig()
+    assert (settings["passes"], settings["horizon_s"]) == (base.passes, base.horizon_s)
 
 
 def test_policies_run_only_where_they_fit(capsys):
