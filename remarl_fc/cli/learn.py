@@ -672,9 +672,9 @@ def cmd_eval(args: argparse.Namespace) -> int:
     episodes = args.episodes or DEFAULT_EVAL_EPISODES
     track_filter = None if args.track_filter is None else args.track_filter == "on"
     world = world_overrides(args.dynamics, args.sensors, args.arrival, track_filter)
-    policy, result = evaluate_policy(
-        args.policy, args.scenario, episodes, args.seed, world, shield_from_args(args)
-    )
+    shield = shield_from_args(args)
+    policy, result = evaluate_policy(args.policy, args.scenario, episodes, args.seed, world, shield)
+    result["shield_settings"] = dataclasses.asdict(shield)  # as eval --suite records them
     if args.plot:
         plot_episode(policy, args.scenario, args.seed, Path(args.plot), world)
         result["plot"] = args.plot

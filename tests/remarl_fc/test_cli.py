@@ -229,6 +229,10 @@ def test_eval_in_the_worlds_of_real_flight(capsys):
     assert main(args) == 0
     out = json.loads(capsys.readouterr().out)
     assert (out["dynamics"], out["sensors"], out["arrival"]) == ("ideal", "exact", "hover")
+    assert out["shield_settings"]["mode"] == "off"
+    assert main([*args, "--shield", "on", "--shield-neighbour-horizon", "3"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["shield"] == "on" and out["shield_settings"]["neighbour_horizon_s"] == 3.0
 
 
 def test_eval_names_an_unknown_vehicle_profile_and_the_suite_refuses_world_flags(capsys):
