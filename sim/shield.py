@@ -42,7 +42,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from sim.arrays import BoolArray, Float32Array, FloatArray
+from sim.arrays import BoolArray, Float32Array, FloatArray, IntArray
 from sim.config import ScenarioConfig
 from sim.prediction import displacements, segment_closest_sq
 from sim.sensors import picture
@@ -199,6 +199,16 @@ def candidate_grid(headings: int) -> FloatArray:
     return np.linspace(-1.0, 1.0, headings)
 
 
+def nearest_candidate(heading: FloatArray | Float32Array, headings: int) -> IntArray:
+    """(...) the index of the candidate (`candidate_grid` of ``headings``) nearest ``heading``.
+
+    ``heading`` (...): normalised heading changes in [−1, 1]; ties go to the lower index.
+    """
+    offset = np.asarray(heading, dtype=np.float64)[..., None] - candidate_grid(headings)
+    nearest: IntArray = np.abs(offset).argmin(axis=-1)
+    return nearest
+
+
 def passing_side(safe: BoolArray, heading: FloatArray | Float32Array) -> BoolArray:
     """(..., K) the run of ``safe``'s passing candidates that holds ``heading``.
 
@@ -210,8 +220,7 @@ def passing_side(safe: BoolArray, heading: FloatArray | Float32Array) -> BoolArr
     """
     k = safe.shape[-1]
     index = np.arange(k)
-    offset = np.asarray(heading, dtype=np.float64)[..., None] - candidate_grid(k)
-    at = np.abs(offset).argmin(axis=-1)[..., None]  # (..., 1) the candidate chosen
+    at = nearest_candidate(heading, k)[..., None]  # (..., 1) the candidate chosen
     fails = ~safe
     below = np.where(fails & (index < at), index, -1).max(axis=-1, keepdims=True)
     above = np.where(fails & (index > at), index, k).min(axis=-1, keepdims=True)

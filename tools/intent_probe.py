@@ -51,7 +51,7 @@ from policies.generalist_init import load_actor
 from policies.generalist_train import shielded_sets, teacher_vehicle
 from remarl_fc.offline.suite import MethodSpec, resolve_method
 from sim.encounters import sample_family
-from sim.shield import candidate_grid
+from sim.shield import nearest_candidate
 from sim.suite import load_suite
 from sim.swarm import SwarmSim
 
@@ -154,8 +154,7 @@ def errors(
 
 def landed_safe(action: torch.Tensor, safe: torch.Tensor) -> float:
     """The share of rows whose action lies nearest a candidate heading of its safe set (K)."""
-    grid = torch.from_numpy(candidate_grid(safe.shape[-1])).to(action)
-    nearest = (action[:, None] - grid[None, :]).abs().argmin(dim=-1)
+    nearest = torch.from_numpy(nearest_candidate(action.numpy(), safe.shape[-1]))
     return float(safe.gather(1, nearest[:, None])[:, 0].float().mean())
 
 

@@ -23,6 +23,7 @@ from sim.shield import (
     _rank,
     _severity,
     candidate_grid,
+    nearest_candidate,
     passing_side,
     shield,
     shield_state,
@@ -183,6 +184,20 @@ def test_the_safe_headings_are_the_candidates_that_pass_at_cruise(seed):
             assert (c >= -0.5) if d.safe_headings[e, 0, k] else (c < 0.5), (e, k, c)
         if d.speed_m_s[e, 0] == VEHICLE.cruise_m_s and d.safe_exists[e, 0]:
             assert d.safe_headings[e, 0, np.argmin(np.abs(grid - d.action[e, 0]))]
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    headings=st.integers(2, 25),
+    heading=st.lists(st.floats(-1.0, 1.0, allow_nan=False), min_size=1, max_size=6),
+)
+def test_the_nearest_candidate_is_no_farther_than_any_other(headings, heading):
+    """Batched: no candidate of the grid lies nearer a heading than the one returned."""
+    h = np.array(heading)
+    at = nearest_candidate(h, headings)
+    grid = candidate_grid(headings)
+    assert at.shape == h.shape and ((at >= 0) & (at < headings)).all()
+    assert (np.abs(grid[at] - h)[:, None] <= np.abs(grid[None, :] - h[:, None]) + 1e-12).all()
 
 
 @settings(max_examples=200, deadline=None)
