@@ -138,3 +138,15 @@ def test_every_command_in_the_docs_exists_as_shown():
         for problem in _problems(command, parser)
     ]
     assert not wrong, "\n".join(wrong)
+
+
+def test_every_tool_the_docs_name_exists():
+    """``python tools/NAME.py`` and the like: the file is there."""
+    named = {
+        (path.name, tool)
+        for path in DOCS
+        for tool in re.findall(r"\btools/[a-z_]+\.py\b", path.read_text(encoding="utf-8"))
+    }
+    assert len(named) > 20
+    missing = [f"{name}: {tool}" for name, tool in sorted(named) if not (ROOT / tool).is_file()]
+    assert not missing, "\n".join(missing)
