@@ -49,25 +49,29 @@ def _snippets(text: str) -> list[str]:
     return out
 
 
-def _found(pattern: re.Pattern[str]) -> list[tuple[str, str, str]]:
-    """(file, first group, last group cut at `END`) for each match of ``pattern`` in the docs."""
-    found = []
-    for path in DOCS:
-        for snippet in _snippets(path.read_text(encoding="utf-8")):
-            for match in pattern.finditer(snippet):
-                rest = END.split(match.group(match.lastindex or 0), maxsplit=1)[0].strip()
-                found.append((path.name, match.group(1), rest))
-    return found
+def _matches(pattern: re.Pattern[str]) -> list[tuple[str, re.Match[str]]]:
+    """(file, match) for each match of ``pattern`` in the code of the docs."""
+    return [
+        (path.name, match)
+        for path in DOCS
+        for snippet in _snippets(path.read_text(encoding="utf-8"))
+        for match in pattern.finditer(snippet)
+    ]
+
+
+def _cut(text: str) -> str:
+    """``text`` up to where its command ends (`END`)."""
+    return END.split(text, maxsplit=1)[0].strip()
 
 
 def _commands() -> list[tuple[str, str]]:
     """(file, command after ``remarl-fc``) for every command in the docs."""
-    return [(name, command) for name, _, command in _found(COMMAND)]
+    return [(name, _cut(match.group(1))) for name, match in _matches(COMMAND)]
 
 
 def _tool_commands() -> list[tuple[str, str, str]]:
     """(file, ``tools/NAME.py``, its arguments as shown) for every tool the docs name."""
-    return _found(TOOL)
+    return [(name, match.group(1), _cut(match.group(2))) for name, match in _matches(TOOL)]
 
 
 def _subcommands(parser: argparse.ArgumentParser) -> dict[str, argparse.ArgumentParser]:
