@@ -44,6 +44,7 @@ from numpy.typing import NDArray
 
 from sim.arrays import BoolArray, Float32Array, FloatArray, IntArray
 from sim.config import ScenarioConfig
+from sim.dynamics import PREDICTED_STEPS, Motion, predict_response
 from sim.prediction import displacements, segment_closest_sq
 from sim.sensors import picture
 from sim.state import SwarmState
@@ -53,6 +54,8 @@ ShieldMode = Literal["off", "monitor", "on"]
 SHIELD_MODES: tuple[ShieldMode, ...] = ("off", "monitor", "on")
 NeighbourArcs = Literal["proposals", "straight"]
 NEIGHBOUR_ARCS: tuple[NeighbourArcs, ...] = ("proposals", "straight")
+VehicleModel = Literal["fitted", "ideal"]
+VEHICLE_MODELS: tuple[VehicleModel, ...] = ("fitted", "ideal")
 
 
 @dataclass(frozen=True)
@@ -131,7 +134,19 @@ class ShieldConfig:
     ``remarl-fc train --generalist --teacher self-shield --teacher-neighbours straight``); it
     makes one pass, whatever ``passes`` says."""
 
+    vehicle_model: VehicleModel = "fitted"
+    """How the UAVs' motion is predicted where the simulator flies them with a fitted autopilot
+    response (``--dynamics``, `sim.dynamics`): "fitted" (every candidate and every neighbour's
+    arc flown with the vehicle's response, from its velocity now and after its last command:
+    `sim.dynamics.predict_response`) or "ideal" (the arcs as commanded). Ideal vehicles fly
+    their arcs exactly either way. RESULTS_PLACEHOLDER"""
+
     def __post_init__(self) -> None:
+        if self.vehicle_model not in VEHICLE_MODELS:
+            raise ValueError(
+                f"shield vehicle_model must be one of {', '.join(VEHICLE_MODELS)}, "
+                f"got {self.vehicle_model!r}"
+            )
         if self.mode not in SHIELD_MODES:
             raise ValueError(f"shield mode must be one of {', '.join(SHIELD_MODES)}")
         if self.neighbour_arcs not in NEIGHBOUR_ARCS:
@@ -263,7 +278,9 @@ class Swarm:
         pos_m: (B, N, 2) positions. heading_rad: commanded headings. target_m: (B, N, 2).
         deciding: the UAVs this decision is for (flying). present: the UAVs the others must
         keep clear of (flying, or hovering where they arrived). speed_m_s: each UAV's speed
-        along its committed arc (0 while hovering).
+        along its committed arc (0 while hovering). motion: (B, N) each UAV's velocity, last
+        command and fitted response, where its motion is predicted with the response
+        (`ShieldConfig.vehicle_model` "fitted"); None: every UAV flies its arcs exactly.
     """
 
     pos_m: FloatArray
@@ -272,6 +289,7 @@ class Swarm:
     deciding: BoolArray
     present: BoolArray
     speed_m_s: FloatArray
+    motion: Motion | None = None
 
 
 @dataclass(frozen=True)
@@ -377,24 +395,46 @@ def _decide(
     # tracked intruders are checked over their own, shorter look-ahead (a cut where it ends)
     tracked = bool(threats.tracked.any())
     cuts = (cfg.neighbour_horizon_s, cfg.track_horizon_s) if tracked else (cfg.neighbour_horizon_s,)
+    motion = swarm.motion
+    if motion is not None:  # the end of the steps the response is flown exactly: a knot
+        cuts = (*cuts, PREDICTED_STEPS * dt)
     times, split = _times(dt, horizon, cuts)  # (P,)
+    later = times[CHORDS + 1 :]  # the instants after the coming step
     a_max = vehicle.max_turn_rad
     deciding = swarm.deciding
     # Every UAV's proposal at 1 m/s, (B, N, 1, P): its own first candidate; and each arc its
     # neighbours check against (at its speed), the proposal itself first unless they expect it
-    # to fly straight on (`ShieldConfig.neighbour_arcs`).
+    # to fly straight on (`ShieldConfig.neighbour_arcs`). With the fitted response, each arc
+    # as the vehicle flies it instead (`sim.dynamics.predict_response`).
     committed = _at_times(
         displacements(swarm.heading_rad, prop[..., None] * a_max, 1.0, dt, horizon, CHORDS),
         split,
     )
     theirs = [
-        committed
-        if arc.action is prop
-        else _at_times(
-            displacements(
-                swarm.heading_rad, arc.action[..., None] * a_max, 1.0, dt, horizon, CHORDS
+        _committed_path(
+            committed
+            if arc.action is prop
+            else _at_times(
+                displacements(
+                    swarm.heading_rad, arc.action[..., None] * a_max, 1.0, dt, horizon, CHORDS
+                ),
+                split,
             ),
-            split,
+            arc,
+            swarm,
+        )
+        if motion is None
+        else _neighbour_major(
+            predict_response(
+                swarm.heading_rad,
+                arc.action[..., None] * a_max,
+                arc.first_m_s[..., None],
+                swarm.speed_m_s[..., None],
+                motion,
+                dt,
+                CHORDS,
+                later,
+            )
         )
         for arc in arcs
     ]
@@ -409,10 +449,24 @@ def _decide(
     )
 
     # 1. The proposal of every UAV at full speed: most pass, and their decision is made.
-    unit_x, unit_y = (d.reshape(-1, b * n, 1) for d in _time_first(committed))  # (P, B·N, 1)
-    clear, cpa, rank = _clearance(
-        unit_x, unit_y, paths.owner, cruise, paths, (b, n), cruise, vehicle.d_col_m
-    )
+    if motion is None:
+        unit_x, unit_y = (d.reshape(-1, b * n, 1) for d in _time_first(committed))
+        own = (_flown(unit_x, cruise, cruise), _flown(unit_y, cruise, cruise))  # (P, B·N, 1)
+    else:
+        ox, oy = _time_first(
+            predict_response(
+                swarm.heading_rad,
+                prop[..., None] * a_max,
+                cruise,
+                cruise,
+                motion,
+                dt,
+                CHORDS,
+                later,
+            )
+        )
+        own = (ox.reshape(-1, b * n, 1), oy.reshape(-1, b * n, 1))
+    clear, cpa, rank = _clearance(own, paths.owner, paths, (b, n), vehicle.d_col_m)
     proposed_cpa = cpa[..., 0]
     fails = deciding & (clear[..., 0] < 0.0)
     turn, speed, flown_cpa = prop.copy(), full.copy(), proposed_cpa.copy()
@@ -421,14 +475,17 @@ def _decide(
     if fails.any():
         # 2. The failing UAVs' bands: every heading change at full speed, then slower ones.
         grid = np.broadcast_to(candidate_grid(cfg.headings), (b, n, cfg.headings))
-        unit_x, unit_y = _time_first(
-            _at_times(
-                displacements(
-                    swarm.heading_rad[fails], grid[fails] * a_max, 1.0, dt, horizon, CHORDS
-                ),
-                split,
-            )
-        )  # (P, F, K): the F failing UAVs' candidates only
+        if motion is None:
+            unit_x, unit_y = _time_first(
+                _at_times(
+                    displacements(
+                        swarm.heading_rad[fails], grid[fails] * a_max, 1.0, dt, horizon, CHORDS
+                    ),
+                    split,
+                )
+            )  # (P, F, K): the F failing UAVs' candidates only
+        else:
+            failing = motion.of(fails)
         row = np.cumsum(fails.reshape(-1)) - 1  # each failing UAV's place among them
         best = rank[..., 0].copy()  # the fallback's rank so far (`_rank`)
         fallback = (prop.copy(), full.copy(), proposed_cpa.copy())
@@ -440,9 +497,22 @@ def _decide(
             if not todo.any():
                 break
             mine = paths.of(todo)
-            c, d, u = _clearance(
-                unit_x, unit_y, row[mine.owner], v, mine, (b, n), cruise, vehicle.d_col_m
-            )
+            if motion is None:
+                flown = (_flown(unit_x, v, cruise), _flown(unit_y, v, cruise))
+            else:
+                flown = _time_first(
+                    predict_response(
+                        swarm.heading_rad[fails],
+                        grid[fails] * a_max,
+                        v,
+                        cruise,
+                        failing,
+                        dt,
+                        CHORDS,
+                        later,
+                    )
+                )
+            c, d, u = _clearance(flown, row[mine.owner], mine, (b, n), vehicle.d_col_m)
             ok = (c >= 0.0) & todo[..., None]
             if v == cruise:
                 safe_headings = ok
@@ -522,6 +592,31 @@ def _at_times(
     return out[0], out[1]
 
 
+def _committed_path(
+    unit: tuple[FloatArray, FloatArray], arc: Commitment, swarm: Swarm
+) -> tuple[FloatArray, FloatArray]:
+    """A committed arc's (P, B, N) displacements as flown, from its 1 m/s ones (B, N, 1, P).
+
+    The coming step at the arc's own speed, then on at the committed speed.
+    """
+    out = []
+    for d in unit:
+        path = np.moveaxis(d[..., 0, :], -1, 0)  # (P, B, N) at 1 m/s
+        flown = path * arc.first_m_s[None]
+        if not np.array_equal(arc.first_m_s, swarm.speed_m_s):
+            flown[CHORDS + 1 :] = (
+                flown[CHORDS] + (path[CHORDS + 1 :] - path[CHORDS]) * swarm.speed_m_s[None]
+            )
+        out.append(flown)
+    return out[0], out[1]
+
+
+def _neighbour_major(xy: tuple[FloatArray, FloatArray]) -> tuple[FloatArray, FloatArray]:
+    """One arc's displacements (B, N, 1, P) as (P, B, N), a neighbour's committed path."""
+    x, y = (np.moveaxis(d[..., 0, :], -1, 0) for d in xy)
+    return x, y
+
+
 def _time_first(xy: tuple[FloatArray, FloatArray]) -> tuple[Float32Array, Float32Array]:
     """Displacements (..., K, P) as C-contiguous float32 (P, ..., K).
 
@@ -557,34 +652,31 @@ def _at(values: FloatArray, index: NDArray[np.intp]) -> FloatArray:
 
 
 def _clearance(
-    unit_x: Float32Array,
-    unit_y: Float32Array,
+    flown: tuple[Float32Array, Float32Array],
     row: NDArray[np.intp],
-    speed_m_s: float,
     paths: ThreatPaths,
     swarm_shape: tuple[int, int],
-    cruise_m_s: float,
     d_col_m: float,
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """(clearance, closest approach, rank), each (B, N, K), of the candidates at one speed.
 
-    ``unit_x``, ``unit_y`` (P, R, K) (`_time_first`): candidates' displacements at 1 m/s (a
-    displacement scales with the speed); ``row`` (S,): the row of each pair's UAV. Clearance:
+    ``flown`` (x, y), each (P, R, K) (`_time_first`): the candidates' displacements at that
+    speed; ``row`` (S,): the row of each pair's UAV. Clearance:
     the smallest (distance − required) over every threat and segment; +inf with no threat
     (and the closest approach +inf too). Rank: `_rank`, what the fallback flies the highest of
     when nothing passes.
     """
     b, n = swarm_shape
-    k = unit_x.shape[-1]
+    k = flown[0].shape[-1]
     clearance = np.full((b, n, k), np.inf)
     cpa_sq = np.full((b, n, k), np.inf)
     rank = np.full((b, n, k), np.inf)
     if not len(paths.owner):
         return clearance, np.sqrt(cpa_sq), rank
     # Time first from here on: every segment operation runs over contiguous blocks.
-    rx = _flown(unit_x[:, row], speed_m_s, cruise_m_s)  # (P, S, K), contiguous float32
+    rx = flown[0][:, row]  # (P, S, K), contiguous float32
     rx += paths.rel_x[..., None]
-    ry = _flown(unit_y[:, row], speed_m_s, cruise_m_s)
+    ry = flown[1][:, row]
     ry += paths.rel_y[..., None]
     seg = segment_closest_sq(rx, ry, paths.reach[..., None])
     seg[paths.after] = np.inf  # segments that start after the arrival
@@ -728,8 +820,8 @@ def _threat_paths(
 ) -> ThreatPaths:
     """The (UAV, threat) pairs that can come within the required distance, and their paths.
 
-    ``committed``: the neighbours' arcs, each with its (B, N, 1, P) displacements at 1 m/s
-    (`_at_times`); the first is every UAV's proposal. Sorted by UAV.
+    ``committed``: the neighbours' arcs, each with its (P, B, N) displacements as flown
+    (`_committed_path`, `_predicted`); the first is every UAV's proposal. Sorted by UAV.
     Most of the N·M and N·N pairs are far apart: gathered away, they cost nothing.
     """
     b, n = swarm.heading_rad.shape
@@ -776,18 +868,11 @@ def _threat_paths(
         # past the neighbour horizon nothing is required (−inf: never binding)
         ahead = _checked(times, cfg.neighbour_horizon_s)[:, 0, 0]
         need = np.broadcast_to(np.where(ahead, required, -np.inf)[:, None, None], (p - 1, b, n))
-        for k, (arc, unit) in enumerate(committed):  # threats M + k·N + j: arc k of UAV j
+        for k, (arc, path) in enumerate(committed):  # threats M + k·N + j: arc k of UAV j
             counts = np.take_along_axis(np.broadcast_to(arc.only[:, None], dist.shape), idx, -1)
             masks.append(near & counts)
             slots.append(m + k * n + idx)
-            for out, d, at in ((xs, unit[0], 0), (ys, unit[1], 1)):
-                path = np.moveaxis(d[..., 0, :], -1, 0)  # (P, B, N) at 1 m/s
-                # the coming step at its own speed, then on at the committed speed
-                flown = path * arc.first_m_s[None]
-                if not np.array_equal(arc.first_m_s, swarm.speed_m_s):
-                    flown[CHORDS + 1 :] = (
-                        flown[CHORDS] + (path[CHORDS + 1 :] - path[CHORDS]) * swarm.speed_m_s[None]
-                    )
+            for out, flown, at in ((xs, path[0], 0), (ys, path[1], 1)):
                 out.append(swarm.pos_m[None, ..., at] + flown)
             needs.append(need)
     if not masks:
@@ -870,6 +955,17 @@ def shield_state(
         age = np.where(known, now - state.tracks.t_valid_s, 0.0)
         pos, vel = np.where(known[..., None], pos, 0.0), np.where(known[..., None], vel, 0.0)
     hovering = state.hovering(cfg.arrival)
+    response = state.response
+    motion = None
+    if response is not None and shield_cfg.vehicle_model == "fitted":
+        motion = Motion(
+            state.vel_m_s,
+            state.last_turn_rad,
+            state.speed_m_s,
+            response.delay_s,
+            response.tau_s,
+            response.accel_m_s2,
+        )
     swarm = Swarm(
         pos_m=state.pos_m + state.gps_error_m,
         heading_rad=state.heading_rad,
@@ -877,6 +973,7 @@ def shield_state(
         deciding=state.active,
         present=state.active | hovering,
         speed_m_s=np.where(hovering, 0.0, state.speed_m_s),
+        motion=motion,
     )
     threats = Threats(pos, vel, known, age)
     return shield(shield_cfg, vehicle or vehicle_of(cfg), swarm, threats, proposed)

@@ -108,7 +108,7 @@ def add_shield_flags(p: Any, default: str) -> None:
 
     The defaults of the horizons, margin and passes are `sim.shield.ShieldConfig`'s.
     """
-    from sim.shield import NEIGHBOUR_ARCS, SHIELD_MODES, ShieldConfig
+    from sim.shield import NEIGHBOUR_ARCS, SHIELD_MODES, VEHICLE_MODELS, ShieldConfig
 
     base = ShieldConfig()
     p.add_argument(
@@ -159,6 +159,14 @@ def add_shield_flags(p: Any, default: str) -> None:
         help="what each UAV expects of its neighbours: the swarm's proposals this step, or "
         f"flying straight on, one pass (default {base.neighbour_arcs})",
     )
+    p.add_argument(
+        "--shield-vehicle-model",
+        choices=list(VEHICLE_MODELS),
+        default=base.vehicle_model,
+        help="how the shield predicts vehicles flown with a fitted autopilot response "
+        "(--dynamics): with that response, or on the arcs as commanded (default "
+        f"{base.vehicle_model})",
+    )
 
 
 def shield_from_args(args: argparse.Namespace) -> Any:
@@ -174,6 +182,7 @@ def shield_from_args(args: argparse.Namespace) -> Any:
             margin_m=args.shield_margin,
             passes=args.shield_passes,
             neighbour_arcs=args.shield_neighbours,
+            vehicle_model=args.shield_vehicle_model,
         )
     except ValueError as exc:
         raise ConfigError(f"--shield: {exc}") from exc

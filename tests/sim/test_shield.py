@@ -8,9 +8,11 @@ import math
 
 import numpy as np
 import pytest
+from dense_response import dense_track
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from sim.dynamics import Motion
 from sim.scenarios import load_scenario
 from sim.shield import (
     COLLISION_INTRUDER_SOON,
@@ -29,6 +31,7 @@ from sim.shield import (
     shield_state,
 )
 from sim.swarm import SwarmSim
+from sim.vehicle import load_profile
 
 VEHICLE = Vehicle(d_col_m=20.0, dt_s=2.0, max_turn_rad=math.pi / 4, cruise_m_s=5.0)
 DENSE = 2000
@@ -400,9 +403,11 @@ def test_uncertainty_of_old_reports_widens_what_is_required():
     assert shield(cfg, VEHICLE, swarm, stale, np.zeros((1, 1))).intervened[0, 0]
 
 
-@pytest.mark.parametrize("scenario", ["3u2o", "50u8o"])
-def test_on_a_simulator_state_every_output_is_in_range(scenario):
-    cfg = load_scenario(scenario)
+@pytest.mark.parametrize(
+    ("scenario", "dynamics"), [("3u2o", "ideal"), ("50u8o", "ideal"), ("7u2o", "arducopter")]
+)
+def test_on_a_simulator_state_every_output_is_in_range(scenario, dynamics):
+    cfg = load_scenario(scenario, dynamics=dynamics)
     sim = SwarmSim(cfg, scored=False)
     rng = np.random.default_rng(1)
     state = sim.initial_state(rng, 3)
@@ -415,9 +420,38 @@ def test_on_a_simulator_state_every_output_is_in_range(scenario):
         state, _ = sim.step(state, d.action, rng, speeds_m_s=d.speed_m_s)
 
 
+def test_the_fitted_vehicle_is_predicted_on_the_track_it_flies():
+    """A fitted ArduCopter at 10 m/s that was turning right, its velocity still 24° left of
+    its commanded heading, proposes a full left turn past a static intruder: the shield with
+    its response (``motion``) predicts the closest approach of the command stream replayed at
+    10 ms within 0.5 m; the ideal arc misses it by metres."""
+    prof, a_max = load_profile("arducopter"), math.pi / 4
+    fast = Vehicle(d_col_m=20.0, dt_s=2.0, max_turn_rad=a_max, cruise_m_s=10.0)
+    _, track, vel0 = dense_track(prof, 0.0, -a_max, 10.0, a_max, 10.0, 10.0, 2.0, 25.0)
+    intruder = np.array([30.0, 40.0])
+    flown = float(np.hypot(*(track - intruder).T).min())
+    motion = Motion(
+        vel0[None, None], np.full((1, 1), -a_max), np.full((1, 1), 10.0),
+        np.full((1, 1), prof.delay_s), np.full((1, 1), prof.velocity_tau_s),
+        np.full((1, 1), prof.max_accel_m_s2),
+    )  # fmt: skip
+    fitted = dataclasses.replace(lone_uav(), speed_m_s=np.full((1, 1), 10.0), motion=motion)
+    threats = Threats(
+        intruder[None, None], np.zeros((1, 1, 2)), np.ones((1, 1), bool), np.zeros((1, 1))
+    )
+    cfg = ShieldConfig(mode="on")
+    left = np.ones((1, 1))
+    predicted = shield(cfg, fast, fitted, threats, left).proposed_cpa_m[0, 0]
+    ideal = shield(cfg, fast, dataclasses.replace(fitted, motion=None), threats, left)
+    assert abs(predicted - flown) < 0.5
+    assert ideal.proposed_cpa_m[0, 0] < flown - 3.0
+
+
 def test_bad_settings_are_refused():
     with pytest.raises(ValueError, match="mode"):
         ShieldConfig(mode="maybe")  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="vehicle_model"):
+        ShieldConfig(vehicle_model="exact")  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="headings"):
         ShieldConfig(headings=4)
     with pytest.raises(ValueError, match="horizon"):
