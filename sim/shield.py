@@ -4,15 +4,18 @@ A Simplex-style monitor around any controller (a learned policy, the potential f
 for every UAV at every decision it predicts, over a look-ahead ``horizon_s``,
 
 * its own motion under each candidate decision — a heading change over the coming step flown
-  as the simulator flies it (the constant-turn-rate arc, then straight on its final heading:
-  `sim.prediction`), at full speed and, where the vehicle can slow down (a multirotor), at
-  lower speeds down to a hover for the coming step, on at the cruise speed after it;
+  as the simulator flies it (the ideal vehicle: the constant-turn-rate arc, then straight on
+  its final heading, `sim.prediction`; a vehicle flown with a fitted autopilot response:
+  that command stream through the response, from its velocity now and after its last
+  command, `sim.dynamics.predict_response`), at full speed and, where the vehicle can slow
+  down (a multirotor), at lower speeds down to a hover for the coming step, on at the cruise
+  speed after it;
 * every intruder it knows of, straight at constant velocity from its track, with a position
   uncertainty that grows with the age of the report and the time predicted ahead
   (``track_growth_m_s``; a tracked intruder over the shorter ``track_horizon_s``);
 * every neighbouring UAV of the swarm on its committed arc: the decision the swarm's controller
   proposes for it this step (the swarm shares its decisions), at its commanded speed (0 while
-  it hovers where it arrived);
+  it hovers where it arrived), flown as its own candidates are (with its response, if any);
 
 and computes, in closed form per piecewise-linear segment, each candidate's closest approach to
 each of them (the "bands" of detect-and-avoid systems such as NASA's DAIDALUS, over the
@@ -406,38 +409,37 @@ def _decide(
     # neighbours check against (at its speed), the proposal itself first unless they expect it
     # to fly straight on (`ShieldConfig.neighbour_arcs`). With the fitted response, each arc
     # as the vehicle flies it instead (`sim.dynamics.predict_response`).
-    committed = _at_times(
-        displacements(swarm.heading_rad, prop[..., None] * a_max, 1.0, dt, horizon, CHORDS),
-        split,
-    )
-    theirs = [
-        _committed_path(
-            committed
-            if arc.action is prop
-            else _at_times(
-                displacements(
-                    swarm.heading_rad, arc.action[..., None] * a_max, 1.0, dt, horizon, CHORDS
+    if motion is None:
+        committed = _at_times(
+            displacements(swarm.heading_rad, prop[..., None] * a_max, 1.0, dt, horizon, CHORDS),
+            split,
+        )
+        theirs = [
+            _committed_path(
+                committed
+                if arc.action is prop
+                else _at_times(
+                    displacements(
+                        swarm.heading_rad, arc.action[..., None] * a_max, 1.0, dt, horizon, CHORDS
+                    ),
+                    split,
                 ),
-                split,
-            ),
-            arc,
-            swarm,
-        )
-        if motion is None
-        else _neighbour_major(
-            predict_response(
-                swarm.heading_rad,
-                arc.action[..., None] * a_max,
-                arc.first_m_s[..., None],
-                swarm.speed_m_s[..., None],
-                motion,
-                dt,
-                CHORDS,
-                later,
+                arc,
+                swarm,
             )
-        )
-        for arc in arcs
-    ]
+            for arc in arcs
+        ]
+    else:  # one prediction for all of them: the proposal at full speed, then each arc
+        turns = np.stack([prop, *(arc.action for arc in arcs)], axis=-1) * a_max
+        firsts = np.stack([full, *(arc.first_m_s for arc in arcs)], axis=-1)
+        thens = np.stack([full, *(swarm.speed_m_s for _ in arcs)], axis=-1)
+        px, py = predict_response(
+            swarm.heading_rad, turns, firsts, thens, motion, dt, CHORDS, later
+        )  # (B, N, 1 + arcs, P)
+        theirs = [
+            (np.moveaxis(px[..., k, :], -1, 0), np.moveaxis(py[..., k, :], -1, 0))
+            for k in range(1, len(arcs) + 1)
+        ]
     paths = _threat_paths(
         cfg,
         vehicle,
@@ -453,18 +455,7 @@ def _decide(
         unit_x, unit_y = (d.reshape(-1, b * n, 1) for d in _time_first(committed))
         own = (_flown(unit_x, cruise, cruise), _flown(unit_y, cruise, cruise))  # (P, B·N, 1)
     else:
-        ox, oy = _time_first(
-            predict_response(
-                swarm.heading_rad,
-                prop[..., None] * a_max,
-                cruise,
-                cruise,
-                motion,
-                dt,
-                CHORDS,
-                later,
-            )
-        )
+        ox, oy = _time_first((px[..., :1, :], py[..., :1, :]))
         own = (ox.reshape(-1, b * n, 1), oy.reshape(-1, b * n, 1))
     clear, cpa, rank = _clearance(own, paths.owner, paths, (b, n), vehicle.d_col_m)
     proposed_cpa = cpa[..., 0]
@@ -475,6 +466,9 @@ def _decide(
     if fails.any():
         # 2. The failing UAVs' bands: every heading change at full speed, then slower ones.
         grid = np.broadcast_to(candidate_grid(cfg.headings), (b, n, cfg.headings))
+        speeds = [cruise]
+        if vehicle.can_slow:
+            speeds += [f * cruise for f in cfg.slow_fractions]
         if motion is None:
             unit_x, unit_y = _time_first(
                 _at_times(
@@ -484,15 +478,26 @@ def _decide(
                     split,
                 )
             )  # (P, F, K): the F failing UAVs' candidates only
-        else:
-            failing = motion.of(fails)
+        else:  # every speed's candidates in one prediction, (P, F, speeds · K)
+            k = cfg.headings
+            cand_x, cand_y = _time_first(
+                predict_response(
+                    swarm.heading_rad[fails],
+                    np.tile(grid[fails] * a_max, len(speeds)),
+                    np.repeat(speeds, k),
+                    cruise,
+                    motion.of(fails),
+                    dt,
+                    CHORDS,
+                    later,
+                )
+            )
         row = np.cumsum(fails.reshape(-1)) - 1  # each failing UAV's place among them
         best = rank[..., 0].copy()  # the fallback's rank so far (`_rank`)
         fallback = (prop.copy(), full.copy(), proposed_cpa.copy())
-        speeds = [cruise]
-        if vehicle.can_slow:
-            speeds += [f * cruise for f in cfg.slow_fractions]
-        for v in speeds:  # fastest first, each batched over every UAV, heading and threat
+        for i, v in enumerate(
+            speeds
+        ):  # fastest first, each batched over every UAV, heading and threat
             todo = fails & ~found
             if not todo.any():
                 break
@@ -500,18 +505,7 @@ def _decide(
             if motion is None:
                 flown = (_flown(unit_x, v, cruise), _flown(unit_y, v, cruise))
             else:
-                flown = _time_first(
-                    predict_response(
-                        swarm.heading_rad[fails],
-                        grid[fails] * a_max,
-                        v,
-                        cruise,
-                        failing,
-                        dt,
-                        CHORDS,
-                        later,
-                    )
-                )
+                flown = (cand_x[..., i * k : (i + 1) * k], cand_y[..., i * k : (i + 1) * k])
             c, d, u = _clearance(flown, row[mine.owner], mine, (b, n), vehicle.d_col_m)
             ok = (c >= 0.0) & todo[..., None]
             if v == cruise:
@@ -609,12 +603,6 @@ def _committed_path(
             )
         out.append(flown)
     return out[0], out[1]
-
-
-def _neighbour_major(xy: tuple[FloatArray, FloatArray]) -> tuple[FloatArray, FloatArray]:
-    """One arc's displacements (B, N, 1, P) as (P, B, N), a neighbour's committed path."""
-    x, y = (np.moveaxis(d[..., 0, :], -1, 0) for d in xy)
-    return x, y
 
 
 def _time_first(xy: tuple[FloatArray, FloatArray]) -> tuple[Float32Array, Float32Array]:
@@ -958,10 +946,13 @@ def shield_state(
     response = state.response
     motion = None
     if response is not None and shield_cfg.vehicle_model == "fitted":
+        # A vehicle that hovers where it arrived is checked where it is, as the ideal one: its
+        # braking, predicted too, cost the real world's 10u1o 5 points (docs/MODEL.md §21)
+        parked = hovering[..., None]
         motion = Motion(
-            state.vel_m_s,
+            np.where(parked, 0.0, state.vel_m_s),
             state.last_turn_rad,
-            state.speed_m_s,
+            np.where(hovering, 0.0, state.speed_m_s),
             response.delay_s,
             response.tau_s,
             response.accel_m_s2,

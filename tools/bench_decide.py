@@ -8,7 +8,7 @@ to it moves less across days than the milliseconds, on a machine whose speed var
 session to the next (it moves too: docs/RESULTS.md).
 
     OMP_NUM_THREADS=1 python tools/bench_decide.py [--scenario 50u8o] [--samples 2000] [--json]
-        [--pooling max-attention] [--shield-passes 1]
+        [--pooling max-attention] [--shield-passes 1] [--dynamics arducopter]
 """
 
 from __future__ import annotations
@@ -45,6 +45,11 @@ def main() -> None:
     parser.add_argument(
         "--shield-passes", type=int, default=ShieldConfig().passes, help="the shield's passes"
     )
+    parser.add_argument(
+        "--dynamics",
+        default="ideal",
+        help="the vehicles' profile: with a fitted one the shield predicts their response",
+    )
     parser.add_argument("--json", action="store_true", help="print the result as JSON")
     args = parser.parse_args()
     result = bench_decide(
@@ -56,6 +61,7 @@ def main() -> None:
         policy_name=args.policy,
         pooling=args.pooling,
         shield_passes=args.shield_passes,
+        dynamics=args.dynamics,
     )
     if args.json:
         print(json.dumps(result, indent=2))
@@ -65,7 +71,8 @@ def main() -> None:
         f"generalist hidden {result['hidden']} ({result['pooling']} pooling), "
         f"k = {result['max_neighbours']}, "
         f"m = {result['max_obstacles']} (observation {result['observation_size']} entries); "
-        f"{result['samples']} decisions over {result['states']} states"
+        f"{result['samples']} decisions over {result['states']} states; "
+        f"{result['dynamics']} vehicles"
     )
     for part, label in (
         ("decision", "decision (observe + act)"),

@@ -151,6 +151,7 @@ def bench_decide(
     policy_name: str | None = None,
     pooling: str = "max-mean",
     shield_passes: int = ShieldConfig().passes,
+    dynamics: str = "ideal",
 ) -> dict[str, Any]:
     """Median and p99 (ms) of one decision (observations + actor) for one swarm.
 
@@ -162,11 +163,13 @@ def bench_decide(
     (the actor on them), ``shield_*`` (the safety shield on the actor's proposals, mode on,
     `sim.shield.shield_state`, ``shield_passes`` passes), and ``shielded_decision_*`` (all
     three). Decisions cycle over the states of one straight episode and their crowded copies.
+    ``dynamics``: the vehicles' profile (`sim.vehicle`); with a fitted one the shield predicts
+    every candidate with its response (`sim.shield.ShieldConfig.vehicle_model`).
     ``reference_*``: the `reference_workload` timed after each decision, and
     ``decision_per_reference`` the ratio of the medians, which moves less across machines and
     days than the milliseconds (1.28–1.31 on a fast day, 1.46–1.62 on one twice as slow).
     """
-    cfg = load_scenario(scenario)
+    cfg = load_scenario(scenario, dynamics=dynamics)
     if policy_name is not None:
         policy = load_policy(policy_name)
         hidden = int(policy.meta["hidden"])
@@ -219,6 +222,7 @@ def bench_decide(
         "most_intruders_in_one_observation": sensed,
         "samples": samples,
         "shield_passes": shield_passes,
+        "dynamics": cfg.dynamics,
         **_percentiles(decide, "decision"),
         **_percentiles(observe, "observe"),
         **_percentiles(act, "act"),

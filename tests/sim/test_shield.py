@@ -608,3 +608,43 @@ def test_straight_neighbours_make_each_decision_the_uavs_own():
 def test_unknown_neighbour_arcs_are_refused():
     with pytest.raises(ValueError, match="neighbour_arcs must be one of proposals, straight"):
         ShieldConfig(neighbour_arcs="guess")  # type: ignore[arg-type]
+
+
+def test_fitted_vehicles_carry_their_motion_and_a_hovering_one_is_held_where_it_is(monkeypatch):
+    """On a state flown with a fitted response the shield gets every UAV's velocity, last
+    command and response; a UAV hovering at its target, braking still, at rest where it is;
+    with ``vehicle_model`` "ideal", or an ideal vehicle, no motion at all."""
+    import sim.shield as shield_module
+
+    seen = []
+
+    def spy(cfg, vehicle, swarm, threats, proposed):
+        seen.append(swarm)
+        return shield(cfg, vehicle, swarm, threats, proposed)
+
+    monkeypatch.setattr(shield_module, "shield", spy)
+    cfg = load_scenario("3u1o", dynamics="arducopter", arrival="hover")
+    sim = SwarmSim(cfg, scored=False)
+    rng = np.random.default_rng(3)
+    state = sim.initial_state(rng, 1)
+    # one UAV arrives now: its target put right under it, the others' far ahead
+    target = state.target_m.copy()
+    target[0, 0] = state.pos_m[0, 0] + 12.0 * state.vel_m_s[0, 0] / 10.0
+    state = dataclasses.replace(state, target_m=target)
+    state, _ = sim.step(state, np.zeros((1, 3)), rng)
+    hovering = state.hovering(cfg.arrival)
+    assert hovering[0, 0] and not hovering[0, 1:].any()
+    assert np.hypot(*state.vel_m_s[0, 0]) > 1.0  # still braking
+    on = ShieldConfig(mode="on")
+    shield_state(on, cfg, state, np.zeros((1, 3)))
+    motion = seen[-1].motion
+    assert motion is not None
+    np.testing.assert_array_equal(motion.vel_m_s[0, 0], 0.0)
+    assert motion.last_speed_m_s[0, 0] == 0.0
+    np.testing.assert_array_equal(motion.vel_m_s[0, 1:], state.vel_m_s[0, 1:])
+    assert (motion.delay_s == load_profile("arducopter").delay_s).all()
+    shield_state(dataclasses.replace(on, vehicle_model="ideal"), cfg, state, np.zeros((1, 3)))
+    assert seen[-1].motion is None
+    ideal = load_scenario("3u1o", arrival="hover")
+    shield_state(on, ideal, SwarmSim(ideal, scored=False).initial_state(rng, 1), np.zeros((1, 3)))
+    assert seen[-1].motion is None
