@@ -56,6 +56,7 @@ FLY_FLAGS = {
     "max_flight_s": "max_flight",
     "swarm": "swarm",
     "bus_prefix": "bus_prefix",
+    "vehicle_profile": "vehicle_profile",
 }
 """`FlyConfig` settings that ``fly`` takes from its flags as they are: setting → flag (its dest)."""
 
@@ -143,6 +144,14 @@ def add_parsers(sub: Any) -> None:
         "--speedup", type=float, default=1.0, help=argparse.SUPPRESS
     )  # only to fly a mock running faster than real time
     add_shield_flags(p, default=FLY_SHIELD_MODE)
+    p.add_argument(
+        "--vehicle-profile",
+        default=None,
+        metavar="NAME|FILE",
+        help="the vehicle profile (sim/vehicles) the shield predicts this process's vehicles "
+        "with (default: the one fitted to each vehicle's autopilot, arducopter or px4; "
+        "docs/FLYING.md)",
+    )
     add_track_filter_flag(p)
     bus = p.add_argument_group("swarm bus (one process per vehicle)")
     bus.add_argument(

@@ -33,6 +33,14 @@ FLY_SHIELD = ShieldConfig(mode="on")
 """The safety shield a flight flies behind unless told otherwise (`FlyConfig.shield`): on, with
 `sim.shield.ShieldConfig`'s horizon, margin and candidates."""
 
+ARDUPILOT_PROFILE = "arducopter"
+"""The vehicle profile the shield predicts an ArduPilot vehicle with unless told otherwise:
+fitted to ArduCopter SITL's traces (`sim/vehicles/arducopter.toml`)."""
+
+PX4_PROFILE = "px4"
+"""The vehicle profile the shield predicts a PX4 vehicle with unless told otherwise: fitted to
+PX4 SIH's traces (`sim/vehicles/px4.toml`)."""
+
 TELEMETRY: dict[int, float] = {
     MsgId.GLOBAL_POSITION_INT: 10.0,
     MsgId.ATTITUDE: 10.0,
@@ -134,6 +142,11 @@ class FlyConfig:
     """The safety shield behind the policy (`sim.shield`, docs/FLYING.md "The safety shield"):
     "on" replaces a decision that would come within d_col + margin of an obstacle or of the
     swarm; "monitor" only records it; "off" computes nothing."""
+    vehicle_profile: str | None = None
+    """The vehicle profile (`sim/vehicles`: a name or a file) the shield predicts this
+    process's vehicles with (``shield.vehicle_model`` "fitted"); None: the one fitted to each
+    vehicle's autopilot, `ARDUPILOT_PROFILE` or `PX4_PROFILE` (docs/FLYING.md, "The safety
+    shield")."""
 
     def __post_init__(self) -> None:
         if not self.connections:

@@ -39,12 +39,14 @@ from remarl_fc.flight.config import Member
 from remarl_fc.flight.status import NEIGHBOUR, OBSTACLE, Status
 from remarl_fc.flight.traffic import TrafficPicture
 from remarl_fc.frames import heading_to_yaw, ne_to_sim, sim_to_ne
+from sim.dynamics import IDEAL_ACCEL_M_S2, IDEAL_TAU_S, Motion
 from sim.kinematics import heading_velocity
 from sim.observation import ObservationLayout, build_observations
 from sim.shield import ShieldConfig, ShieldDecision, Threats, shield
 from sim.shield import Swarm as ShieldSwarm
 from sim.shield import Vehicle as ShieldVehicle
 from sim.spawn import virtual_centre_and_velocity
+from sim.vehicle import VehicleProfile
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -138,8 +140,10 @@ class SwarmPicture:
         on_arc: (N,) flying this controller's arcs (its own vehicles under control): their
             velocity is the arc's heading × the arc's speed.
         heading_known: (N,) whose commanded heading the others know (this controller's own).
-        vel_ne_m_s: (N, 2) the velocity of those not on an arc: their telemetry's (a peer
-            process flies them), 0 for one holding at its target.
+        vel_ne_m_s: (N, 2) each vehicle's velocity from its telemetry: a peer process's
+            vehicles move at it; 0 for one holding at its target; NaN where unknown (a
+            vehicle on an arc then moves at the arc's velocity). The shield's prediction of
+            a fitted vehicle on an arc starts from it (`SwarmController.use_profiles`).
     """
 
     present: BoolArray
@@ -151,7 +155,7 @@ class SwarmPicture:
     def everyone(cls, n: int) -> SwarmPicture:
         """All N vehicles under this controller's control."""
         yes = np.ones(n, dtype=bool)
-        return cls(yes, yes.copy(), yes.copy(), np.zeros((n, 2)))
+        return cls(yes, yes.copy(), yes.copy(), np.full((n, 2), np.nan))
 
 
 @dataclass(frozen=True)
@@ -214,6 +218,9 @@ class SwarmController:
         self.turn = np.zeros(n)
         self.t0 = np.zeros(n)
         self.speed_m_s = np.full(n, spec.speed_m_s)
+        self.response: FloatArray | None = None
+        """(N, 3) each vehicle's delay (s), velocity time constant (s) and acceleration cap
+        (m/s²) for the shield's prediction (`use_profiles`); None: the arcs as commanded."""
         self.centre0 = np.zeros((int(self.groups.max(initial=0)) + 1, 2))
         self.swarm_vel = np.zeros_like(self.centre0)
         self.t_start = 0.0
@@ -231,6 +238,28 @@ class SwarmController:
         )
         self.t_start = now
         self.started = True
+
+    def use_profiles(self, profiles: Sequence[VehicleProfile]) -> None:
+        """Predict each vehicle (slot order) with this fitted response behind the shield.
+
+        With ``ShieldConfig.vehicle_model`` "fitted" the shield flies every candidate of a
+        vehicle on this controller's arcs with its profile's response, from its telemetry's
+        velocity and after its current arc (`sim.dynamics.predict_response`), as the
+        simulator's shield does; an ideal profile is the arc as commanded. A peer's vehicle
+        flies straight on at its velocity either way.
+        """
+        if len(profiles) != self.n:
+            raise ValueError(f"{len(profiles)} vehicle profiles for {self.n} vehicles")
+        if all(p.ideal for p in profiles):
+            self.response = None
+            return
+        rows = [
+            (0.0, IDEAL_TAU_S, IDEAL_ACCEL_M_S2)
+            if p.ideal
+            else (p.delay_s, p.velocity_tau_s, p.max_accel_m_s2)
+            for p in profiles
+        ]
+        self.response = np.array(rows, dtype=np.float64)
 
     def heading_at(self, now: float) -> FloatArray:
         """(N,) heading on each vehicle's current arc (straight on after the arc's end)."""
@@ -359,6 +388,21 @@ class SwarmController:
         told_speed = np.hypot(told[:, 0], told[:, 1])
         moving = ~on_arc & (told_speed > MOVING_M_S)
         course = np.where(moving, np.arctan2(told[:, 1], told[:, 0]), heading)
+        motion = None
+        if self.response is not None and self.shield.vehicle_model == "fitted":
+            # on an arc: from its telemetry's velocity (the arc's where unknown), after the arc
+            # in force now; a peer's (or one at rest) flies on at its velocity, its command
+            raw = ne_to_sim(np.asarray(sw.vel_ne_m_s, dtype=np.float64))
+            arc = heading_velocity(heading, self.speed_m_s[:, None])
+            now_vel = np.where(np.isfinite(raw), raw, np.where(on_arc[:, None], arc, 0.0))
+            motion = Motion(
+                now_vel[None],
+                np.where(on_arc, self.turn, 0.0)[None],
+                np.where(on_arc, self.speed_m_s, told_speed)[None],
+                self.response[None, :, 0],
+                self.response[None, :, 1],
+                self.response[None, :, 2],
+            )
         swarm = ShieldSwarm(
             pos_m=pos[None],
             heading_rad=course[None],
@@ -366,6 +410,7 @@ class SwarmController:
             deciding=flown[None],
             present=(np.asarray(sw.present, dtype=bool) & known)[None],
             speed_m_s=np.where(on_arc, speed, told_speed)[None],
+            motion=motion,
         )
         obs_xy, obs_v, ages = obstacles
         threats = Threats(

@@ -32,7 +32,15 @@ from remarl_fc.bus.core import SwarmBus
 from remarl_fc.bus.memory import MemoryBroker, MemoryBus
 from remarl_fc.errors import RemarlError
 from remarl_fc.flight.commands import Commander
-from remarl_fc.flight.config import Clock, FlyConfig, Member, bus_core, members_of
+from remarl_fc.flight.config import (
+    ARDUPILOT_PROFILE,
+    PX4_PROFILE,
+    Clock,
+    FlyConfig,
+    Member,
+    bus_core,
+    members_of,
+)
 from remarl_fc.flight.control import (
     ControlSpec,
     FlownPolicy,
@@ -81,6 +89,7 @@ from remarl_fc.mavlink.consts import (
 from remarl_fc.mavlink.link import MavlinkLink, TlogWriter
 from remarl_fc.resource import StackOwner
 from sim.sensors import TrackNoise
+from sim.vehicle import VehicleProfile, load_profile
 
 HOLD_CONFIRM_S = 6.0
 """At the end, wait at most this long for the last hold commands to be confirmed."""
@@ -125,6 +134,13 @@ class SwarmRuntime(StackOwner):
         self.controller = SwarmController(
             policy, spec, mission.targets_ne_m(), shield=cfg.shield, groups=mission.groups()
         )
+        given = cfg.vehicle_profile
+        self.profiles: dict[bool, VehicleProfile] = {
+            px4: load_profile(given or (PX4_PROFILE if px4 else ARDUPILOT_PROFILE))
+            for px4 in (False, True)
+        }
+        """The profile the shield predicts a vehicle of this process with, by ``is_px4``."""
+        self._ideal = load_profile("ideal")
         self.shield = ShieldTally(cfg.shield.mode)
         """What the safety shield did (`remarl_fc.flight.shielding`)."""
         self.vehicles: dict[int, Vehicle] = {
@@ -260,8 +276,16 @@ class SwarmRuntime(StackOwner):
         mine = self.local_members()
         start_ne_m, start = await self.preparation.prepare_swarm(mine, self.peers)
         self.controller.start(start_ne_m, start)
+        # the autopilots answered: each of this process's vehicles is predicted with its own
+        # (a peer's flies on at its velocity, whatever it is)
+        profiles = [self.profiles[m.track.is_px4] if m.local else self._ideal for m in self.members]
+        self.controller.use_profiles(profiles)
+        fitted = self.cfg.shield.mode != "off" and self.cfg.shield.vehicle_model == "fitted"
         for m in mine:
             self._apply(self.vehicles[m.system_id], Status.CONTROLLED, "under control")
+            if fitted:
+                profile = profiles[m.slot].name
+                self._event(m, f"the shield predicts it with the {profile} response")
 
     async def _fly(self) -> None:
         dt = self.spec.dt_s

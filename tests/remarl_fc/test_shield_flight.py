@@ -48,6 +48,7 @@ from sim.observation import ObservationLayout
 from sim.scenarios import load_scenario
 from sim.shield import ShieldConfig, shield_state
 from sim.swarm import SwarmSim
+from sim.vehicle import load_profile
 
 SPEC = ControlSpec(speed_m_s=10.0, dt_s=2.0, max_turn_rad=math.pi / 4, lead_m=40.0, arrival_m=20.0)
 LAYOUT = ObservationLayout(
@@ -210,6 +211,66 @@ def test_the_controller_shields_as_the_simulator_adapter_does():
     np.testing.assert_allclose(d.speed_m_s, expected.speed_m_s[0])
     np.testing.assert_allclose(d.shield.proposed_cpa_m, expected.proposed_cpa_m, rtol=1e-6)
     np.testing.assert_allclose(d.shield.flown_cpa_m, expected.flown_cpa_m, rtol=1e-6)
+
+
+def test_with_fitted_vehicles_the_controller_predicts_as_the_simulator_does():
+    """3u2o flown by fitted ArduCopters, each vehicle then still turning out of a hard turn
+    the other way: the controller told the vehicles' profile, their telemetry's
+    velocities and the arcs in force decides the same; told nothing of the profile, or with
+    ``vehicle_model`` "ideal", it predicts the arcs as commanded, as the simulator's adapter
+    then does."""
+    cfg = load_scenario("3u2o", dynamics="arducopter")
+    sim = SwarmSim(cfg)
+    rng = np.random.default_rng(0)
+    state = sim.initial_state(rng, 1)
+    policy = GoToTarget()
+    policy.layout = sim.obs_layout
+    spec = replace(SPEC, lead_m=cfg.field.swarm_lead_m)
+    shield = ShieldConfig(mode="on")
+    for _ in range(3):
+        state, _ = sim.step(state, policy.act(sim.observe(state).flat()), rng)
+    # each vehicle still turning out of a hard turn the other way, 25° off its new heading
+    last = np.array([[0.6, -0.6, 0.6]])
+    tilt = np.exp(1j * np.deg2rad(25.0) * np.sign(last[0]))
+    v = (state.vel_m_s[0, :, 0] + 1j * state.vel_m_s[0, :, 1]) * tilt
+    state = replace(state, vel_m_s=np.stack([v.real, v.imag], axis=-1)[None], last_turn_rad=last)
+    proposed = policy.act(sim.observe(state).flat())
+    expected = shield_state(shield, cfg, state, proposed, spec.shield_vehicle())
+    now = float(state.steps[0]) * cfg.dt_s
+    visible = state.obstacle_visible[0]
+    picture = SwarmPicture.everyone(3)
+    picture = replace(picture, vel_ne_m_s=sim_to_ne(state.vel_m_s[0]))
+
+    def decide(controller_shield: ShieldConfig, profiles: bool) -> Any:
+        c = SwarmController(policy, spec, sim_to_ne(state.target_m[0]), shield=controller_shield)
+        c.start(sim_to_ne(state.pos_m[0]), 0.0)
+        c.h0, c.t0[:] = state.heading_rad[0].copy(), now
+        c.turn, c.speed_m_s = state.last_turn_rad[0].copy(), state.speed_m_s[0].copy()
+        c.h0 = c.h0 - c.turn  # the arc in force ends on the state's heading
+        c.t0[:] = now - cfg.dt_s
+        if profiles:
+            c.use_profiles([load_profile("arducopter")] * 3)
+        return c.decide(
+            now,
+            sim_to_ne(state.pos_m[0] + state.gps_error_m[0]),
+            sim_to_ne(state.obstacle_pos_m[0][visible]),
+            sim_to_ne(state.obstacle_vel_m_s[0][visible]),
+            swarm=picture,
+        )
+
+    d = decide(shield, profiles=True)
+    assert d.shield is not None
+    np.testing.assert_array_equal(d.shield.intervened, expected.intervened)
+    np.testing.assert_allclose(d.action, expected.action[0], atol=1e-6)
+    np.testing.assert_allclose(d.speed_m_s, expected.speed_m_s[0])
+    np.testing.assert_allclose(d.shield.proposed_cpa_m, expected.proposed_cpa_m, rtol=1e-5)
+    ideal = replace(shield, vehicle_model="ideal")
+    arcs = shield_state(ideal, cfg, state, proposed, spec.shield_vehicle())
+    for told in (decide(shield, profiles=False), decide(ideal, profiles=True)):
+        assert told.shield is not None
+        np.testing.assert_allclose(told.shield.proposed_cpa_m, arcs.proposed_cpa_m, rtol=1e-5)
+    assert not np.allclose(arcs.proposed_cpa_m, expected.proposed_cpa_m)
+    assert np.isfinite(expected.proposed_cpa_m).any()
 
 
 def test_the_obstacle_picture_gives_each_reports_age():
