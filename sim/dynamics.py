@@ -17,6 +17,9 @@ A vehicle that arrived is commanded to stop (speed 0: ``fly`` holds it) and brak
 model. Each UAV has its own response (`Response`), drawn per episode where the scenario's
 ``dynamics_randomisation`` asks for it. The commanded heading stays the simulator's heading:
 it is what the runtime's controller knows and builds the observation frame from.
+
+The safety shield predicts with the same model (`predict_response`): candidate arcs flown from
+a UAV's velocity now and after its last command (`Motion`), then the lag in closed form.
 """
 
 from __future__ import annotations
