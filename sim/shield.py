@@ -501,9 +501,8 @@ def _decide(
         row = np.cumsum(fails.reshape(-1)) - 1  # each failing UAV's place among them
         best = rank[..., 0].copy()  # the fallback's rank so far (`_rank`)
         fallback = (prop.copy(), full.copy(), proposed_cpa.copy())
-        for i, v in enumerate(
-            speeds
-        ):  # fastest first, each batched over every UAV, heading and threat
+        # fastest first, each batched over every UAV, heading and threat
+        for i, v in enumerate(speeds):
             todo = fails & ~found
             if not todo.any():
                 break
@@ -815,8 +814,9 @@ def _threat_paths(
     """The (UAV, threat) pairs that can come within the required distance, and their paths.
 
     ``committed``: the neighbours' arcs, each with its (P, B, N) displacements as flown
-    (`_committed_path`, `_predicted`); the first is every UAV's proposal. Sorted by UAV.
-    Most of the N·M and N·N pairs are far apart: gathered away, they cost nothing.
+    (`_committed_path`, `sim.dynamics.predict_response`); the first is every UAV's proposal.
+    Sorted by UAV. Most of the N·M and N·N pairs are far apart: gathered away, they cost
+    nothing.
     """
     b, n = swarm.heading_rad.shape
     horizon = float(times[-1])
