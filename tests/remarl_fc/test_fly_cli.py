@@ -66,6 +66,10 @@ def test_fly_the_example_mission_on_a_mock_in_another_process(tmp_path, capsys):
         (["--policy", "3u2o", "--mission", "missing.toml"], "cannot read the file"),
         (["--policy", "nope", "--mission", str(MISSION)], "nope"),
         (["--policy", "3u2o", "--mission", str(MISSION), "--setpoint-hz", "2"], "10 Hz"),
+        (
+            ["--mission", str(MISSION), "--vehicle-profile", "bogus"],
+            "unknown vehicle profile 'bogus'; shipped: arducopter",
+        ),
     ],
 )
 def test_fly_refuses_what_cannot_be_flown(args, message, capsys):
