@@ -25,7 +25,7 @@ a UAV's velocity now and after its last command (`Motion`), then the lag in clos
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 from numpy.typing import NDArray
@@ -66,7 +66,12 @@ class Response:
     cap_m_s: FloatArray
 
 
-def _values(profile: VehicleProfile) -> tuple[float, float, float]:
+def response_values(profile: VehicleProfile) -> tuple[float, float, float]:
+    """A profile's (delay s, velocity time constant s, acceleration cap m/s²).
+
+    For an ideal profile, the stand-ins of an ideal vehicle in a mixed batch: no delay,
+    `IDEAL_TAU_S`, `IDEAL_ACCEL_M_S2`.
+    """
     if profile.ideal:
         return 0.0, IDEAL_TAU_S, IDEAL_ACCEL_M_S2
     return profile.delay_s, profile.velocity_tau_s, profile.max_accel_m_s2
@@ -100,7 +105,7 @@ class ResponseSpec:
                 f"a vehicle delay can reach the decision step ({cfg.dt_s} s); lower "
                 "dynamics_randomisation.delay_scale"
             )
-        table = np.array([_values(p) for p in profiles])
+        table = np.array([response_values(p) for p in profiles])
         scales = (rand.delay_scale, rand.velocity_tau_scale, rand.max_accel_scale)
         step_s = cfg.dt_s / (cfg.substeps * integration_grid(cfg.substeps, cfg.dt_s))
         return cls(table, scales, step_s)
@@ -125,7 +130,7 @@ class ResponseSpec:
 def longest_delay_s(cfg: ScenarioConfig) -> float:
     """The longest transport delay the scenario can draw, seconds."""
     names = cfg.dynamics_randomisation.profiles or (cfg.dynamics,)
-    longest = max(_values(load_profile(name))[0] for name in names)
+    longest = max(response_values(load_profile(name))[0] for name in names)
     return longest * cfg.dynamics_randomisation.delay_scale[1]
 
 
@@ -306,28 +311,16 @@ class Motion:
     tau_s: FloatArray
     accel_m_s2: FloatArray
 
+    def _arrays(self) -> list[FloatArray]:
+        return [getattr(self, f.name) for f in fields(self)]
+
     def of(self, rows: BoolArray | NDArray[np.intp]) -> Motion:
         """The UAVs selected by ``rows`` (an index or a mask of the leading axis)."""
-        return Motion(
-            self.vel_m_s[rows],
-            self.last_turn_rad[rows],
-            self.last_speed_m_s[rows],
-            self.delay_s[rows],
-            self.tau_s[rows],
-            self.accel_m_s2[rows],
-        )
+        return Motion(*(v[rows] for v in self._arrays()))
 
     def flat(self, axes: int) -> Motion:
         """The same UAVs with their ``axes`` leading axes (B, N, ...) made one (R, ...)."""
-        fields = (
-            self.vel_m_s,
-            self.last_turn_rad,
-            self.last_speed_m_s,
-            self.delay_s,
-            self.tau_s,
-            self.accel_m_s2,
-        )
-        return Motion(*(np.reshape(v, (-1, *v.shape[axes:])) for v in fields))
+        return Motion(*(np.reshape(v, (-1, *v.shape[axes:])) for v in self._arrays()))
 
 
 def _lag_m(
@@ -357,12 +350,12 @@ def _lag_m(
 
 PREDICTED_STEPS = 2
 """Decision steps `predict_response` flies exactly with the response before its closed-form
-tail (`_lag_m`). At the paper's 10 m/s and 2 s, for the fitted ArduCopter (the slowest profile,
-capped at 2.5 m/s²) from rest, from full speed, turning, slowing and stopping, the tail stays
-within 0.01 m of flying twelve steps exactly. Against the same command stream replayed at
-10 ms the prediction is as close as the simulator's own integration (`INTEGRATION_STEP_S`,
-the delayed command taken at the middle of each step): 0.8 m for ArduCopter from rest, 1.05 m
-for PX4."""
+tail (`_lag_m`), at least 2 (an instant between their ends lies on the chord between them).
+At the paper's 10 m/s and 2 s, for the fitted ArduCopter (the slowest profile, capped at
+2.5 m/s²) from rest, from full speed, turning, slowing and stopping, the tail stays within
+0.01 m of flying twelve steps exactly. Against the same command stream replayed at 10 ms the
+prediction is as close as the simulator's own integration (`INTEGRATION_STEP_S`, the delayed
+command taken at the middle of each step): 0.8 m for ArduCopter from rest, 1.05 m for PX4."""
 
 
 def predict_response(
@@ -422,14 +415,10 @@ def predict_response(
     # (R, K, 2, L); before the tail: linear between the ends of the steps flown
     knots = np.arange(1, PREDICTED_STEPS + 1) * dt_s
     points = np.stack(ends, axis=-1)  # (R, K, 2, steps)
-    inside = later < knots[-1]
-    place = np.clip(np.searchsorted(knots, later) - 1, 0, max(PREDICTED_STEPS - 2, 0))
+    place = np.clip(np.searchsorted(knots, later) - 1, 0, PREDICTED_STEPS - 2)
     w = np.clip((later - knots[place]) / dt_s, 0.0, 1.0)
-    if PREDICTED_STEPS > 1:
-        near = points[..., place] + w * (points[..., place + 1] - points[..., place])
-    else:
-        near = points[..., :1]
-    rest = np.where(inside, near, tail)
+    near = points[..., place] + w * (points[..., place + 1] - points[..., place])
+    rest = np.where(later < knots[-1], near, tail)
     x = np.concatenate([arc[0], rest[..., 0, :]], axis=-1)
     y = np.concatenate([arc[1], rest[..., 1, :]], axis=-1)
     return x.reshape(*lead, k, -1), y.reshape(*lead, k, -1)

@@ -40,7 +40,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -48,7 +48,7 @@ from numpy.typing import NDArray
 from sim.arrays import BoolArray, Float32Array, FloatArray, IntArray
 from sim.config import ScenarioConfig
 from sim.dynamics import PREDICTED_STEPS, Motion, predict_response
-from sim.prediction import displacements, segment_closest_sq
+from sim.prediction import F, displacements, segment_closest_sq
 from sim.sensors import picture
 from sim.state import SwarmState
 from sim.vehicle import load_profile
@@ -459,7 +459,8 @@ def _decide(
     # 1. The proposal of every UAV at full speed: most pass, and their decision is made.
     if motion is None:
         unit_x, unit_y = (d.reshape(-1, b * n, 1) for d in _time_first(committed))
-        own = (_flown(unit_x, cruise, cruise), _flown(unit_y, cruise, cruise))  # (P, B·N, 1)
+        at = np.float32(cruise)
+        own = (_flown(unit_x, at, cruise), _flown(unit_y, at, cruise))  # (P, B·N, 1)
     else:
         ox, oy = _time_first((px[..., :1, :], py[..., :1, :]))
         own = (ox.reshape(-1, b * n, 1), oy.reshape(-1, b * n, 1))
@@ -508,7 +509,8 @@ def _decide(
                 break
             mine = paths.of(todo)
             if motion is None:
-                flown = (_flown(unit_x, v, cruise), _flown(unit_y, v, cruise))
+                at = np.float32(v)
+                flown = (_flown(unit_x, at, cruise), _flown(unit_y, at, cruise))
             else:
                 flown = (cand_x[..., i * k : (i + 1) * k], cand_y[..., i * k : (i + 1) * k])
             c, d, u = _clearance(flown, row[mine.owner], mine, (b, n), vehicle.d_col_m)
@@ -598,16 +600,11 @@ def _committed_path(
 
     The coming step at the arc's own speed, then on at the committed speed.
     """
-    out = []
-    for d in unit:
-        path = np.moveaxis(d[..., 0, :], -1, 0)  # (P, B, N) at 1 m/s
-        flown = path * arc.first_m_s[None]
-        if not np.array_equal(arc.first_m_s, swarm.speed_m_s):
-            flown[CHORDS + 1 :] = (
-                flown[CHORDS] + (path[CHORDS + 1 :] - path[CHORDS]) * swarm.speed_m_s[None]
-            )
-        out.append(flown)
-    return out[0], out[1]
+    x, y = (
+        _flown(np.moveaxis(d[..., 0, :], -1, 0), arc.first_m_s[None], swarm.speed_m_s[None])
+        for d in unit
+    )  # (P, B, N)
+    return x, y
 
 
 def _time_first(xy: tuple[FloatArray, FloatArray]) -> tuple[Float32Array, Float32Array]:
@@ -732,17 +729,19 @@ def _rank(clearance: FloatArray, near_clear: FloatArray, danger: NDArray[np.uint
     return out
 
 
-def _flown(unit: Float32Array, speed_m_s: float, cruise_m_s: float) -> Float32Array:
-    """Displacements (P, ...) of a candidate flown at ``speed_m_s`` from its 1 m/s ones.
+def _flown(unit: NDArray[F], first_m_s: Any, then_m_s: Any) -> NDArray[F]:
+    """Displacements (P, ...) of arcs flown at ``first_m_s``, then ``then_m_s``, from 1 m/s ones.
 
-    The arc at that speed over the coming step, then on at the cruise speed: slowing down (or
-    stopping) holds for one step and the next decision goes on, so a stop never hides a
-    conflict beyond the horizon by standing in an intruder's way.
+    The arc at the first speed over the coming step, then on at the second: a candidate slowed
+    down (or stopped) holds for one step and the next decision goes on at the cruise speed, so
+    a stop never hides a conflict beyond the horizon by standing in an intruder's way; a
+    neighbour's committed arc goes on at its committed speed. Speeds: scalars (of ``unit``'s
+    float type, to keep it) or arrays broadcast against ``unit[0]``.
     """
-    out: Float32Array = unit * np.float32(speed_m_s)
-    if speed_m_s != cruise_m_s:
+    out: NDArray[F] = unit * first_m_s
+    if not np.array_equal(first_m_s, then_m_s):
         end = CHORDS  # the arc's last point, at dt; the straight part's follow
-        out[end + 1 :] = out[end] + (unit[end + 1 :] - unit[end]) * cruise_m_s
+        out[end + 1 :] = out[end] + (unit[end + 1 :] - unit[end]) * then_m_s
     return out
 
 

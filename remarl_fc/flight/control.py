@@ -39,7 +39,7 @@ from remarl_fc.flight.config import Member
 from remarl_fc.flight.status import NEIGHBOUR, OBSTACLE, Status
 from remarl_fc.flight.traffic import TrafficPicture
 from remarl_fc.frames import heading_to_yaw, ne_to_sim, sim_to_ne
-from sim.dynamics import IDEAL_ACCEL_M_S2, IDEAL_TAU_S, Motion
+from sim.dynamics import Motion, response_values
 from sim.kinematics import heading_velocity
 from sim.observation import ObservationLayout, build_observations
 from sim.shield import ShieldConfig, ShieldDecision, Threats, shield
@@ -250,16 +250,8 @@ class SwarmController:
         """
         if len(profiles) != self.n:
             raise ValueError(f"{len(profiles)} vehicle profiles for {self.n} vehicles")
-        if all(p.ideal for p in profiles):
-            self.response = None
-            return
-        rows = [
-            (0.0, IDEAL_TAU_S, IDEAL_ACCEL_M_S2)
-            if p.ideal
-            else (p.delay_s, p.velocity_tau_s, p.max_accel_m_s2)
-            for p in profiles
-        ]
-        self.response = np.array(rows, dtype=np.float64)
+        ideal = all(p.ideal for p in profiles)
+        self.response = None if ideal else np.array([response_values(p) for p in profiles])
 
     def heading_at(self, now: float) -> FloatArray:
         """(N,) heading on each vehicle's current arc (straight on after the arc's end)."""

@@ -140,7 +140,6 @@ class SwarmRuntime(StackOwner):
             for px4 in (False, True)
         }
         """The profile the shield predicts a vehicle of this process with, by ``is_px4``."""
-        self._ideal = load_profile("ideal")
         self.shield = ShieldTally(cfg.shield.mode)
         """What the safety shield did (`remarl_fc.flight.shielding`)."""
         self.vehicles: dict[int, Vehicle] = {
@@ -276,9 +275,9 @@ class SwarmRuntime(StackOwner):
         mine = self.local_members()
         start_ne_m, start = await self.preparation.prepare_swarm(mine, self.peers)
         self.controller.start(start_ne_m, start)
-        # the autopilots answered: each of this process's vehicles is predicted with its own
-        # (a peer's flies on at its velocity, whatever it is)
-        profiles = [self.profiles[m.track.is_px4] if m.local else self._ideal for m in self.members]
+        # the autopilots answered: each vehicle is predicted with its own (a peer's flies on at
+        # its velocity, its command, whatever its profile)
+        profiles = [self.profiles[m.track.is_px4] for m in self.members]
         self.controller.use_profiles(profiles)
         fitted = self.cfg.shield.mode != "off" and self.cfg.shield.vehicle_model == "fitted"
         for m in mine:

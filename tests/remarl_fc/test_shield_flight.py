@@ -520,3 +520,10 @@ async def test_a_policy_that_ignores_traffic_keeps_separation_behind_the_shield(
     shield = flights["on"].runtime["shield"]
     assert shield["mode"] == "on" and shield["by_vehicle"]["1"] == shield["interventions"] >= 1
     assert flights["off"].runtime["shield"] == {"mode": "off"}
+    # the mock's ArduPilot answered: the shield predicted the vehicle with ArduCopter's fit
+
+    def said(flight: Any) -> list[str]:
+        return [text for v in flight.runtime["vehicles"] for _, text in v["events"]]
+
+    assert "the shield predicts it with the arducopter response" in said(flights["on"])
+    assert not any("predicts" in text for text in said(flights["off"]))
