@@ -14,6 +14,7 @@ distils the policy a run starts from, flown behind the safety shield, back into 
 
 from __future__ import annotations
 
+import re
 import shutil
 from pathlib import Path
 from typing import Any
@@ -30,22 +31,29 @@ from sim.policy_metadata import network_of, observation_layout, pooling_of
 
 
 def init_path(name: str) -> Path:
-    """The file of ``init``: a path (it holds "/" or ends in .safetensors) or a zoo name.
+    """The file of ``init``: a zoo name or a path to an exported file.
+
+    A zoo name is one at the zoo's top ("generalist") or in one of its subfolders
+    ("robust/generalist"), as ``eval --policy`` takes it.
 
     Raises:
         ConfigError: no such file.
     """
-    if "/" in name or name.endswith(".safetensors"):
-        path = Path(name)
-    else:
-        path = Path(__file__).parent / "zoo" / f"{name}.safetensors"
+    shipped = Path(__file__).parent / "zoo" / f"{name}.safetensors"
+    if ZOO_NAME.fullmatch(name) and shipped.is_file():
+        return shipped
+    path = Path(name) if "/" in name or name.endswith(".safetensors") else shipped
     if not path.is_file():
         raise ConfigError(
             f"train --generalist --init {name}: no such policy file ({path}); name a zoo "
-            "policy (generalist) or an exported .safetensors file"
+            "policy (generalist, robust/generalist) or an exported .safetensors file"
         )
     return path
 
+
+ZOO_NAME = re.compile(r"[A-Za-z0-9_-]+(/[A-Za-z0-9_-]+)?")
+"""A zoo name, at the zoo's top or in one of its subfolders: one folder at most, no path
+tricks (``remarl_fc.policy_io.resolve`` reads the same names)."""
 
 INIT_FILE = "init.safetensors"
 """The copy of ``init`` a run folder keeps: a resumed run starts from what it started from,

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -183,6 +184,17 @@ def test_a_bad_start_is_a_clear_error(tmp_path, name, content, match):
     cfg = tiny_cfg(tmp_path, init=init)
     with pytest.raises(ConfigError, match=match):
         RunBook.open(cfg, tmp_path / "run", PPONets.create, resume=False)
+
+
+@pytest.mark.parametrize("name", ["generalist", "robust/generalist"])
+def test_a_start_is_named_as_eval_names_a_zoo_policy(name):
+    import policies
+    from policies.generalist_init import init_path
+
+    shipped = Path(policies.__file__).parent / "zoo" / f"{name}.safetensors"
+    assert init_path(name).resolve() == shipped.resolve()
+    with pytest.raises(ConfigError, match=r"robust/generalist\) or an exported"):
+        init_path("robust/none")
 
 
 @pytest.mark.parametrize("fraction", [1.0, 0.5])
