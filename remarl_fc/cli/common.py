@@ -153,6 +153,13 @@ def add_shield_flags(p: Any, default: str) -> None:
         f"earlier ones gave the neighbours (default {base.passes})",
     )
     p.add_argument(
+        "--shield-escape-steps",
+        type=int,
+        default=base.escape_steps,
+        help="steps a UAV may hold the full turn for where no one-step heading passes "
+        f"(default {base.escape_steps}; 1: one-step headings alone; ideal vehicles)",
+    )
+    p.add_argument(
         "--shield-neighbours",
         choices=list(NEIGHBOUR_ARCS),
         default=base.neighbour_arcs,
@@ -181,6 +188,7 @@ def shield_from_args(args: argparse.Namespace) -> Any:
             neighbour_horizon_s=args.shield_neighbour_horizon,
             margin_m=args.shield_margin,
             passes=args.shield_passes,
+            escape_steps=args.shield_escape_steps,
             neighbour_arcs=args.shield_neighbours,
             vehicle_model=args.shield_vehicle_model,
         )

@@ -13,17 +13,20 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from sim.dynamics import Motion
+from sim.prediction import displacements
 from sim.scenarios import load_scenario
 from sim.shield import (
     COLLISION_INTRUDER_SOON,
     COLLISION_NEIGHBOUR_SOON,
     COLLISION_NOW,
+    ESCAPE_STEPS_MAX,
     ShieldConfig,
     Swarm,
     Threats,
     Vehicle,
     _rank,
     _severity,
+    _turns,
     candidate_grid,
     nearest_candidate,
     passing_side,
@@ -169,7 +172,8 @@ def test_the_safe_headings_are_the_candidates_that_pass_at_cruise(seed):
     """Lone UAVs (one pass decides): where the proposal fails, every candidate heading the
     decision calls safe keeps separation in the dense simulation at the cruise speed, every one
     it calls unsafe does not (0.5 m either way for the chords), and a decision at cruise speed
-    is one of them; where the proposal passes, the set is empty."""
+    is one of them, or, where none passes, a full turn (`ShieldConfig.escape_steps`); where the
+    proposal passes, the set is empty."""
     rng = np.random.default_rng(seed)
     cfg = ShieldConfig(mode="on", track_growth_m_s=0.0, headings=11)
     b, m = 16, int(rng.integers(1, 5))
@@ -186,7 +190,10 @@ def test_the_safe_headings_are_the_candidates_that_pass_at_cruise(seed):
         for k, c in enumerate(clear):
             assert (c >= -0.5) if d.safe_headings[e, 0, k] else (c < 0.5), (e, k, c)
         if d.speed_m_s[e, 0] == VEHICLE.cruise_m_s and d.safe_exists[e, 0]:
-            assert d.safe_headings[e, 0, np.argmin(np.abs(grid - d.action[e, 0]))]
+            if d.safe_headings[e, 0].any():
+                assert d.safe_headings[e, 0, np.argmin(np.abs(grid - d.action[e, 0]))]
+            else:  # no heading of one step passes: a full turn held over the next step
+                assert abs(d.action[e, 0]) == 1.0
 
 
 @settings(max_examples=200, deadline=None)
@@ -341,7 +348,7 @@ def test_with_nothing_passing_the_nearest_collision_in_time_is_avoided_first():
         np.array([[[25.0, 100.0]]]), np.array([[[1.5, -13.5]]]), np.ones((1, 1), bool),
         np.zeros((1, 1)),
     )  # fmt: skip
-    cfg = ShieldConfig(mode="on")
+    cfg = ShieldConfig(mode="on", escape_steps=1)  # the one-step candidates alone
     proposed = np.zeros((1, 2))
     decision = shield(cfg, fixed, swarm, threats, proposed)
     assert not decision.safe_exists[0, 0]
@@ -358,6 +365,58 @@ def test_with_nothing_passing_the_nearest_collision_in_time_is_avoided_first():
     assert widest > 0.5 and closest_to_neighbour(widest) < fixed.d_col_m
     assert decision.action[0, 0] < 0.0
     assert closest_to_neighbour(decision.action[0, 0]) >= fixed.d_col_m + cfg.margin_m
+
+
+@settings(max_examples=100, deadline=None)
+@given(
+    heading=st.floats(-math.pi, math.pi),
+    first=st.floats(-1.0, 1.0),
+    second=st.floats(-1.0, 1.0),
+    t=st.floats(0.0, 25.0),
+)
+def test_turns_held_over_steps_are_the_arcs_the_vehicle_flies(heading, first, second, t):
+    """`_turns` against a dense integration of the turn rate, and one step of it against the
+    one-step prediction (`sim.prediction.displacements`, what every other candidate uses)."""
+    a_max, dt = VEHICLE.max_turn_rad, VEHICLE.dt_s
+    z = _turns(np.array(heading), np.array([first, second]) * a_max, dt, np.array([t]))[0]
+    fine = np.linspace(0.0, t, 4001)
+    mid = 0.5 * (fine[1:] + fine[:-1])
+    turned = np.where(mid < dt, first * mid / dt, first + second * np.clip(mid / dt - 1, 0, 1))
+    h = heading + a_max * turned
+    dense = complex(np.sum(np.diff(fine) * np.cos(h)), np.sum(np.diff(fine) * np.sin(h)))
+    assert abs(z - dense) < 1e-5
+    times = np.array([0.0, 1.0, 2.0, 7.5, 25.0])
+    dx, dy = displacements(np.array(heading), np.array([first * a_max]), 1.0, dt, 25.0, 2)
+    one = _turns(np.array(heading), np.array([first, 0.0]) * a_max, dt, times)
+    assert np.allclose(one.real[[0, 1, 2, 4]], dx[0], atol=1e-9)
+    assert np.allclose(one.imag[[0, 1, 2, 4]], dy[0], atol=1e-9)
+
+
+def test_a_turn_wider_than_one_step_is_held_over_the_next_decision():
+    """A fixed-speed UAV 30 m from a static obstacle just right of its course: no heading of
+    one step (at most 45°, then straight) clears it, a full left turn held for two steps (90°)
+    does. The shield turns fully left now, whatever the proposal; with one-step candidates
+    alone, nothing passes."""
+    fixed = dataclasses.replace(VEHICLE, can_slow=False)
+    swarm = lone_uav()
+    threats = Threats(
+        np.array([[[30.0, -4.0]]]), np.zeros((1, 1, 2)), np.ones((1, 1), bool), np.zeros((1, 1))
+    )
+    proposed = np.full((1, 1), -0.5)  # towards the obstacle's side
+    one_step = shield(ShieldConfig(mode="on", escape_steps=1), fixed, swarm, threats, proposed)
+    assert not one_step.safe_exists[0, 0]
+    decision = shield(ShieldConfig(mode="on"), fixed, swarm, threats, proposed)
+    assert decision.safe_exists[0, 0] and not decision.safe_headings.any()
+    assert decision.action[0, 0] == 1.0
+    required = fixed.d_col_m + ShieldConfig().margin_m
+    assert decision.flown_cpa_m[0, 0] >= required
+    # the plan flown densely: a full left turn for two steps, then straight on
+    t = np.linspace(0.0, ShieldConfig().horizon_s, 20001)
+    h = fixed.max_turn_rad * np.clip(t / fixed.dt_s, 0.0, 2.0)
+    step = np.diff(t) * fixed.cruise_m_s
+    x = np.concatenate([[0.0], np.cumsum(step * np.cos(0.5 * (h[1:] + h[:-1])))])
+    y = np.concatenate([[0.0], np.cumsum(step * np.sin(0.5 * (h[1:] + h[:-1])))])
+    assert np.hypot(x - 30.0, y + 4.0).min() >= required - 0.05
 
 
 def test_the_fallback_weighs_a_collision_by_how_near_and_how_sure_it_is():
@@ -458,6 +517,9 @@ def test_bad_settings_are_refused():
         ShieldConfig(horizon_s=0.0)
     with pytest.raises(ValueError, match="track_horizon_s"):
         ShieldConfig(track_horizon_s=0.0)
+    for steps in (0, ESCAPE_STEPS_MAX + 1):
+        with pytest.raises(ValueError, match="escape_steps must be 1 to 4"):
+            ShieldConfig(escape_steps=steps)
 
 
 @pytest.mark.parametrize(
