@@ -427,7 +427,10 @@ def _decide(
     if motion is not None:  # the end of the steps the response is flown exactly: a knot
         cuts = (*cuts, PREDICTED_STEPS * dt)
     elif cfg.escape_steps > 1:  # the chords of the turns held after the coming step (`_escape`)
-        cuts = (*cuts, *(dt * (1 + i / CHORDS) for i in range(1, CHORDS * (cfg.escape_steps - 1))))
+        cuts = (
+            *cuts,
+            *(dt * (1 + i / CHORDS) for i in range(1, CHORDS * (cfg.escape_steps - 1) + 1)),
+        )
     times, split = _times(dt, horizon, cuts)  # (P,)
     later = times[CHORDS + 1 :]  # the instants after the coming step
     a_max = vehicle.max_turn_rad

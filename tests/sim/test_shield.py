@@ -392,7 +392,8 @@ def test_turns_held_over_steps_are_the_arcs_the_vehicle_flies(heading, first, se
     assert np.allclose(one.imag[[0, 1, 2, 4]], dy[0], atol=1e-9)
 
 
-def test_a_turn_wider_than_one_step_is_held_over_the_next_decision():
+@pytest.mark.parametrize("neighbour_horizon_s", [4.0, 6.0, 3.0])
+def test_a_turn_wider_than_one_step_is_held_over_the_next_decision(neighbour_horizon_s):
     """A fixed-speed UAV 30 m from a static obstacle just right of its course: no heading of
     one step (at most 45°, then straight) clears it, a full left turn held for two steps (90°)
     does. The shield turns fully left now, whatever the proposal; with one-step candidates
@@ -403,9 +404,10 @@ def test_a_turn_wider_than_one_step_is_held_over_the_next_decision():
         np.array([[[30.0, -4.0]]]), np.zeros((1, 1, 2)), np.ones((1, 1), bool), np.zeros((1, 1))
     )
     proposed = np.full((1, 1), -0.5)  # towards the obstacle's side
-    one_step = shield(ShieldConfig(mode="on", escape_steps=1), fixed, swarm, threats, proposed)
+    cfg = ShieldConfig(mode="on", neighbour_horizon_s=neighbour_horizon_s)
+    one_step = shield(dataclasses.replace(cfg, escape_steps=1), fixed, swarm, threats, proposed)
     assert not one_step.safe_exists[0, 0]
-    decision = shield(ShieldConfig(mode="on"), fixed, swarm, threats, proposed)
+    decision = shield(cfg, fixed, swarm, threats, proposed)
     assert decision.safe_exists[0, 0] and not decision.safe_headings.any()
     assert decision.action[0, 0] == 1.0
     required = fixed.d_col_m + ShieldConfig().margin_m
@@ -416,7 +418,9 @@ def test_a_turn_wider_than_one_step_is_held_over_the_next_decision():
     step = np.diff(t) * fixed.cruise_m_s
     x = np.concatenate([[0.0], np.cumsum(step * np.cos(0.5 * (h[1:] + h[:-1])))])
     y = np.concatenate([[0.0], np.cumsum(step * np.sin(0.5 * (h[1:] + h[:-1])))])
-    assert np.hypot(x - 30.0, y + 4.0).min() >= required - 0.05
+    flown = np.hypot(x - 30.0, y + 4.0).min()
+    assert flown >= required - 0.05
+    assert abs(decision.flown_cpa_m[0, 0] - flown) < 0.25  # the chords' error, within the margin
 
 
 def test_the_fallback_weighs_a_collision_by_how_near_and_how_sure_it_is():
