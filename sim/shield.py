@@ -161,7 +161,7 @@ class ShieldConfig:
     a_max and then flies straight: an intruder that needs a wider turn leaves nothing that
     passes, though turning fully now and again at the next decision clears it. Measured behind
     the generalist on the standard suite (docs/MODEL.md §21), 1 → 2 → 3 steps: mean success
-    95.5 → 96.0 → 95.9 %, UAV–UAV collisions in 0.67 → 0.53 → 0.74 % of the episodes, dense-10u
+    95.5 → 96.0 → 95.8 %, UAV–UAV collisions in 0.67 → 0.53 → 0.74 % of the episodes, dense-10u
     65 → 72 → 74 %, 50u8o 90 → 91 → 83 %. The ideal vehicle's alone: a vehicle flown with its
     fitted response slows down instead."""
 
