@@ -48,6 +48,7 @@ from numpy.typing import NDArray
 from sim.arrays import BoolArray, Float32Array, FloatArray, IntArray
 from sim.config import ScenarioConfig
 from sim.dynamics import PREDICTED_STEPS, Motion, predict_response
+from sim.kinematics import sinc_series
 from sim.prediction import F, displacements, segment_closest_sq
 from sim.sensors import picture
 from sim.state import SwarmState
@@ -629,23 +630,29 @@ def _escape(
     return passes, first, _at(cpa, pick)
 
 
-def _turns(heading: FloatArray, turns: FloatArray, dt_s: float, times: FloatArray) -> Any:
+def _turns(
+    heading: FloatArray, turns: FloatArray, dt_s: float, times: FloatArray
+) -> NDArray[np.complex128]:
     """(..., P) complex displacements at 1 m/s: per-step ``turns`` (..., S), then straight.
 
-    Each step a constant-turn-rate arc, as the simulator flies the ideal vehicle; exact at
-    ``times`` (P,). ``heading`` broadcasts against ``turns[..., 0]``.
+    Each step a constant-turn-rate arc (its chord as `sim.prediction.displacements` computes
+    it), as the simulator flies the ideal vehicle; exact at ``times`` (P,). ``heading``
+    broadcasts against ``turns[..., 0]``; every turn at most a_max ≤ π/2 a step.
     """
     s = turns.shape[-1]
     zeros = np.zeros((*turns.shape[:-1], 1))
     h = np.asarray(heading)[..., None] + np.concatenate([zeros, np.cumsum(turns, -1)], -1)
     rate = np.broadcast_to(np.concatenate([turns, zeros], axis=-1), h.shape)  # per step
     half = 0.5 * rate[..., :s]
-    step = dt_s * np.sinc(half / np.pi) * np.exp(1j * (h[..., :s] + half))  # each whole step
+    step = dt_s * sinc_series(half) * np.exp(1j * (h[..., :s] + half))  # each whole step
     ends = np.concatenate([np.zeros((*h.shape[:-1], 1)), np.cumsum(step, axis=-1)], axis=-1)
     j = np.minimum((times / dt_s + 1e-9).astype(np.intp), s)  # (P,) the step each time is in
     into = times - j * dt_s
     half_in = 0.5 * rate[..., j] * into / dt_s
-    return ends[..., j] + into * np.sinc(half_in / np.pi) * np.exp(1j * (h[..., j] + half_in))
+    out: NDArray[np.complex128] = ends[..., j] + into * sinc_series(half_in) * np.exp(
+        1j * (h[..., j] + half_in)
+    )
+    return out
 
 
 CHORDS = 2
