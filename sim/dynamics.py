@@ -367,16 +367,18 @@ def predict_response(
     dt_s: float,
     chords: int,
     later_s: FloatArray,
+    second_rad: FloatArray | None = None,
 ) -> tuple[FloatArray, FloatArray]:
     """Displacements (x, y), each (..., K, chords + 1 + L), of K candidate arcs of UAVs (...).
 
     What `sim.prediction.displacements` predicts for the ideal vehicle, flown with each UAV's
     fitted response (`fly_response`, the simulator's own model): the coming step commands the
     arc of ``turn_rad`` (..., K) at ``first_m_s`` (broadcast to it), after the last decision's
-    arc for the delay; the steps after it hold its final heading at ``then_m_s``. ``motion``:
-    the UAVs of ``heading_rad`` (...). Sampled at the ``chords`` chords of the coming step,
-    then at ``later_s`` (L,), instants after it: flown exactly for `PREDICTED_STEPS` steps
-    (linear between their ends); from there on in closed form (`_lag_m`): the command holds,
+    arc for the delay; the next step the arc of ``second_rad`` (..., K; None: no turn) at
+    ``then_m_s``, and the steps after it hold its final heading. ``motion``: the UAVs of
+    ``heading_rad`` (...). Sampled at the ``chords`` chords of the coming step, then at
+    ``later_s`` (L,), instants after it: flown exactly for `PREDICTED_STEPS` steps (linear
+    between the chords of each); from there on in closed form (`_lag_m`): the command holds,
     and the velocity error keeps its direction.
     """
     lead, k = heading_rad.shape, turn_rad.shape[-1]
@@ -401,22 +403,27 @@ def predict_response(
     track = fly_response(np.zeros((*shape, 2)), vel, cmd, response, moving, chords, dt_s)
     arc = [np.moveaxis(d, 0, -1).astype(np.float64) for d in (track.x, track.y)]
     final = heading + turn_rad
+    second = np.zeros(shape) if second_rad is None else second_rad.reshape(shape)
     ends, vel_end = [track.pos_m], track.vel_m_s  # at the end of each step flown
-    cmd = Commands(final, np.zeros(shape), then, turn_rad, first)
+    inside = []  # (R, K, 2) at each chord inside the steps after the first
+    cmd = Commands(final, second, then, turn_rad, first)
+    final = final + second
     for _ in range(PREDICTED_STEPS - 1):
         track = fly_response(ends[-1], vel_end, cmd, response, moving, chords, dt_s)
+        inside += [np.stack([track.x[i], track.y[i]], axis=-1) for i in range(1, chords)]
+        inside.append(track.pos_m)
         ends.append(track.pos_m)
         vel_end = track.vel_m_s
-        cmd = Commands(final, np.zeros(shape), then, np.zeros(shape), then)
+        cmd = Commands(final, np.zeros(shape), then, cmd.turn_rad, then)  # the last turn late
     later = np.asarray(later_s, dtype=np.float64)
     c = np.stack([then * np.cos(final), then * np.sin(final)], axis=-1)  # (R, K, 2)
     s = np.maximum(later - PREDICTED_STEPS * dt_s, 0.0)  # (L,) into the tail
     tail = ends[-1][..., None] + c[..., None] * s - _lag_m(c - vel_end, tau, accel, s)
-    # (R, K, 2, L); before the tail: linear between the ends of the steps flown
-    knots = np.arange(1, PREDICTED_STEPS + 1) * dt_s
-    points = np.stack(ends, axis=-1)  # (R, K, 2, steps)
-    place = np.clip(np.searchsorted(knots, later) - 1, 0, PREDICTED_STEPS - 2)
-    w = np.clip((later - knots[place]) / dt_s, 0.0, 1.0)
+    # (R, K, 2, L); before the tail: linear between the chords of the steps flown
+    knots = dt_s * (1 + np.arange(chords * (PREDICTED_STEPS - 1) + 1) / chords)
+    points = np.stack([ends[0], *inside], axis=-1).astype(np.float64)  # (R, K, 2, knots)
+    place = np.clip(np.searchsorted(knots, later) - 1, 0, len(knots) - 2)
+    w = np.clip((later - knots[place]) / (dt_s / chords), 0.0, 1.0)
     near = points[..., place] + w * (points[..., place + 1] - points[..., place])
     rest = np.where(later < knots[-1], near, tail)
     x = np.concatenate([arc[0], rest[..., 0, :]], axis=-1)

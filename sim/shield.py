@@ -427,7 +427,7 @@ def _decide(
     motion = swarm.motion
     if motion is not None:  # the end of the steps the response is flown exactly: a knot
         cuts = (*cuts, PREDICTED_STEPS * dt)
-    elif cfg.escape_steps > 1:  # the chords of the turns held after the coming step (`_escape`)
+    if cfg.escape_steps > 1:  # the chords of the turns held after the coming step (`_escape`)
         cuts = (
             *cuts,
             *(dt * (1 + i / CHORDS) for i in range(1, CHORDS * (cfg.escape_steps - 1) + 1)),
@@ -556,8 +556,10 @@ def _decide(
                 np.where(better, v, fallback[1]),
                 np.where(better, _at(d, top), fallback[2]),
             )
-        todo = fails & ~found
-        if cfg.escape_steps > 1 and motion is None and todo.any():
+        # held turns only where every intruder is known exactly: against ADS-B tracks, whose
+        # position errors the check does not model, they cost the real world (docs/MODEL.md §21)
+        todo = fails & ~found & ~np.logical_or.reduce(threats.tracked, axis=-1)[:, None]
+        if cfg.escape_steps > 1 and todo.any():
             # 3. A full turn held over the next decisions, for the UAVs still without one.
             now, escape, escape_cpa = _escape(cfg, vehicle, swarm, prop, todo, paths, times)
             turn = np.where(now, escape, turn)
@@ -608,17 +610,35 @@ def _escape(
         (B, N) each: a plan passes; its first step (±1, normalised); its closest approach.
     """
     b, n = prop.shape
-    held = np.arange(2, cfg.escape_steps + 1)  # (H,) steps of each plan's turn
+    motion = swarm.motion
+    # a fitted vehicle's plans: as far as its response is flown exactly (`PREDICTED_STEPS`)
+    longest = cfg.escape_steps if motion is None else min(cfg.escape_steps, PREDICTED_STEPS)
+    held = np.arange(2, longest + 1)  # (H,) steps of each plan's turn
     side = np.array([-1.0, 1.0])
     firsts = np.tile(side, len(held))  # (C,) = (H · 2,)
     steps = np.repeat(held, len(side))
-    rates = np.where(np.arange(cfg.escape_steps) < steps[:, None], firsts[:, None], 0.0)
-    start = swarm.heading_rad[todo][:, None]  # (F, 1)
-    z = _turns(start, rates * vehicle.max_turn_rad, vehicle.dt_s, times)  # (F, C, P) at 1 m/s
-    z *= vehicle.cruise_m_s
-    flown = tuple(
-        np.ascontiguousarray(np.moveaxis(d, -1, 0), dtype=np.float32) for d in (z.real, z.imag)
-    )
+    turns = np.where(np.arange(longest) < steps[:, None], firsts[:, None], 0.0)
+    turns *= vehicle.max_turn_rad  # (C, S) each plan's turn per step
+    start = swarm.heading_rad[todo]  # (F,)
+    if motion is None:
+        z = _turns(start[:, None], turns, vehicle.dt_s, times)  # (F, C, P) at 1 m/s
+        z *= vehicle.cruise_m_s
+        flown = _time_first((z.real, z.imag))
+    else:  # through the response, from each UAV's motion now (the tail holds the final turn)
+        wide = np.broadcast_to(turns, (len(start), *turns.shape))
+        flown = _time_first(
+            predict_response(
+                start,
+                wide[..., 0],
+                vehicle.cruise_m_s,
+                vehicle.cruise_m_s,
+                motion.of(todo),
+                vehicle.dt_s,
+                CHORDS,
+                times[CHORDS + 1 :],
+                second_rad=wide[..., 1],
+            )
+        )
     row = np.cumsum(todo.reshape(-1)) - 1  # each UAV's place among them
     mine = paths.of(todo)
     clear, cpa, _ = _clearance((flown[0], flown[1]), row[mine.owner], mine, (b, n), vehicle.d_col_m)

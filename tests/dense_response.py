@@ -21,17 +21,20 @@ def dense_track(
     then: float,
     dt_s: float,
     horizon_s: float,
+    second: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(times (T,), positions (T, 2) from the origin, velocity at time 0 (2,)).
 
     The last decision's arc (heading − last_turn → heading at ``last_speed``) is commanded
     from −dt, starting at rest on its first heading's velocity; the coming arc (heading →
-    heading + turn at ``first``) from 0; its final heading at ``then`` from dt on.
+    heading + turn at ``first``) from 0; then at ``then`` from dt on the arc turning by
+    ``second`` more, and its final heading from 2·dt on.
     """
     t = np.arange(-dt_s, horizon_s + STEP_S / 2, STEP_S)
     past = t < 0
     frac = np.clip(np.where(past, (t + dt_s) / dt_s, t / dt_s), 0.0, 1.0)
     course = np.where(past, heading - last_turn + last_turn * frac, heading + turn * frac)
+    course = course + second * np.clip(t / dt_s - 1.0, 0.0, 1.0)
     speed = np.where(past, last_speed, np.where(t < dt_s, first, then))
     cmd = speed[:, None] * np.stack([np.cos(course), np.sin(course)], axis=-1)
     vel = respond(profile, t, cmd, cmd[0], dt_s=STEP_S)

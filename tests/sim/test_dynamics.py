@@ -288,17 +288,42 @@ def test_a_predicted_response_is_the_track_the_vehicle_flies(
     np.testing.assert_allclose(tail, flown, atol=0.05)
 
 
+@pytest.mark.parametrize("profile", ["arducopter", "px4"])
+@pytest.mark.parametrize("second", [-1.0, 0.0, 1.0])
+def test_a_turn_in_the_next_step_is_flown_as_the_replay_flies_it(profile, second):
+    """The next step's arc (`predict_response`'s ``second_rad``, the shield's turns held over
+    two steps) against the command stream replayed at 10 ms, at its chord and after it; no
+    second turn is the prediction without one, exactly."""
+    prof = load_profile(profile)
+    a_max, dt = math.pi / 4, 2.0
+    _, ref, vel0 = dense_track(prof, 0.3, 0.0, 10.0, a_max, 10.0, 10.0, dt, 25.0, second * a_max)
+    motion = Motion(
+        vel0[None], np.zeros(1), np.full(1, 10.0), np.array([prof.delay_s]),
+        np.array([prof.velocity_tau_s]), np.array([prof.max_accel_m_s2]),
+    )  # fmt: skip
+    later = np.array([3.0, 4.0, 10.0, 25.0])
+    turn = np.array([[a_max]])
+    args = (np.full(1, 0.3), turn, 10.0, 10.0, motion, dt, 2, later)
+    x, y = predict_response(*args, second_rad=np.array([[second * a_max]]))
+    at = np.rint(np.concatenate([[0.0, 1.0, 2.0], later]) / 0.01).astype(int)
+    gap = np.hypot(x[0, 0] - ref[at, 0], y[0, 0] - ref[at, 1])
+    assert gap.max() < 1.5, gap
+    if second == 0.0:
+        plain = predict_response(*args)
+        assert np.array_equal(plain[0], x) and np.array_equal(plain[1], y)
+
+
 def test_between_the_steps_flown_a_prediction_is_the_chord_and_a_stop_is_braked():
-    """An instant between the end of the coming step and the end of the next lies on the
-    chord between them; a commanded stop from 10 m/s still coasts metres (what the ideal
-    vehicle, stopping at once, never does)."""
+    """An instant between two chords of the next step lies on the chord between them; a
+    commanded stop from 10 m/s still coasts metres (what the ideal vehicle, stopping at once,
+    never does)."""
     prof = load_profile("arducopter")
     motion = Motion(
         np.array([[10.0, 0.0]]), np.zeros(1), np.full(1, 10.0), np.full(1, prof.delay_s),
         np.full(1, prof.velocity_tau_s), np.full(1, prof.max_accel_m_s2),
     )  # fmt: skip
     x, y = predict_response(
-        np.zeros(1), np.array([[0.5, 0.0]]), 0.0, 10.0, motion, 2.0, 2, np.array([3.0, 4.0])
+        np.zeros(1), np.array([[0.5, 0.0]]), 0.0, 10.0, motion, 2.0, 2, np.array([2.5, 3.0])
     )
     np.testing.assert_allclose(x[..., 3], 0.5 * (x[..., 2] + x[..., 4]))
     np.testing.assert_allclose(y[..., 3], 0.5 * (y[..., 2] + y[..., 4]))

@@ -421,6 +421,36 @@ def test_a_turn_wider_than_one_step_is_held_over_the_next_decision(neighbour_hor
     flown = np.hypot(x - 30.0, y + 4.0).min()
     assert flown >= required - 0.05
     assert abs(decision.flown_cpa_m[0, 0] - flown) < 0.25  # the chords' error, within the margin
+    # the same obstacle known from an ADS-B report: no turn is held against a track
+    tracked = dataclasses.replace(threats, intruder_age_s=np.full((1, 1), 0.5))
+    assert not shield(cfg, fixed, swarm, tracked, proposed).safe_exists[0, 0]
+
+
+def test_a_fitted_vehicle_holds_its_turn_as_its_response_flies_it():
+    """A fitted ArduCopter at 5 m/s that cannot slow, 34 m from a static obstacle just right of
+    its course: late and wide, no heading of one step clears it; a full left turn held for two
+    steps does, predicted through the response within the prediction's tolerance of the
+    command stream replayed at 10 ms."""
+    prof = load_profile("arducopter")
+    fixed = dataclasses.replace(VEHICLE, can_slow=False)
+    a_max, dt = fixed.max_turn_rad, fixed.dt_s
+    _, ref, vel0 = dense_track(prof, 0.0, 0.0, 5.0, a_max, 5.0, 5.0, dt, 25.0, a_max)
+    one = np.ones((1, 1))
+    motion = Motion(
+        vel0[None, None], 0 * one, 5 * one, prof.delay_s * one, prof.velocity_tau_s * one,
+        prof.max_accel_m_s2 * one,
+    )  # fmt: skip
+    swarm = dataclasses.replace(lone_uav(), motion=motion)
+    obstacle = np.array([34.0, -4.0])
+    threats = Threats(obstacle[None, None], np.zeros((1, 1, 2)), np.ones((1, 1), bool), 0 * one)
+    proposed = np.full((1, 1), -0.5)
+    cfg = ShieldConfig(mode="on")
+    one_step = shield(dataclasses.replace(cfg, escape_steps=1), fixed, swarm, threats, proposed)
+    assert not one_step.safe_exists[0, 0]
+    decision = shield(cfg, fixed, swarm, threats, proposed)
+    assert decision.safe_exists[0, 0] and decision.action[0, 0] == 1.0
+    flown = np.hypot(*(ref - obstacle).T).min()
+    assert abs(decision.flown_cpa_m[0, 0] - flown) < 1.5
 
 
 def test_the_fallback_weighs_a_collision_by_how_near_and_how_sure_it_is():
