@@ -163,8 +163,10 @@ class ShieldConfig:
     passes, though turning fully now and again at the next decision clears it. Measured behind
     the generalist on the standard suite (docs/MODEL.md §21), 1 → 2 → 3 steps: mean success
     95.5 → 96.0 → 95.8 %, UAV–UAV collisions in 0.67 → 0.53 → 0.74 % of the episodes, dense-10u
-    65 → 72 → 74 %, 50u8o 90 → 91 → 83 %. The ideal vehicle's alone: a vehicle flown with its
-    fitted response slows down instead."""
+    65 → 72 → 74 %, 50u8o 90 → 91 → 83 %. A vehicle flown with its fitted response holds its
+    turn for two steps at most (its response is predicted exactly over two). None is held
+    against an ADS-B track, whose position errors the check does not model: held there, they
+    cost the real world's eight paper scenarios 0.5 and 0.8 points on two draws."""
 
     def __post_init__(self) -> None:
         if self.vehicle_model not in VEHICLE_MODELS:

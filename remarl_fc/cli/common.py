@@ -157,7 +157,7 @@ def add_shield_flags(p: Any, default: str) -> None:
         type=int,
         default=base.escape_steps,
         help="steps a UAV may hold the full turn for where no one-step heading passes "
-        f"(default {base.escape_steps}; 1: one-step headings alone; ideal vehicles)",
+        f"(default {base.escape_steps}; 1: one-step headings alone; never against ADS-B tracks)",
     )
     p.add_argument(
         "--shield-neighbours",
