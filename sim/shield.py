@@ -22,7 +22,8 @@ each of them (the "bands" of detect-and-avoid systems such as NASA's DAIDALUS, o
 candidates a turn-limited UAV can fly). The policy's action passes when its closest approach
 stays ≥ d_col + ``margin_m`` (plus the intruder's uncertainty) over the horizon; otherwise the
 shield flies the passing heading change nearest to the proposed one at full speed, then (where
-the vehicle can slow down) the fastest slower speed with a passing heading, nearest first; when
+the vehicle can slow down) the fastest slower speed with a passing heading, nearest first; then,
+where no intruder is a track, a full turn held over this step and the next (`_escape`); when
 nothing passes, the least dangerous candidate (`_rank`: it avoids a collision predicted in the
 coming step first, then one with an intruder within the neighbour look-ahead, then one with a
 neighbour in it; then the largest clearance, the closest approach minus what is required).
