@@ -350,7 +350,7 @@ def _lag_m(
 
 PREDICTED_STEPS = 2
 """Decision steps `predict_response` flies exactly with the response before its closed-form
-tail (`_lag_m`), at least 2 (an instant between their ends lies on the chord between them).
+tail (`_lag_m`), at least 2 (an instant inside them lies on the chord between their chords).
 At the paper's 10 m/s and 2 s, for the fitted ArduCopter (the slowest profile, capped at
 2.5 m/s²) from rest, from full speed, turning, slowing and stopping, the tail stays within
 0.01 m of flying twelve steps exactly. Against the same command stream replayed at 10 ms the
@@ -404,24 +404,21 @@ def predict_response(
     arc = [np.moveaxis(d, 0, -1).astype(np.float64) for d in (track.x, track.y)]
     final = heading + turn_rad
     second = np.zeros(shape) if second_rad is None else second_rad.reshape(shape)
-    ends, vel_end = [track.pos_m], track.vel_m_s  # at the end of each step flown
-    inside = []  # (R, K, 2) at each chord inside the steps after the first
+    flown = [track.pos_m]  # (R, K, 2) at the first step's end, then each chord after it
     cmd = Commands(final, second, then, turn_rad, first)
     final = final + second
     for _ in range(PREDICTED_STEPS - 1):
-        track = fly_response(ends[-1], vel_end, cmd, response, moving, chords, dt_s)
-        inside += [np.stack([track.x[i], track.y[i]], axis=-1) for i in range(1, chords)]
-        inside.append(track.pos_m)
-        ends.append(track.pos_m)
-        vel_end = track.vel_m_s
+        track = fly_response(flown[-1], track.vel_m_s, cmd, response, moving, chords, dt_s)
+        flown += [np.stack([track.x[i], track.y[i]], axis=-1) for i in range(1, chords)]
+        flown.append(track.pos_m)
         cmd = Commands(final, np.zeros(shape), then, cmd.turn_rad, then)  # the last turn late
     later = np.asarray(later_s, dtype=np.float64)
     c = np.stack([then * np.cos(final), then * np.sin(final)], axis=-1)  # (R, K, 2)
     s = np.maximum(later - PREDICTED_STEPS * dt_s, 0.0)  # (L,) into the tail
-    tail = ends[-1][..., None] + c[..., None] * s - _lag_m(c - vel_end, tau, accel, s)
+    tail = flown[-1][..., None] + c[..., None] * s - _lag_m(c - track.vel_m_s, tau, accel, s)
     # (R, K, 2, L); before the tail: linear between the chords of the steps flown
     knots = dt_s * (1 + np.arange(chords * (PREDICTED_STEPS - 1) + 1) / chords)
-    points = np.stack([ends[0], *inside], axis=-1).astype(np.float64)  # (R, K, 2, knots)
+    points = np.stack(flown, axis=-1).astype(np.float64)  # (R, K, 2, knots)
     place = np.clip(np.searchsorted(knots, later) - 1, 0, len(knots) - 2)
     w = np.clip((later - knots[place]) / (dt_s / chords), 0.0, 1.0)
     near = points[..., place] + w * (points[..., place + 1] - points[..., place])
