@@ -24,9 +24,10 @@ stays ≥ d_col + ``margin_m`` (plus the intruder's uncertainty) over the horizo
 shield flies the passing heading change nearest to the proposed one at full speed, then (where
 the vehicle can slow down) the fastest slower speed with a passing heading, nearest first; then,
 where no intruder is a track, a full turn held over this step and the next (`_escape`); when
-nothing passes, the least dangerous candidate (`_rank`: it avoids a collision predicted in the
-coming step first, then one with an intruder within the neighbour look-ahead, then one with a
-neighbour in it; then the largest clearance, the closest approach minus what is required).
+nothing passes, the least dangerous candidate, of one step or held (`_rank`: it avoids a
+collision predicted in the coming step first, then one with an intruder within the neighbour
+look-ahead, then one with a neighbour in it; then the largest clearance, the closest approach
+minus what is required).
 Nothing after a UAV reaches its target (its distance over the cruise speed, at least the coming
 step) is checked: it leaves, or hovers where nothing of the swarm is headed; a
 straight line past the target would see conflicts the UAV never flies into.
@@ -564,11 +565,18 @@ def _decide(
         todo = fails & ~found & ~np.logical_or.reduce(threats.tracked, axis=-1)[:, None]
         if cfg.escape_steps > 1 and todo.any():
             # 3. A full turn held over the next decisions, for the UAVs still without one.
-            now, escape, escape_cpa = _escape(cfg, vehicle, swarm, prop, todo, paths, times)
-            turn = np.where(now, escape, turn)
-            flown_cpa = np.where(now, escape_cpa, flown_cpa)
-            found = found | now
-        # 4. Nothing passes: the least dangerous (`_rank`).
+            held = _escape(cfg, vehicle, swarm, prop, todo, paths, times)
+            turn = np.where(held.passes, held.first, turn)
+            flown_cpa = np.where(held.passes, held.cpa_m, flown_cpa)
+            found = found | held.passes
+            # where none passes either, the least dangerous of them competes for the fallback
+            better = todo & ~held.passes & (held.top_rank > best)
+            fallback = (
+                np.where(better, held.top_first, fallback[0]),
+                np.where(better, cruise, fallback[1]),
+                np.where(better, held.top_cpa_m, fallback[2]),
+            )
+        # 4. Nothing passes: the least dangerous (`_rank`), of one step or held.
         turn = np.where(found, turn, fallback[0])
         speed = np.where(found, speed, fallback[1])
         flown_cpa = np.where(found, flown_cpa, fallback[2])
@@ -591,6 +599,25 @@ def _decide(
     )
 
 
+@dataclass(frozen=True)
+class HeldTurns:
+    """What `_escape` found for the UAVs it tried, (B, N) each.
+
+    Attributes:
+        passes: a plan passes. first: the first step of the one flown (±1, normalised).
+        cpa_m: its predicted closest approach. top_rank, top_first, top_cpa_m: where none
+        passes, the least dangerous plan (`_rank`): its rank, first step and closest approach,
+        which compete with the one-step candidates for the fallback.
+    """
+
+    passes: BoolArray
+    first: FloatArray
+    cpa_m: FloatArray
+    top_rank: FloatArray
+    top_first: FloatArray
+    top_cpa_m: FloatArray
+
+
 def _escape(
     cfg: ShieldConfig,
     vehicle: Vehicle,
@@ -599,7 +626,7 @@ def _escape(
     todo: BoolArray,
     paths: ThreatPaths,
     times: FloatArray,
-) -> tuple[BoolArray, FloatArray, FloatArray]:
+) -> HeldTurns:
     """Full turns held over 2 … ``cfg.escape_steps`` steps for the UAVs ``todo`` (B, N).
 
     Each such plan turns by a_max at this decision and at the next ones, then flies straight
@@ -607,10 +634,8 @@ def _escape(
     steps that pass first; among the two sides, the one nearer the proposal. Only its first
     step is flown: the next decision checks again, and its neighbours keep clear of that step
     then straight on, as of any other decision (they re-plan every step; keeping clear of the
-    whole turn changed nothing measurable, docs/MODEL.md §21).
-
-    Returns:
-        (B, N) each: a plan passes; its first step (±1, normalised); its closest approach.
+    whole turn changed nothing measurable, docs/MODEL.md §21). Where none passes, the least
+    dangerous plan competes for the fallback with the one-step candidates, by `_rank`.
     """
     b, n = prop.shape
     motion = swarm.motion
@@ -644,13 +669,21 @@ def _escape(
         )
     row = np.cumsum(todo.reshape(-1)) - 1  # each UAV's place among them
     mine = paths.of(todo)
-    clear, cpa, _ = _clearance((flown[0], flown[1]), row[mine.owner], mine, (b, n), vehicle.d_col_m)
+    clear, cpa, rank = _clearance(
+        (flown[0], flown[1]), row[mine.owner], mine, (b, n), vehicle.d_col_m
+    )
     ok = (clear >= 0.0) & todo[..., None]
     order = steps + 0.25 * np.abs(firsts - prop[..., None])  # (B, N, C); |offset| ≤ 2
     pick = np.where(ok, order, np.inf).argmin(axis=-1)
-    passes: BoolArray = np.logical_or.reduce(ok, axis=-1)
-    first: FloatArray = firsts[pick]
-    return passes, first, _at(cpa, pick)
+    top = rank.argmax(axis=-1)
+    return HeldTurns(
+        passes=np.logical_or.reduce(ok, axis=-1),
+        first=firsts[pick],
+        cpa_m=_at(cpa, pick),
+        top_rank=_at(rank, top),
+        top_first=firsts[top],
+        top_cpa_m=_at(cpa, top),
+    )
 
 
 def _turns(

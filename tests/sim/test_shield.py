@@ -453,6 +453,34 @@ def test_a_fitted_vehicle_holds_its_turn_as_its_response_flies_it():
     assert abs(decision.flown_cpa_m[0, 0] - flown) < 1.5
 
 
+def test_where_nothing_passes_a_held_turn_can_be_the_least_dangerous():
+    """A fixed-speed UAV between two static obstacles, one 32 m ahead just right of its course,
+    one to its left: nothing passes, of one step or held. The least dangerous heading of one
+    step turns left, into a collision; a full right turn held for two steps keeps d_col from
+    both (not the margin): the fallback flies its first step, and says how close it comes."""
+    fixed = dataclasses.replace(VEHICLE, can_slow=False)
+    swarm = lone_uav()
+    obstacles = np.array([[32.0, -4.0], [23.0, 29.0]])
+    threats = Threats(obstacles[None], np.zeros((1, 2, 2)), np.ones((1, 2), bool), np.zeros((1, 2)))
+    proposed = np.full((1, 1), 0.5)
+    cfg = ShieldConfig(mode="on")
+    one_step = shield(dataclasses.replace(cfg, escape_steps=1), fixed, swarm, threats, proposed)
+    assert not one_step.safe_exists[0, 0] and one_step.action[0, 0] > 0.0
+    assert one_step.flown_cpa_m[0, 0] < fixed.d_col_m
+    decision = shield(cfg, fixed, swarm, threats, proposed)
+    assert not decision.safe_exists[0, 0] and decision.intervened[0, 0]
+    assert decision.action[0, 0] == -1.0 and decision.speed_m_s[0, 0] == fixed.cruise_m_s
+    # the plan flown densely: a full right turn for two steps, then straight on
+    t = np.linspace(0.0, cfg.horizon_s, 20001)
+    h = -fixed.max_turn_rad * np.clip(t / fixed.dt_s, 0.0, 2.0)
+    step = np.diff(t) * fixed.cruise_m_s
+    x = np.concatenate([[0.0], np.cumsum(step * np.cos(0.5 * (h[1:] + h[:-1])))])
+    y = np.concatenate([[0.0], np.cumsum(step * np.sin(0.5 * (h[1:] + h[:-1])))])
+    flown = np.hypot(x[:, None] - obstacles[:, 0], y[:, None] - obstacles[:, 1]).min()
+    assert fixed.d_col_m <= flown < fixed.d_col_m + cfg.margin_m
+    assert abs(decision.flown_cpa_m[0, 0] - flown) < 0.25  # the chords' error
+
+
 def test_the_fallback_weighs_a_collision_by_how_near_and_how_sure_it_is():
     """The coming step's segments weigh most for any threat; within the neighbour look-ahead an
     intruder's (flown straight, as predicted) more than a neighbour's (it decides again)."""
