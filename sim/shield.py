@@ -165,7 +165,9 @@ class ShieldConfig:
     passes, though turning fully now and again at the next decision clears it. Measured behind
     the generalist on the standard suite (docs/MODEL.md §21), 1 → 2 → 3 steps: mean success
     95.5 → 96.0 → 95.8 %, UAV–UAV collisions in 0.67 → 0.53 → 0.74 % of the episodes, dense-10u
-    65 → 72 → 74 %, 50u8o 90 → 91 → 83 %. A vehicle flown with its fitted response holds its
+    65 → 72 → 74 %, 50u8o 90 → 91 → 83 %. Where none of them passes either, the least
+    dangerous competes with the one-step candidates for the fallback: at two steps 96.06 %,
+    UAV–UAV collisions in 0.47 % of the episodes. A vehicle flown with its fitted response holds its
     turn for two steps at most (its response is predicted exactly over two). None is held
     against an ADS-B track, whose position errors the check does not model: held there, they
     cost the real world's eight paper scenarios 0.5 and 0.8 points on two draws."""
