@@ -31,7 +31,8 @@ take any number of them in any order. The flat observation, in this order:
 Δψ is the other UAV's commanded heading minus the UAV's own (its cos and sin are 0, and "ψ
 known" 0, where the heading is not known, e.g. a vehicle commanded by someone else). Rows hold
 the nearest vehicles inside the sensing range and aperture, nearest first; the neighbours are
-the other UAVs still present (``uav_valid``), never the UAV itself.
+the other UAVs of the UAV's own swarm still present (``uav_valid``), never the UAV itself; the
+UAVs of other swarms (``uav_group``) are intruder rows (`OTHER_SWARMS`).
 """
 
 from __future__ import annotations
@@ -178,6 +179,7 @@ def build_observations(
     uav_valid: BoolArray | None = None,
     commanded_heading_rad: FloatArray | None = None,
     heading_known: BoolArray | None = None,
+    uav_group: IntArray | None = None,
 ) -> Observations:
     """Build every UAV's observation from plain arrays.
 
@@ -196,6 +198,9 @@ def build_observations(
         commanded_heading_rad: (B, N) version 2: the heading each UAV is commanded to fly (the
             neighbours' Δψ); None: ``own_heading_rad``.
         heading_known: (B, N) version 2: whose commanded heading the others know; None: all.
+        uav_group: (N,) version 2: the swarm each UAV flies with (`UAVConfig.groups`); a UAV's
+            neighbours are its own swarm's, and the other swarms' UAVs are among its intruder
+            rows (`OTHER_SWARMS`). None: one swarm.
 
     Returns:
         `Observations` (rows, mask, sensed).
@@ -217,13 +222,91 @@ def build_observations(
         heading_cos_sin,
     )
     if layout.version == 2:
-        return _build_v2(*common, uav_valid, commanded_heading_rad, heading_known)
+        swarms = None if uav_group is None else _formations(np.asarray(uav_group))
+        if swarms is None or len(np.unique(swarms)) < 2:
+            return _build_v2(*common, uav_valid, commanded_heading_rad, heading_known)
+        return _build_v2_swarms(*common, uav_valid, commanded_heading_rad, heading_known, swarms)
     b, n, _ = own_pos_m.shape
     # One flat float32 array holds every observation; rows and mask are views of it.
     storage = np.zeros((b, n, layout.size), dtype=np.float32)
     sensed = _build_v1(*common, storage)
     rows = storage[..., : layout.rows * COLUMNS].reshape(b, n, layout.rows, COLUMNS)
     mask = storage[..., layout.rows * COLUMNS :]
+    return Observations(rows, mask, sensed, storage)
+
+
+OTHER_SWARMS = "intruders"
+"""What a UAV of one swarm sees of another swarm's UAVs (version 2, `UAVConfig.groups`): rows
+among the intruders, nearest first with them, not neighbours. As neighbours, flying their own
+formation to their own targets, they drew UAVs after them: the generalist, seeing two crossing
+swarms as one, left its own in 53 of the 55 episodes two lines of five lost, flying with the
+other line for hundreds of metres; as intruders it flew 96 % of them (docs/MODEL.md §19)."""
+
+
+def _formations(group: IntArray) -> IntArray:
+    """Each UAV's swarm for `OTHER_SWARMS`, the UAVs that fly alone (a swarm of one) as one.
+
+    A UAV alone has no formation of its own to be drawn from: the others stay its neighbours,
+    as they stay each other's (random paths: 97.5 % of the suite's episodes that way, 94 % with
+    every other UAV an intruder row).
+    """
+    sizes = np.bincount(group)
+    out: IntArray = np.where(sizes[group] > 1, group, -1)
+    return out
+
+
+def _build_v2_swarms(
+    layout: ObservationLayout,
+    own_pos_m: FloatArray,
+    own_heading_rad: FloatArray,
+    own_vel_m_s: FloatArray,
+    target_m: FloatArray,
+    centre_m: FloatArray,
+    obstacle_pos_m: FloatArray,
+    obstacle_vel_m_s: FloatArray,
+    obstacle_valid: BoolArray | None,
+    heading_cos_sin: tuple[FloatArray, FloatArray] | None,
+    uav_valid: BoolArray | None,
+    commanded_heading_rad: FloatArray | None,
+    heading_known: BoolArray | None,
+    uav_group: IntArray,
+) -> Observations:
+    """`_build_v2` for several swarms (`OTHER_SWARMS`): built once per swarm, its UAVs' rows kept.
+
+    For each swarm, the others' UAVs that are present join the intruders (after them, so that
+    ``sensed`` keeps its M obstacles) and are no one's neighbour. A loop over the swarms, a few
+    at most, each pass batched over every environment and UAV.
+    """
+    b, n, _ = own_pos_m.shape
+    group = np.asarray(uav_group)
+    present = np.ones((b, n), dtype=bool) if uav_valid is None else np.asarray(uav_valid, bool)
+    seen = np.ones(obstacle_pos_m.shape[:2], bool) if obstacle_valid is None else obstacle_valid
+    if heading_cos_sin is None:
+        heading_cos_sin = np.cos(own_heading_rad), np.sin(own_heading_rad)
+    storage = np.zeros((b, n, layout.size), dtype=np.float32)
+    sensed = np.zeros((b, n, obstacle_pos_m.shape[1]), dtype=bool)
+    for g in np.unique(group):
+        mine = group == g
+        built = _build_v2(
+            layout,
+            own_pos_m,
+            own_heading_rad,
+            own_vel_m_s,
+            target_m,
+            centre_m,
+            np.concatenate([obstacle_pos_m, own_pos_m[:, ~mine]], axis=1),
+            np.concatenate([obstacle_vel_m_s, own_vel_m_s[:, ~mine]], axis=1),
+            np.concatenate([seen, present[:, ~mine]], axis=1),
+            heading_cos_sin,
+            present & mine,
+            commanded_heading_rad,
+            heading_known,
+        )
+        assert built.storage is not None  # `_build_v2` builds one flat array
+        storage[:, mine] = built.storage[:, mine]
+        sensed[:, mine] = built.sensed[:, mine, : obstacle_pos_m.shape[1]]
+    rows = storage[..., layout.blocks()["self"]].reshape(b, n, ROW_OBSTACLES, COLUMNS)
+    mask = storage[..., layout.blocks()["neighbour_mask"].start :]
     return Observations(rows, mask, sensed, storage)
 
 

@@ -233,7 +233,11 @@ class SwarmSim:
         if layout.version == 2:  # the other UAVs still in the episode, and where they head
             present = state.active[sel] | state.hovering(self.cfg.arrival)[sel]
             told = heading if commanded_heading_rad is None else commanded_heading_rad
-            neighbours = {"uav_valid": present, "commanded_heading_rad": told}
+            neighbours = {
+                "uav_valid": present,
+                "commanded_heading_rad": told,
+                "uav_group": self.groups,  # other swarms' UAVs are intruder rows
+            }
             velocity = velocity * (state.speed_m_s[sel] / self.cfg.uav.speed_m_s)[..., None]
         return build_observations(
             layout,

@@ -21,6 +21,12 @@ interventions, the shielded suite mean), after checking that the flights without
 repeat the recorded ones: the shield is not part of the policy, and a change to it leaves the
 policy file and the rest of its evaluation as shipped (the file's metadata keeps the shielded
 mean of its shipping day).
+
+    python tools/ship_generalist.py --refly [--name generalist] [--workers 2]
+
+flies the shipped policy again, with and without the shield, where the simulator changed what a
+policy sees or does (not the policy): every figure of its eval file is rewritten, its policy
+file, training and recipe are kept (the file's metadata keeps the means of its shipping day).
 """
 
 from __future__ import annotations
@@ -131,6 +137,60 @@ def shielded(result: dict[str, Any]) -> dict[str, Any]:
     return {k: result[k] for k in SHIELDED_KEPT}
 
 
+def family_rows(results: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:
+    """The eval file's row of each family, alone and behind the shield (`evaluate_suite`'s)."""
+    families: dict[str, dict[str, Any]] = {}
+    for r in results:
+        row = {k: r.get(k) for k in KEPT}
+        row["success_rate"] = r["success_rate_unshielded"]
+        row["success_rate_solvable"] = r["success_rate_solvable_unshielded"]
+        row["collision_rate_u2o"] = r["collision_rate_u2o_unshielded"]
+        row["collision_rate_u2u"] = r["collision_rate_u2u_unshielded"]
+        row["shielded"] = shielded(r)
+        families[r["family"]] = row
+    return families
+
+
+def suite_metrics(
+    families: dict[str, dict[str, Any]], flown: dict[str, dict[str, Any]]
+) -> dict[str, Any]:
+    """The eval file's means (and the policy file's metadata): suite, shield, real world."""
+    episodes = sum(f["episodes"] for f in families.values())
+    u2u = sum(f["collision_rate_u2u"] * f["episodes"] for f in families.values()) / episodes
+    metrics = {
+        "success_rate": _mean([f["success_rate"] for f in families.values()]),
+        "success_rate_solvable": _mean([f["success_rate_solvable"] for f in families.values()]),
+        "collision_rate_u2u": u2u,
+        "shielded_success_rate_solvable": _mean(
+            [f["shielded"]["success_rate_solvable"] for f in families.values()]
+        ),
+    }
+    if flown:
+        metrics["real_world_success_rate"] = _mean([r["success_rate"] for r in flown.values()])
+    return metrics
+
+
+def refly(name: str, workers: int) -> dict[str, Any]:
+    """`--refly`: every figure of a shipped generalist's eval file, flown again."""
+    path = zoo_dir() / f"{name}.eval.json"
+    report = json.loads(path.read_text())
+    suite = load_suite(report["suite"])
+    policy = zoo_dir() / f"{name}.safetensors"
+    results = evaluate_suite(
+        suite, [MethodSpec("policy", str(policy))], workers=workers, shield=ShieldConfig(mode="on")
+    )
+    scenarios = report["real_world"]["scenarios"]
+    episodes = int(next(iter(scenarios.values()))["episodes"]) if scenarios else 0
+    flown = real_world(policy, episodes, suite) if episodes else {}
+    families = family_rows(results)
+    metrics = suite_metrics(families, flown)
+    report.update(metrics)
+    report["families"] = families
+    report["real_world"]["scenarios"] = flown
+    path.write_text(json.dumps(report, indent=2, default=float) + "\n")
+    return metrics
+
+
 def reshield(name: str, workers: int) -> dict[str, Any]:
     """`--reshield`: the shielded figures of a shipped generalist's eval file, flown again."""
     path = zoo_dir() / f"{name}.eval.json"
@@ -184,6 +244,12 @@ def main() -> None:
         help="fly the shipped NAME again behind today's shield and rewrite only the shielded "
         "figures of its eval file (no run)",
     )
+    parser.add_argument(
+        "--refly",
+        action="store_true",
+        help="fly the shipped NAME again, with and without the shield, and rewrite every figure "
+        "of its eval file (no run): after a change to what the simulator shows a policy",
+    )
     parser.add_argument("--checkpoint", default="best", choices=["best", "last"])
     parser.add_argument("--workers", type=int, default=1)
     parser.add_argument(
@@ -203,11 +269,14 @@ def main() -> None:
     )
     args = parser.parse_args()
     keep_freed_memory()
-    if args.reshield:
-        print(json.dumps(reshield(args.name, args.workers), indent=2))
+    if args.reshield and args.refly:
+        parser.error("--reshield flies the shield again, --refly everything: give one")
+    if args.reshield or args.refly:
+        again = reshield if args.reshield else refly
+        print(json.dumps(again(args.name, args.workers), indent=2))
         return
     if args.run is None:
-        parser.error("a run folder is required (or --reshield)")
+        parser.error("a run folder is required (or --reshield, --refly)")
     run = Path(args.run)
     suite = load_suite("standard")
     with tempfile.TemporaryDirectory() as tmp:
@@ -223,27 +292,8 @@ def main() -> None:
         flown = real_world(policy, episodes, suite) if episodes else {}
     raw = run / f"suite-{args.checkpoint}.json"  # kept beside the run, whatever happens next
     raw.write_text(json.dumps({"results": results}, indent=1, default=float))
-    families: dict[str, dict[str, Any]] = {}
-    for r in results:
-        row = {k: r.get(k) for k in KEPT}
-        row["success_rate"] = r["success_rate_unshielded"]
-        row["success_rate_solvable"] = r["success_rate_solvable_unshielded"]
-        row["collision_rate_u2o"] = r["collision_rate_u2o_unshielded"]
-        row["collision_rate_u2u"] = r["collision_rate_u2u_unshielded"]
-        row["shielded"] = shielded(r)
-        families[r["family"]] = row
-    episodes = sum(f["episodes"] for f in families.values())
-    u2u = sum(f["collision_rate_u2u"] * f["episodes"] for f in families.values()) / episodes
-    metrics = {
-        "success_rate": _mean([f["success_rate"] for f in families.values()]),
-        "success_rate_solvable": _mean([f["success_rate_solvable"] for f in families.values()]),
-        "collision_rate_u2u": u2u,
-        "shielded_success_rate_solvable": _mean(
-            [f["shielded"]["success_rate_solvable"] for f in families.values()]
-        ),
-    }
-    if flown:
-        metrics["real_world_success_rate"] = _mean([r["success_rate"] for r in flown.values()])
+    families = family_rows(results)
+    metrics = suite_metrics(families, flown)
     config = json.loads((run / "config.json").read_text())["generalist"]
     report = {
         "policy": f"{args.name} (policies/zoo/{args.name}.safetensors)",

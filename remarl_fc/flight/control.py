@@ -314,6 +314,7 @@ class SwarmController:
                 "uav_valid": (np.asarray(sw.present, dtype=bool) & known)[None],
                 "commanded_heading_rad": heading[None],
                 "heading_known": np.asarray(sw.heading_known, dtype=bool)[None],
+                "uav_group": self.groups,  # other swarms' vehicles are intruder rows
             }
         built = build_observations(
             layout,

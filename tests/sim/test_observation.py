@@ -343,3 +343,41 @@ def test_v2_many_uavs_sort_each_uavs_neighbours_first():
     nearest = np.sort(np.where(gaps <= 100.0, gaps, np.inf), axis=-1)[..., :3]
     np.testing.assert_allclose(nb[..., 4], np.where(nb_mask > 0, nearest / 100.0, 0.0), atol=1e-6)
     assert it_mask.shape[-1] == 2
+
+
+def test_v2_other_swarms_uavs_are_intruder_rows_not_neighbours():
+    """Two swarms: a UAV's neighbour rows hold its own swarm's UAVs only; the other swarm's are
+    intruder rows, nearest first among the intruders, with their velocity; ``sensed`` keeps the
+    intruders alone."""
+    w = {
+        "own_pos_m": np.array([[[0.0, 0.0], [30.0, 0.0], [0.0, 20.0]]]),
+        "own_heading_rad": np.array([[0.0, np.pi, -0.5 * np.pi]]),  # each sees the others
+        "own_vel_m_s": np.array([[[10.0, 0.0], [-10.0, 0.0], [0.0, -10.0]]]),
+        "target_m": np.full((1, 3, 2), 500.0),
+        "centre_m": np.zeros((1, 3, 2)),
+        "obstacle_pos_m": np.array([[[50.0, 0.0]]]),
+        "obstacle_vel_m_s": np.zeros((1, 1, 2)),
+    }
+    obs = build_observations(LAYOUT_V2, **w, uav_group=np.array([0, 0, 1]))
+    nb, it, nb_mask, it_mask = v2_rows(obs)
+    assert nb_mask[0].tolist() == [[1, 0], [1, 0], [0, 0]]
+    np.testing.assert_allclose(nb[0, 0, 0, :5], [0.3, 0.0, -2.0, 0.0, 0.3], atol=1e-6)
+    # UAV 0: the other swarm's UAV 20 m to its left, then the intruder 50 m ahead
+    assert it_mask[0, 0].tolist() == [1, 1, 0]
+    np.testing.assert_allclose(it[0, 0, 0], [0.0, 0.2, -1.0, -1.0, 0.2], atol=1e-6)
+    np.testing.assert_allclose(it[0, 0, 1], [0.5, 0.0, -1.0, 0.0, 0.5], atol=1e-6)
+    # UAV 2, alone in its swarm: both UAVs of the other one and the intruder, nearest first
+    assert it_mask[0, 2].tolist() == [1, 1, 1]
+    np.testing.assert_allclose(
+        it[0, 2, :, 4], [0.2, np.hypot(30, 20) / 100, np.hypot(50, 20) / 100]
+    )
+    assert obs.sensed.shape == (1, 3, 1)
+    assert obs.sensed[0, :, 0].tolist() == [True, False, True]  # behind UAV 1: not sensed
+
+
+def test_v2_one_swarm_named_is_the_observation_without_groups():
+    w = world(np.random.default_rng(5), b=3, n=5, m=4)
+    plain = build_observations(LAYOUT_V2, **w)
+    named = build_observations(LAYOUT_V2, **w, uav_group=np.zeros(5, dtype=np.int64))
+    np.testing.assert_array_equal(plain.storage, named.storage)
+    np.testing.assert_array_equal(plain.sensed, named.sensed)
