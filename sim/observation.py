@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -225,7 +226,7 @@ def build_observations(
         swarms = None if uav_group is None else _formations(np.asarray(uav_group))
         if swarms is None or len(np.unique(swarms)) < 2:
             return _build_v2(*common, uav_valid, commanded_heading_rad, heading_known)
-        return _build_v2_swarms(*common, uav_valid, commanded_heading_rad, heading_known, swarms)
+        return _build_v2_swarms(common, uav_valid, commanded_heading_rad, heading_known, swarms)
     b, n, _ = own_pos_m.shape
     # One flat float32 array holds every observation; rows and mask are views of it.
     storage = np.zeros((b, n, layout.size), dtype=np.float32)
@@ -256,16 +257,7 @@ def _formations(group: IntArray) -> IntArray:
 
 
 def _build_v2_swarms(
-    layout: ObservationLayout,
-    own_pos_m: FloatArray,
-    own_heading_rad: FloatArray,
-    own_vel_m_s: FloatArray,
-    target_m: FloatArray,
-    centre_m: FloatArray,
-    obstacle_pos_m: FloatArray,
-    obstacle_vel_m_s: FloatArray,
-    obstacle_valid: BoolArray | None,
-    heading_cos_sin: tuple[FloatArray, FloatArray] | None,
+    common: tuple[Any, ...],
     uav_valid: BoolArray | None,
     commanded_heading_rad: FloatArray | None,
     heading_known: BoolArray | None,
@@ -273,10 +265,13 @@ def _build_v2_swarms(
 ) -> Observations:
     """`_build_v2` for several swarms (`OTHER_SWARMS`): built once per swarm, its UAVs' rows kept.
 
-    For each swarm, the others' UAVs that are present join the intruders (after them, so that
+    ``common``: `build_observations`' arguments up to ``heading_cos_sin``, in its order. For
+    each swarm, the others' UAVs that are present join the intruders (after them, so that
     ``sensed`` keeps its M obstacles) and are no one's neighbour. A loop over the swarms, a few
     at most, each pass batched over every environment and UAV.
     """
+    layout, own_pos_m, own_heading_rad, own_vel_m_s, target_m, centre_m = common[:6]
+    obstacle_pos_m, obstacle_vel_m_s, obstacle_valid, heading_cos_sin = common[6:]
     b, n, _ = own_pos_m.shape
     group = np.asarray(uav_group)
     present = np.ones((b, n), dtype=bool) if uav_valid is None else np.asarray(uav_valid, bool)

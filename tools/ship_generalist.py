@@ -170,8 +170,11 @@ def suite_metrics(
     return metrics
 
 
-def refly(name: str, workers: int) -> dict[str, Any]:
-    """`--refly`: every figure of a shipped generalist's eval file, flown again."""
+def _shipped_flown(
+    name: str, workers: int
+) -> tuple[Path, dict[str, Any], Suite, Path, list[dict[str, Any]]]:
+    """A shipped generalist's eval file (path, contents), suite and policy file, and its suite
+    flown again with and without the shield (`evaluate_suite`'s rows)."""
     path = zoo_dir() / f"{name}.eval.json"
     report = json.loads(path.read_text())
     suite = load_suite(report["suite"])
@@ -179,6 +182,12 @@ def refly(name: str, workers: int) -> dict[str, Any]:
     results = evaluate_suite(
         suite, [MethodSpec("policy", str(policy))], workers=workers, shield=ShieldConfig(mode="on")
     )
+    return path, report, suite, policy, results
+
+
+def refly(name: str, workers: int) -> dict[str, Any]:
+    """`--refly`: every figure of a shipped generalist's eval file, flown again."""
+    path, report, suite, policy, results = _shipped_flown(name, workers)
     scenarios = report["real_world"]["scenarios"]
     episodes = int(next(iter(scenarios.values()))["episodes"]) if scenarios else 0
     flown = real_world(policy, episodes, suite) if episodes else {}
@@ -193,13 +202,7 @@ def refly(name: str, workers: int) -> dict[str, Any]:
 
 def reshield(name: str, workers: int) -> dict[str, Any]:
     """`--reshield`: the shielded figures of a shipped generalist's eval file, flown again."""
-    path = zoo_dir() / f"{name}.eval.json"
-    report = json.loads(path.read_text())
-    suite = load_suite(report["suite"])
-    policy = zoo_dir() / f"{name}.safetensors"
-    results = evaluate_suite(
-        suite, [MethodSpec("policy", str(policy))], workers=workers, shield=ShieldConfig(mode="on")
-    )
+    path, report, suite, policy, results = _shipped_flown(name, workers)
     for r in results:
         row = report["families"][r["family"]]
         if r["success_rate_unshielded"] != row["success_rate"]:
