@@ -12,6 +12,8 @@ atomically, so the exporter never leaves a file the loader would refuse.
 observation, for any number of UAVs in a range: schema 2) from its actor's and critic's state
 dicts.
 
+`remeasure_policy` replaces the figures a shipped file carries, where it was flown again.
+
 Files written before checksums existed get one with `rehash_policy`, or from the shell::
 
     python -m policies.export --rehash FILE [FILE ...]
@@ -261,6 +263,24 @@ def rehash_policy(path: Path | str, *, force: bool = False) -> Rehash:
                 raise
     signed = write_policy(path, tensors, meta, header=header)
     return Rehash(str(signed[CHECKSUM_KEY]), written=True)
+
+
+def remeasure_policy(path: Path | str, metrics: Mapping[str, Any]) -> dict[str, Any]:
+    """Replace the evaluation figures a policy file carries (``metrics``), in place.
+
+    For a policy flown again where the simulator changed what it shows a policy, not the
+    policy: the tensors are written back bit for bit and the rest of the metadata unchanged,
+    signed anew; the file must pass every check of the loader first.
+
+    Raises:
+        PolicyFileError: not a policy file, or its metadata or weights are invalid.
+    """
+    path = Path(path)
+    tensors, header, meta = read_policy_file(path)
+    verify_policy(tensors, meta)
+    return write_policy(
+        path, tensors, {**meta, "metrics": _finite_or_null(dict(metrics))}, header=header
+    )
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -23,7 +23,7 @@ from tiny_policy import (
     tiny_tensors,
 )
 
-from policies.export import Rehash, rehash_policy, write_policy
+from policies.export import Rehash, rehash_policy, remeasure_policy, write_policy
 from remarl_fc.policy_io import PolicyChecksumFailed, load_policy
 from sim.observation import ObservationLayout
 from sim.policy_file import (
@@ -95,6 +95,30 @@ def test_rehash_keeps_other_header_entries(tmp_path):
     rehash_policy(path)
     assert header_of(path)["note"] == "kept"
     load_policy(path)
+
+
+def test_remeasure_replaces_the_figures_and_keeps_the_weights(old_file):
+    """A policy flown again: its metrics are the new ones (NaN as null), signed; the tensors
+    bit for bit and every other metadata entry as they were; a damaged file is refused."""
+    path, tensors, _ = old_file
+    rehash_policy(path)
+    before = json.loads(header_of(path)[METADATA_KEY])
+    signed = remeasure_policy(path, {"success_rate": 0.9, "real_world_success_rate": math.nan})
+    policy = load_policy(path)
+    assert policy.checksum == signed[CHECKSUM_KEY] != before[CHECKSUM_KEY]
+    assert policy.meta["metrics"] == {"success_rate": 0.9, "real_world_success_rate": None}
+    new = load_file(str(path))
+    assert all(new[name].tobytes() == arr.tobytes() for name, arr in tensors.items())
+    after = json.loads(header_of(path)[METADATA_KEY])
+    for key in set(before) - {CHECKSUM_KEY, "metrics"}:
+        assert after[key] == before[key]
+    damaged = {k: v.copy() for k, v in tensors.items()}
+    damaged["actor.l1.weight"].flat[0] += 1.0
+    save_file(damaged, str(path), metadata={METADATA_KEY: json.dumps(after)})
+    raw = path.read_bytes()
+    with pytest.raises(PolicyChecksumError, match="checksum mismatch"):
+        remeasure_policy(path, {"success_rate": 1.0})
+    assert path.read_bytes() == raw
 
 
 def test_rehash_refuses_a_damaged_file_unless_forced(old_file):
