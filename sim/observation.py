@@ -263,12 +263,13 @@ def _build_v2_swarms(
     heading_known: BoolArray | None,
     uav_group: IntArray,
 ) -> Observations:
-    """`_build_v2` for several swarms (`OTHER_SWARMS`): built once per swarm, its UAVs' rows kept.
+    """`_build_v2` for several swarms (`OTHER_SWARMS`): built once per swarm, for its UAVs.
 
-    ``common``: `build_observations`' arguments up to ``heading_cos_sin``, in its order. For
-    each swarm, the others' UAVs that are present join the intruders (after them, so that
-    ``sensed`` keeps its M obstacles) and are no one's neighbour. A loop over the swarms, a few
-    at most, each pass batched over every environment and UAV.
+    ``common``: `build_observations`' arguments up to ``heading_cos_sin``, in its order. Each
+    pass observes one swarm's UAVs alone, so their neighbours are each other; the other
+    swarms' UAVs that are present join the intruders (after them, so that ``sensed`` keeps
+    its M obstacles). A loop over the swarms, a few at most, each pass batched over every
+    environment and UAV of it.
     """
     layout, own_pos_m, own_heading_rad, own_vel_m_s, target_m, centre_m = common[:6]
     obstacle_pos_m, obstacle_vel_m_s, obstacle_valid, heading_cos_sin = common[6:]
@@ -284,22 +285,22 @@ def _build_v2_swarms(
         mine = group == g
         built = _build_v2(
             layout,
-            own_pos_m,
-            own_heading_rad,
-            own_vel_m_s,
-            target_m,
-            centre_m,
+            own_pos_m[:, mine],
+            own_heading_rad[:, mine],
+            own_vel_m_s[:, mine],
+            target_m[:, mine],
+            centre_m[:, mine],
             np.concatenate([obstacle_pos_m, own_pos_m[:, ~mine]], axis=1),
             np.concatenate([obstacle_vel_m_s, own_vel_m_s[:, ~mine]], axis=1),
             np.concatenate([seen, present[:, ~mine]], axis=1),
-            heading_cos_sin,
-            present & mine,
-            commanded_heading_rad,
-            heading_known,
+            (heading_cos_sin[0][:, mine], heading_cos_sin[1][:, mine]),
+            present[:, mine],
+            None if commanded_heading_rad is None else commanded_heading_rad[:, mine],
+            None if heading_known is None else heading_known[:, mine],
         )
         assert built.storage is not None  # `_build_v2` builds one flat array
-        storage[:, mine] = built.storage[:, mine]
-        sensed[:, mine] = built.sensed[:, mine, : obstacle_pos_m.shape[1]]
+        storage[:, mine] = built.storage
+        sensed[:, mine] = built.sensed[..., : obstacle_pos_m.shape[1]]
     rows = storage[..., layout.blocks()["self"]].reshape(b, n, ROW_OBSTACLES, COLUMNS)
     mask = storage[..., layout.blocks()["neighbour_mask"].start :]
     return Observations(rows, mask, sensed, storage)

@@ -381,3 +381,32 @@ def test_v2_one_swarm_named_is_the_observation_without_groups():
     named = build_observations(LAYOUT_V2, **w, uav_group=np.zeros(5, dtype=np.int64))
     np.testing.assert_array_equal(plain.storage, named.storage)
     np.testing.assert_array_equal(plain.sensed, named.sensed)
+
+
+@given(seed=st.integers(0, 2**31))
+def test_v2_each_swarm_sees_itself_alone_and_the_other_swarms_as_intruders(seed):
+    """With several swarms, a UAV's observation is the one-swarm observation of its own swarm,
+    the present UAVs of the others appended to the intruders; UAVs flying alone count as one
+    swarm among themselves."""
+    rng = np.random.default_rng(seed)
+    b, n, m = 2, 9, 3
+    w = world(rng, b=b, n=n, m=m)
+    w["own_pos_m"] = rng.uniform(-150, 150, (b, n, 2))
+    groups = np.array([0, 0, 0, 1, 1, 2, 3, 4, 4])  # swarm 2 and 3 fly alone
+    valid = rng.random((b, n)) < 0.8
+    layout = ObservationLayout(4, 200.0, np.radians(270), 10.0, 3, 2)
+    built = build_observations(layout, **w, uav_valid=valid, uav_group=groups)
+    for swarm in ([0, 1, 2], [3, 4], [5, 6], [7, 8]):
+        mine = np.isin(np.arange(n), swarm)
+        alone = build_observations(
+            layout,
+            **{k: w[k][:, mine] for k in ("own_pos_m", "own_heading_rad", "own_vel_m_s")},
+            target_m=w["target_m"][:, mine],
+            centre_m=w["centre_m"][:, mine],
+            obstacle_pos_m=np.concatenate([w["obstacle_pos_m"], w["own_pos_m"][:, ~mine]], 1),
+            obstacle_vel_m_s=np.concatenate([w["obstacle_vel_m_s"], w["own_vel_m_s"][:, ~mine]], 1),
+            obstacle_valid=np.concatenate([np.ones((b, m), bool), valid[:, ~mine]], 1),
+            uav_valid=valid[:, mine],
+        )
+        np.testing.assert_array_equal(built.storage[:, mine], alone.storage)
+        np.testing.assert_array_equal(built.sensed[:, mine], alone.sensed[..., :m])
