@@ -173,9 +173,10 @@ def suite_metrics(
 
 def _shipped_flown(
     name: str, workers: int
-) -> tuple[Path, dict[str, Any], Suite, Path, list[dict[str, Any]]]:
-    """A shipped generalist's eval file (path, contents), suite and policy file, and its suite
-    flown again with and without the shield (`evaluate_suite`'s rows)."""
+) -> tuple[Path, dict[str, Any], Path, list[dict[str, Any]], dict[str, dict[str, Any]]]:
+    """A shipped generalist's eval file (path, contents) and policy file, flown again as its
+    eval file records: the suite with and without the shield (`evaluate_suite`'s rows), and
+    the real world's scenarios with the episodes recorded (`real_world`; none if none)."""
     path = zoo_dir() / f"{name}.eval.json"
     report = json.loads(path.read_text())
     suite = load_suite(report["suite"])
@@ -183,15 +184,15 @@ def _shipped_flown(
     results = evaluate_suite(
         suite, [MethodSpec("policy", str(policy))], workers=workers, shield=ShieldConfig(mode="on")
     )
-    return path, report, suite, policy, results
+    scenarios = report["real_world"]["scenarios"]
+    episodes = int(next(iter(scenarios.values()))["episodes"]) if scenarios else 0
+    flown = real_world(policy, episodes, suite) if episodes else {}
+    return path, report, policy, results, flown
 
 
 def refly(name: str, workers: int) -> dict[str, Any]:
     """`--refly`: every figure of a shipped generalist's eval file, flown again."""
-    path, report, suite, policy, results = _shipped_flown(name, workers)
-    scenarios = report["real_world"]["scenarios"]
-    episodes = int(next(iter(scenarios.values()))["episodes"]) if scenarios else 0
-    flown = real_world(policy, episodes, suite) if episodes else {}
+    path, report, policy, results, flown = _shipped_flown(name, workers)
     families = family_rows(results)
     metrics = suite_metrics(families, flown)
     report.update(metrics)
@@ -204,7 +205,7 @@ def refly(name: str, workers: int) -> dict[str, Any]:
 
 def reshield(name: str, workers: int) -> dict[str, Any]:
     """`--reshield`: the shielded figures of a shipped generalist's eval file, flown again."""
-    path, report, suite, policy, results = _shipped_flown(name, workers)
+    path, report, _, results, real = _shipped_flown(name, workers)
     for r in results:
         row = report["families"][r["family"]]
         if r["success_rate_unshielded"] != row["success_rate"]:
@@ -220,16 +221,14 @@ def reshield(name: str, workers: int) -> dict[str, Any]:
         [f["shielded"]["success_rate_solvable"] for f in families]
     )
     scenarios = report["real_world"]["scenarios"]
-    if scenarios:
-        episodes = int(next(iter(scenarios.values()))["episodes"])
-        for scenario, flown in real_world(policy, episodes, suite).items():
-            if flown["success_rate"] != scenarios[scenario]["success_rate"]:
-                raise SystemExit(
-                    f"{scenario} in the real world: without the shield {flown['success_rate']} "
-                    f"where the eval file records {scenarios[scenario]['success_rate']}; ship "
-                    "it again instead"
-                )
-            scenarios[scenario]["shielded"] = flown["shielded"]
+    for scenario, flown in real.items():
+        if flown["success_rate"] != scenarios[scenario]["success_rate"]:
+            raise SystemExit(
+                f"{scenario} in the real world: without the shield {flown['success_rate']} "
+                f"where the eval file records {scenarios[scenario]['success_rate']}; ship "
+                "it again instead"
+            )
+        scenarios[scenario]["shielded"] = flown["shielded"]
     path.write_text(json.dumps(report, indent=2, default=float) + "\n")
     return {
         "shielded_success_rate_solvable": report["shielded_success_rate_solvable"],

@@ -328,3 +328,61 @@ def test_reshield_rewrites_only_the_shielded_figures_and_refuses_a_changed_polic
     with pytest.raises(SystemExit, match="ship it again"):
         ship.reshield("generalist", workers=1)
     assert (tmp_path / "generalist.eval.json").read_text() == written
+
+
+def test_refly_rewrites_every_figure_and_the_ones_the_policy_file_carries(tmp_path, monkeypatch):
+    """`ship_generalist.py --refly` on copies of the shipped files, the flights stubbed: every
+    family's figures and the means are the new flights', the training and recipe stay, and
+    the policy file carries the new means with its weights bit for bit."""
+    import shutil
+
+    from safetensors.numpy import load_file
+
+    from remarl_fc.policy_io import load_policy, zoo_dir
+
+    ship = tool_module("ship_generalist")
+    shipped = json.loads((zoo_dir() / "generalist.eval.json").read_text())
+    (tmp_path / "generalist.eval.json").write_text(json.dumps(shipped))
+    shutil.copy(zoo_dir() / "generalist.safetensors", tmp_path / "generalist.safetensors")
+    monkeypatch.setattr(ship, "zoo_dir", lambda: tmp_path)
+
+    def flown(suite, methods, workers, shield):  # every family at 0.5 alone, 0.75 shielded
+        row = dict.fromkeys(ship.KEPT, 1.0) | {"episodes": 200.0, "solvable_episodes": 200}
+        alone = {f"{k}_unshielded": 0.5 for k in ("success_rate", "success_rate_solvable")}
+        hits = {f"{k}_unshielded": 0.0625 for k in ("collision_rate_u2o", "collision_rate_u2u")}
+        shielded = dict.fromkeys(ship.SHIELDED_KEPT, 0.75)
+        return [
+            {"family": name, **row, **alone, **hits, **shielded} for name in shipped["families"]
+        ]
+
+    def real(policy, episodes, suite):
+        assert episodes == 300
+        return {
+            name: {"success_rate": 0.25, "collision_rate_u2o": 0.0, "collision_rate_u2u": 0.0}
+            | {"episodes": 300.0, "shielded": {"success_rate": 0.5}}
+            for name in shipped["real_world"]["scenarios"]
+        }
+
+    monkeypatch.setattr(ship, "evaluate_suite", flown)
+    monkeypatch.setattr(ship, "real_world", real)
+    metrics = ship.refly("generalist", workers=1)
+    assert metrics == {
+        "success_rate": 0.5,
+        "success_rate_solvable": 0.5,
+        "collision_rate_u2u": 0.0625,
+        "shielded_success_rate_solvable": 0.75,
+        "real_world_success_rate": 0.25,
+    }
+    again = json.loads((tmp_path / "generalist.eval.json").read_text())
+    assert set(again["families"]) == set(shipped["families"])
+    for row in again["families"].values():
+        assert row["success_rate"] == 0.5 and row["collision_rate_u2u"] == 0.0625
+        assert row["shielded"]["success_rate_solvable"] == 0.75
+    assert all(r["success_rate"] == 0.25 for r in again["real_world"]["scenarios"].values())
+    assert {k: again[k] for k in metrics} == metrics
+    assert again["training"] == shipped["training"] and again["recipe"] == shipped["recipe"]
+    assert load_policy(tmp_path / "generalist.safetensors").meta["metrics"] == metrics
+    before = load_file(str(zoo_dir() / "generalist.safetensors"))
+    after = load_file(str(tmp_path / "generalist.safetensors"))
+    assert set(before) == set(after)
+    assert all(before[k].tobytes() == after[k].tobytes() for k in before)
