@@ -160,6 +160,14 @@ def add_shield_flags(p: Any, default: str) -> None:
         f"(default {base.escape_steps}; 1: one-step headings alone; never against ADS-B tracks)",
     )
     p.add_argument(
+        "--shield-return",
+        type=float,
+        default=base.return_deg,
+        metavar="DEG",
+        help="a UAV whose heading lies more than DEG from the bearing to its target turns back "
+        f"towards it where that passes the check (default {base.return_deg:g}; 180: never)",
+    )
+    p.add_argument(
         "--shield-neighbours",
         choices=list(NEIGHBOUR_ARCS),
         default=base.neighbour_arcs,
@@ -189,6 +197,7 @@ def shield_from_args(args: argparse.Namespace) -> Any:
             margin_m=args.shield_margin,
             passes=args.shield_passes,
             escape_steps=args.shield_escape_steps,
+            return_deg=args.shield_return,
             neighbour_arcs=args.shield_neighbours,
             vehicle_model=args.shield_vehicle_model,
         )

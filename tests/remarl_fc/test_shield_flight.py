@@ -466,6 +466,8 @@ def test_bad_shield_settings_are_refused(command, capsys):
     assert "passes must be >= 1" in capsys.readouterr().err
     assert main([*base, "--shield-escape-steps", "5"]) == 2
     assert "escape_steps must be 1 to 4" in capsys.readouterr().err
+    assert main([*base, "--shield-return", "0"]) == 2
+    assert "return_deg must be in (0, 180]" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         main([*base, "--shield", "sometimes"])
     with pytest.raises(SystemExit):
@@ -483,6 +485,8 @@ def test_the_shield_flags_build_its_config():
         assert shield_from_args(args).neighbour_horizon_s == 6.0
         args = build_parser().parse_args([command, "--shield-escape-steps", "1"])
         assert shield_from_args(args).escape_steps == 1
+        args = build_parser().parse_args([command, "--shield-return", "180"])
+        assert shield_from_args(args).return_deg == 180.0
     assert shield_from_args(build_parser().parse_args(["demo"])) == ShieldConfig(mode="on")
 
 

@@ -426,6 +426,131 @@ def test_a_turn_wider_than_one_step_is_held_over_the_next_decision(neighbour_hor
     assert not shield(cfg, fixed, swarm, tracked, proposed).safe_exists[0, 0]
 
 
+def pacing_world(intruder_m: float) -> tuple[Swarm, Threats]:
+    """A UAV heading east at 5 m/s, its target 1 km away 140° to its right; an intruder
+    ``intruder_m`` away 120° to its right flies its way a little faster, between it and the
+    target: flying straight on passes, and leads away from the target."""
+    bearing, side = math.radians(-140.0), math.radians(-120.0)
+    swarm = dataclasses.replace(
+        lone_uav(), target_m=np.array([[[1e3 * math.cos(bearing), 1e3 * math.sin(bearing)]]])
+    )
+    threats = Threats(
+        np.array([[[intruder_m * math.cos(side), intruder_m * math.sin(side)]]]),
+        np.array([[[5.5, 0.0]]]),
+        np.ones((1, 1), bool),
+        np.zeros((1, 1)),
+    )
+    return swarm, threats
+
+
+def test_a_uav_pacing_an_intruder_away_from_its_target_turns_back_behind_it():
+    """The proposal (straight on) passes, but leads away from the target while the turn back
+    towards it passes too: full right turns until the UAV points at the target, then straight
+    on, checked against a dense integration of that plan. Only its first step is flown."""
+    swarm, threats = pacing_world(60.0)
+    proposed = np.zeros((1, 1))
+    never = shield(ShieldConfig(mode="on", return_deg=180.0), VEHICLE, swarm, threats, proposed)
+    assert not never.intervened[0, 0] and never.action[0, 0] == 0.0
+    decision = shield(ShieldConfig(mode="on"), VEHICLE, swarm, threats, proposed)
+    assert decision.intervened[0, 0] and decision.safe_exists[0, 0]
+    assert decision.action[0, 0] == -1.0  # a full turn towards the target, on its side
+    assert decision.proposed_cpa_m[0, 0] == never.flown_cpa_m[0, 0]
+    # the plan flown densely: 45° right in each of three steps, 5° in the fourth (140°), each
+    # at a constant rate over its step, as the simulator flies them; then straight on
+    t = np.linspace(0.0, ShieldConfig().horizon_s, 25001)
+    mid = 0.5 * (t[1:] + t[:-1])
+    turns = np.radians([45.0, 45.0, 45.0, 5.0]) / VEHICLE.dt_s  # rad/s in each step
+    into = np.clip(mid[:, None] - VEHICLE.dt_s * np.arange(4), 0.0, VEHICLE.dt_s)
+    h = -(into * turns).sum(axis=-1)
+    step = np.diff(t) * VEHICLE.cruise_m_s
+    x = np.concatenate([[0.0], np.cumsum(step * np.cos(h))])
+    y = np.concatenate([[0.0], np.cumsum(step * np.sin(h))])
+    other = threats.intruder_pos_m[0, 0] + threats.intruder_vel_m_s[0, 0] * t[:, None]
+    flown = np.hypot(x - other[:, 0], y - other[:, 1]).min()
+    required = VEHICLE.d_col_m + ShieldConfig().margin_m
+    assert flown >= required
+    assert abs(decision.flown_cpa_m[0, 0] - flown) < 0.25  # the chords' error, within the margin
+    # monitor mode records it and flies the proposal
+    watch = shield(ShieldConfig(mode="monitor"), VEHICLE, swarm, threats, proposed)
+    assert watch.intervened[0, 0] and watch.action[0, 0] == 0.0
+    assert watch.shield_action[0, 0] == -1.0
+
+
+def test_the_turn_back_is_not_flown_where_it_does_not_pass():
+    """10 m nearer, the turn back towards the target passes too close to the intruder: the
+    proposal stands."""
+    swarm, threats = pacing_world(50.0)
+    decision = shield(ShieldConfig(mode="on"), VEHICLE, swarm, threats, np.zeros((1, 1)))
+    assert not decision.intervened[0, 0] and decision.action[0, 0] == 0.0
+
+
+def test_the_turn_back_keeps_clear_of_a_parked_uav_over_the_whole_look_ahead():
+    """The target 1 km behind, 170° to the left; a UAV hovers where it arrived 60 m behind and
+    25 m to the left, on the way back, reached some 20 s after the turn: past the 4 s the
+    shield checks the swarm's flying UAVs over, inside the look-ahead. It is kept clear of as
+    a static intruder: the turn back does not pass, and the proposal stands. Without it, the
+    UAV turns back."""
+    bearing = math.radians(170.0)
+    target = [1e3 * math.cos(bearing), 1e3 * math.sin(bearing)]
+    swarm = Swarm(
+        pos_m=np.array([[[0.0, 0.0], [-60.0, 25.0]]]),
+        heading_rad=np.zeros((1, 2)),
+        target_m=np.array([[target, [-60.0, 25.0]]]),
+        deciding=np.array([[True, False]]),
+        present=np.array([[True, True]]),
+        speed_m_s=np.array([[5.0, 0.0]]),
+    )
+    none = Threats(
+        np.zeros((1, 0, 2)), np.zeros((1, 0, 2)), np.zeros((1, 0), bool), np.zeros((1, 0))
+    )
+    cfg = ShieldConfig(mode="on")
+    parked = shield(cfg, VEHICLE, swarm, none, np.zeros((1, 2)))
+    assert not parked.intervened[0, 0] and parked.action[0, 0] == 0.0
+    gone = dataclasses.replace(swarm, present=np.array([[True, False]]))
+    decision = shield(cfg, VEHICLE, gone, none, np.zeros((1, 2)))
+    assert decision.intervened[0, 0] and decision.action[0, 0] == 1.0
+
+
+def test_a_fitted_vehicle_turns_back_as_its_response_flies_it():
+    """The pacing world flown by a fitted ArduCopter: its turn back is predicted through the
+    response over two steps (90°), then its heading held; at 60 and 70 m that passes too close
+    to the intruder and the proposal stands, at 80 m it passes, within the prediction's
+    tolerance of the command stream replayed at 10 ms."""
+    prof = load_profile("arducopter")
+    a_max, dt = VEHICLE.max_turn_rad, VEHICLE.dt_s
+    t, ref, vel0 = dense_track(prof, 0.0, 0.0, 5.0, -a_max, 5.0, 5.0, dt, 25.0, -a_max)
+    one = np.ones((1, 1))
+    motion = Motion(
+        vel0[None, None], 0 * one, 5 * one, prof.delay_s * one, prof.velocity_tau_s * one,
+        prof.max_accel_m_s2 * one,
+    )  # fmt: skip
+    for intruder_m, turns_back in ((60.0, False), (70.0, False), (80.0, True)):
+        swarm, threats = pacing_world(intruder_m)
+        swarm = dataclasses.replace(swarm, motion=motion)
+        decision = shield(ShieldConfig(mode="on"), VEHICLE, swarm, threats, np.zeros((1, 1)))
+        assert decision.intervened[0, 0] == turns_back
+        assert decision.action[0, 0] == (-1.0 if turns_back else 0.0)
+    other = threats.intruder_pos_m[0, 0] + threats.intruder_vel_m_s[0, 0] * t[:, None]
+    flown = np.hypot(*(ref - other).T).min()
+    assert flown >= VEHICLE.d_col_m
+    assert abs(decision.flown_cpa_m[0, 0] - flown) < 1.5
+
+
+@pytest.mark.parametrize(("beside_m", "turns_back"), [(10.0, False), (24.0, False), (30.0, True)])
+def test_a_target_inside_the_tightest_turn_is_left_to_the_policy(beside_m, turns_back):
+    """A target right beside the UAV, behind it: turning towards it at a_max circles it (a
+    radius of 12.7 m at 5 m/s) where it lies within that circle (its centre 12.7 m to the
+    right: 10 m beside is 2.7 m from it, 24 m is 11.3 m), and the shield leaves the UAV to fly
+    out first; farther, it turns back. Nothing else around."""
+    swarm = dataclasses.replace(lone_uav(), target_m=np.array([[[-5.0, -beside_m]]]))
+    none = Threats(
+        np.zeros((1, 0, 2)), np.zeros((1, 0, 2)), np.zeros((1, 0), bool), np.zeros((1, 0))
+    )
+    decision = shield(ShieldConfig(mode="on"), VEHICLE, swarm, none, np.zeros((1, 1)))
+    assert decision.intervened[0, 0] == turns_back
+    assert decision.action[0, 0] == (-1.0 if turns_back else 0.0)
+
+
 def test_a_fitted_vehicle_holds_its_turn_as_its_response_flies_it():
     """A fitted ArduCopter at 5 m/s that cannot slow, 34 m from a static obstacle just right of
     its course: late and wide, no heading of one step clears it; a full left turn held for two
@@ -579,6 +704,9 @@ def test_bad_settings_are_refused():
         ShieldConfig(horizon_s=0.0)
     with pytest.raises(ValueError, match="track_horizon_s"):
         ShieldConfig(track_horizon_s=0.0)
+    for degrees in (0.0, -5.0, 180.5, math.nan):
+        with pytest.raises(ValueError, match="return_deg must be in"):
+            ShieldConfig(return_deg=degrees)
     for steps in (0, ESCAPE_STEPS_MAX + 1):
         with pytest.raises(ValueError, match="escape_steps must be 1 to 4"):
             ShieldConfig(escape_steps=steps)
