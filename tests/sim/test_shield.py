@@ -455,18 +455,11 @@ def test_a_uav_pacing_an_intruder_away_from_its_target_turns_back_behind_it():
     assert decision.intervened[0, 0] and decision.safe_exists[0, 0]
     assert decision.action[0, 0] == -1.0  # a full turn towards the target, on its side
     assert decision.proposed_cpa_m[0, 0] == never.flown_cpa_m[0, 0]
-    # the plan flown densely: 45° right in each of three steps, 5° in the fourth (140°), each
-    # at a constant rate over its step, as the simulator flies them; then straight on
-    t = np.linspace(0.0, ShieldConfig().horizon_s, 25001)
-    mid = 0.5 * (t[1:] + t[:-1])
-    turns = np.radians([45.0, 45.0, 45.0, 5.0]) / VEHICLE.dt_s  # rad/s in each step
-    into = np.clip(mid[:, None] - VEHICLE.dt_s * np.arange(4), 0.0, VEHICLE.dt_s)
-    h = -(into * turns).sum(axis=-1)
-    step = np.diff(t) * VEHICLE.cruise_m_s
-    x = np.concatenate([[0.0], np.cumsum(step * np.cos(h))])
-    y = np.concatenate([[0.0], np.cumsum(step * np.sin(h))])
+    # the plan flown densely: 45° right in each of three steps, 5° in the fourth (140°), then
+    # straight on
+    t, me = dense_turns([-45.0, -45.0, -45.0, -5.0], ShieldConfig().horizon_s)
     other = threats.intruder_pos_m[0, 0] + threats.intruder_vel_m_s[0, 0] * t[:, None]
-    flown = np.hypot(x - other[:, 0], y - other[:, 1]).min()
+    flown = np.hypot(*(me - other).T).min()
     required = VEHICLE.d_col_m + ShieldConfig().margin_m
     assert flown >= required
     assert abs(decision.flown_cpa_m[0, 0] - flown) < 0.25  # the chords' error, within the margin
@@ -476,20 +469,50 @@ def test_a_uav_pacing_an_intruder_away_from_its_target_turns_back_behind_it():
     assert watch.shield_action[0, 0] == -1.0
 
 
-def test_the_turn_back_is_not_flown_where_it_does_not_pass():
-    """10 m nearer, the turn back towards the target passes too close to the intruder: the
+def dense_turns(turns_deg, horizon_s):
+    """(times, positions (T, 2)) of the ideal test UAV from the origin heading east, turning by
+    ``turns_deg`` in its successive steps, each at a constant rate over its step, then straight:
+    a dense integration of the motion the simulator flies."""
+    t = np.linspace(0.0, horizon_s, 25001)
+    mid = 0.5 * (t[1:] + t[:-1])
+    rates = np.radians(turns_deg) / VEHICLE.dt_s  # rad/s in each step
+    into = np.clip(mid[:, None] - VEHICLE.dt_s * np.arange(len(rates)), 0.0, VEHICLE.dt_s)
+    h = (into * rates).sum(axis=-1)
+    step = np.diff(t) * VEHICLE.cruise_m_s
+    x = np.concatenate([[0.0], np.cumsum(step * np.cos(h))])
+    y = np.concatenate([[0.0], np.cumsum(step * np.sin(h))])
+    return t, np.stack([x, y], axis=-1)
+
+
+def test_with_no_room_to_turn_towards_the_target_the_uav_loops_the_other_way():
+    """10 m nearer, the turn towards the target passes too close to the intruder; the long way
+    round, a left loop of 220°, passes behind it (a dense integration agrees): its first step
+    is flown. A second intruder pacing on the left, 30 m abeam, leaves neither way: the
     proposal stands."""
     swarm, threats = pacing_world(50.0)
     decision = shield(ShieldConfig(mode="on"), VEHICLE, swarm, threats, np.zeros((1, 1)))
-    assert not decision.intervened[0, 0] and decision.action[0, 0] == 0.0
+    assert decision.intervened[0, 0] and decision.action[0, 0] == 1.0
+    t, me = dense_turns([45.0, 45.0, 45.0, 45.0, 40.0], ShieldConfig().horizon_s)
+    other = threats.intruder_pos_m[0, 0] + threats.intruder_vel_m_s[0, 0] * t[:, None]
+    flown = np.hypot(*(me - other).T).min()
+    assert flown >= VEHICLE.d_col_m + ShieldConfig().margin_m
+    assert abs(decision.flown_cpa_m[0, 0] - flown) < 0.25
+    left = Threats(
+        np.concatenate([threats.intruder_pos_m, [[[0.0, 30.0]]]], axis=1),
+        np.concatenate([threats.intruder_vel_m_s, [[[5.5, 0.0]]]], axis=1),
+        np.ones((1, 2), bool),
+        np.zeros((1, 2)),
+    )
+    boxed = shield(ShieldConfig(mode="on"), VEHICLE, swarm, left, np.zeros((1, 1)))
+    assert not boxed.intervened[0, 0] and boxed.action[0, 0] == 0.0
 
 
 def test_the_turn_back_keeps_clear_of_a_parked_uav_over_the_whole_look_ahead():
     """The target 1 km behind, 170° to the left; a UAV hovers where it arrived 60 m behind and
     25 m to the left, on the way back, reached some 20 s after the turn: past the 4 s the
     shield checks the swarm's flying UAVs over, inside the look-ahead. It is kept clear of as
-    a static intruder: the turn back does not pass, and the proposal stands. Without it, the
-    UAV turns back."""
+    a static intruder: the turn to the left does not pass, and the UAV loops back to the right
+    instead. Without it, the UAV turns back to the left."""
     bearing = math.radians(170.0)
     target = [1e3 * math.cos(bearing), 1e3 * math.sin(bearing)]
     swarm = Swarm(
@@ -505,7 +528,7 @@ def test_the_turn_back_keeps_clear_of_a_parked_uav_over_the_whole_look_ahead():
     )
     cfg = ShieldConfig(mode="on")
     parked = shield(cfg, VEHICLE, swarm, none, np.zeros((1, 2)))
-    assert not parked.intervened[0, 0] and parked.action[0, 0] == 0.0
+    assert parked.intervened[0, 0] and parked.action[0, 0] == -1.0
     gone = dataclasses.replace(swarm, present=np.array([[True, False]]))
     decision = shield(cfg, VEHICLE, gone, none, np.zeros((1, 2)))
     assert decision.intervened[0, 0] and decision.action[0, 0] == 1.0
@@ -536,19 +559,30 @@ def test_a_fitted_vehicle_turns_back_as_its_response_flies_it():
     assert abs(decision.flown_cpa_m[0, 0] - flown) < 1.5
 
 
-@pytest.mark.parametrize(("beside_m", "turns_back"), [(10.0, False), (24.0, False), (30.0, True)])
-def test_a_target_inside_the_tightest_turn_is_left_to_the_policy(beside_m, turns_back):
-    """A target right beside the UAV, behind it: turning towards it at a_max circles it (a
-    radius of 12.7 m at 5 m/s) where it lies within that circle (its centre 12.7 m to the
-    right: 10 m beside is 2.7 m from it, 24 m is 11.3 m), and the shield leaves the UAV to fly
-    out first; farther, it turns back. Nothing else around."""
+@pytest.mark.parametrize(("beside_m", "way"), [(10.0, 1.0), (24.0, 1.0), (30.0, -1.0)])
+def test_a_target_inside_the_tightest_turn_towards_it_is_reached_the_long_way(beside_m, way):
+    """A target right beside the UAV, behind it to the right: turning right at a_max circles it
+    (a radius of 12.7 m at 5 m/s) where it lies within that circle (its centre 12.7 m to the
+    right: 10 m beside is 2.7 m from it, 24 m is 11.3 m), so the UAV loops back to the left;
+    farther, it turns right. Nothing else around. A fitted vehicle, which only tries the short
+    way, leaves such a target to the policy."""
     swarm = dataclasses.replace(lone_uav(), target_m=np.array([[[-5.0, -beside_m]]]))
     none = Threats(
         np.zeros((1, 0, 2)), np.zeros((1, 0, 2)), np.zeros((1, 0), bool), np.zeros((1, 0))
     )
     decision = shield(ShieldConfig(mode="on"), VEHICLE, swarm, none, np.zeros((1, 1)))
-    assert decision.intervened[0, 0] == turns_back
-    assert decision.action[0, 0] == (-1.0 if turns_back else 0.0)
+    assert decision.intervened[0, 0] and decision.action[0, 0] == way
+    prof = load_profile("arducopter")
+    one = np.ones((1, 1))
+    motion = Motion(
+        np.array([[[5.0, 0.0]]]), 0 * one, 5 * one, prof.delay_s * one,
+        prof.velocity_tau_s * one, prof.max_accel_m_s2 * one,
+    )  # fmt: skip
+    fitted = shield(
+        ShieldConfig(mode="on"), VEHICLE, dataclasses.replace(swarm, motion=motion), none,
+        np.zeros((1, 1)),
+    )  # fmt: skip
+    assert fitted.intervened[0, 0] == (way == -1.0)
 
 
 def test_a_fitted_vehicle_holds_its_turn_as_its_response_flies_it():
