@@ -559,6 +559,33 @@ def test_a_fitted_vehicle_turns_back_as_its_response_flies_it():
     assert abs(decision.flown_cpa_m[0, 0] - flown) < 1.5
 
 
+def test_the_turn_back_keeps_clear_of_a_flying_neighbour_for_longer():
+    """The target 1 km behind, 170° to the left; a UAV of the swarm 60 m behind and 25 m to the
+    left flies east on the line the turn back to the left would follow west: they would meet
+    some 10 s on. Checked over the 4 s of any other candidate, the turn to the left passes
+    (its predicted closest approach to that UAV a few metres); over the turn back's own 12 s it
+    does not, and the UAV loops back to the right, clear of it."""
+    bearing = math.radians(170.0)
+    swarm = Swarm(
+        pos_m=np.array([[[0.0, 0.0], [-60.0, 25.0]]]),
+        heading_rad=np.zeros((1, 2)),
+        target_m=np.array([[[1e3 * math.cos(bearing), 1e3 * math.sin(bearing)], [1e4, 25.0]]]),
+        deciding=np.ones((1, 2), bool),
+        present=np.ones((1, 2), bool),
+        speed_m_s=np.full((1, 2), 5.0),
+    )
+    none = Threats(
+        np.zeros((1, 0, 2)), np.zeros((1, 0, 2)), np.zeros((1, 0), bool), np.zeros((1, 0))
+    )
+    short = ShieldConfig(mode="on", return_neighbour_horizon_s=4.0)
+    brief = shield(short, VEHICLE, swarm, none, np.zeros((1, 2)))
+    assert brief.action[0, 0] == 1.0 and brief.flown_cpa_m[0, 0] < VEHICLE.d_col_m
+    decision = shield(ShieldConfig(mode="on"), VEHICLE, swarm, none, np.zeros((1, 2)))
+    assert decision.action[0, 0] == -1.0
+    assert decision.flown_cpa_m[0, 0] >= VEHICLE.d_col_m + ShieldConfig().margin_m
+    assert not decision.intervened[0, 1] and decision.action[0, 1] == 0.0
+
+
 @pytest.mark.parametrize(("beside_m", "way"), [(10.0, 1.0), (24.0, 1.0), (30.0, -1.0)])
 def test_a_target_inside_the_tightest_turn_towards_it_is_reached_the_long_way(beside_m, way):
     """A target right beside the UAV, behind it to the right: turning right at a_max circles it
@@ -741,6 +768,9 @@ def test_bad_settings_are_refused():
     for degrees in (0.0, -5.0, 180.5, math.nan):
         with pytest.raises(ValueError, match="return_deg must be in"):
             ShieldConfig(return_deg=degrees)
+    for seconds in (0.0, -1.0, math.inf):
+        with pytest.raises(ValueError, match="return_neighbour_horizon_s must be"):
+            ShieldConfig(return_neighbour_horizon_s=seconds)
     for steps in (0, ESCAPE_STEPS_MAX + 1):
         with pytest.raises(ValueError, match="escape_steps must be 1 to 4"):
             ShieldConfig(escape_steps=steps)
