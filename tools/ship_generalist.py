@@ -204,8 +204,9 @@ def refly(name: str, workers: int) -> dict[str, Any]:
 
 
 def reshield(name: str, workers: int) -> dict[str, Any]:
-    """`--reshield`: the shielded figures of a shipped generalist's eval file, flown again."""
-    path, report, _, results, real = _shipped_flown(name, workers)
+    """`--reshield`: the shielded figures of a shipped generalist's eval file, flown again, and
+    the one its policy file carries."""
+    path, report, policy, results, real = _shipped_flown(name, workers)
     for r in results:
         row = report["families"][r["family"]]
         if r["success_rate_unshielded"] != row["success_rate"]:
@@ -230,6 +231,7 @@ def reshield(name: str, workers: int) -> dict[str, Any]:
             )
         scenarios[scenario]["shielded"] = flown["shielded"]
     path.write_text(json.dumps(report, indent=2, default=float) + "\n")
+    remeasure_policy(policy, suite_metrics(report["families"], scenarios))
     return {
         "shielded_success_rate_solvable": report["shielded_success_rate_solvable"],
         "shielded_collision_rate_u2u": _mean(

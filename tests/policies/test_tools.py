@@ -269,14 +269,21 @@ def test_the_recipe_resumes_a_round_with_a_checkpoint_and_skips_a_made_one(tmp_p
 def test_reshield_rewrites_only_the_shielded_figures_and_refuses_a_changed_policy(
     tmp_path, monkeypatch
 ):
-    """`ship_generalist.py --reshield` on a copy of the shipped eval file, the flights stubbed:
-    the shielded figures change and nothing else; an unshielded figure that does not repeat
+    """`ship_generalist.py --reshield` on copies of the shipped files, the flights stubbed:
+    the shielded figures change and nothing else, in the eval file and in the figures the
+    policy file carries (its weights bit for bit); an unshielded figure that does not repeat
     stops it before anything is written."""
-    from remarl_fc.policy_io import zoo_dir
+    import shutil
+
+    from safetensors.numpy import load_file
+
+    from remarl_fc.policy_io import load_policy, zoo_dir
 
     ship = tool_module("ship_generalist")
     shipped = json.loads((zoo_dir() / "generalist.eval.json").read_text())
     (tmp_path / "generalist.eval.json").write_text(json.dumps(shipped))
+    shutil.copy(zoo_dir() / "generalist.safetensors", tmp_path / "generalist.safetensors")
+    carried = load_policy(zoo_dir() / "generalist.safetensors").meta["metrics"]
     monkeypatch.setattr(ship, "zoo_dir", lambda: tmp_path)
 
     def flown(suite, methods, workers, shield):  # every family as shipped, shielded at 0.5
@@ -318,8 +325,14 @@ def test_reshield_rewrites_only_the_shielded_figures_and_refuses_a_changed_polic
         } == before
     assert again["success_rate"] == shipped["success_rate"]
     assert again["training"] == shipped["training"]
+    metrics = load_policy(tmp_path / "generalist.safetensors").meta["metrics"]
+    assert metrics == carried | {"shielded_success_rate_solvable": 0.5}
+    before = load_file(str(zoo_dir() / "generalist.safetensors"))
+    after = load_file(str(tmp_path / "generalist.safetensors"))
+    assert all(before[k].tobytes() == after[k].tobytes() for k in before)
     # a policy that flies differently without the shield is not the one the file records
     written = (tmp_path / "generalist.eval.json").read_text()
+    signed = (tmp_path / "generalist.safetensors").read_bytes()
     monkeypatch.setattr(
         ship,
         "evaluate_suite",
@@ -328,6 +341,7 @@ def test_reshield_rewrites_only_the_shielded_figures_and_refuses_a_changed_polic
     with pytest.raises(SystemExit, match="ship it again"):
         ship.reshield("generalist", workers=1)
     assert (tmp_path / "generalist.eval.json").read_text() == written
+    assert (tmp_path / "generalist.safetensors").read_bytes() == signed
 
 
 def test_refly_rewrites_every_figure_and_the_ones_the_policy_file_carries(tmp_path, monkeypatch):
