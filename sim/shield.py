@@ -484,36 +484,19 @@ def _decide(
     # to fly straight on (`ShieldConfig.neighbour_arcs`). With the fitted response, each arc
     # as the vehicle flies it instead (`sim.dynamics.predict_response`).
     if motion is None:
-        committed = _at_times(
-            displacements(swarm.heading_rad, prop[..., None] * a_max, 1.0, dt, horizon, CHORDS),
-            split,
-        )
+        committed = _unit_arcs(swarm, prop, vehicle, horizon, split)
         theirs = [
             _committed_path(
                 committed
                 if arc.action is prop
-                else _at_times(
-                    displacements(
-                        swarm.heading_rad, arc.action[..., None] * a_max, 1.0, dt, horizon, CHORDS
-                    ),
-                    split,
-                ),
+                else _unit_arcs(swarm, arc.action, vehicle, horizon, split),
                 arc,
                 swarm,
             )
             for arc in arcs
         ]
     else:  # one prediction for all of them: the proposal at full speed, then each arc
-        turns = np.stack([prop, *(arc.action for arc in arcs)], axis=-1) * a_max
-        firsts = np.stack([full, *(arc.first_m_s for arc in arcs)], axis=-1)
-        thens = np.stack([full, *(swarm.speed_m_s for _ in arcs)], axis=-1)
-        px, py = predict_response(
-            swarm.heading_rad, turns, firsts, thens, motion, dt, CHORDS, later
-        )  # (B, N, 1 + arcs, P)
-        theirs = [
-            (np.moveaxis(px[..., k, :], -1, 0), np.moveaxis(py[..., k, :], -1, 0))
-            for k in range(1, len(arcs) + 1)
-        ]
+        mine_now, *theirs = _responses(swarm, motion, vehicle, prop, full, arcs, later)
     paths = _threat_paths(
         cfg,
         vehicle,
@@ -530,8 +513,10 @@ def _decide(
         at = np.float32(cruise)
         own = (_flown(unit_x, at, cruise), _flown(unit_y, at, cruise))  # (P, B·N, 1)
     else:
-        ox, oy = _time_first((px[..., :1, :], py[..., :1, :]))
-        own = (ox.reshape(-1, b * n, 1), oy.reshape(-1, b * n, 1))
+        own = (
+            np.ascontiguousarray(mine_now[0], dtype=np.float32).reshape(-1, b * n, 1),
+            np.ascontiguousarray(mine_now[1], dtype=np.float32).reshape(-1, b * n, 1),
+        )
     clear, cpa, rank = _clearance(own, paths.owner, paths, (b, n), vehicle.d_col_m)
     proposed_cpa = cpa[..., 0]
     fails = deciding & (clear[..., 0] < 0.0)
@@ -699,25 +684,7 @@ def _escape(
     turns = np.where(np.arange(longest) < steps[:, None], firsts[:, None], 0.0)
     turns *= vehicle.max_turn_rad  # (C, S) each plan's turn per step
     start = swarm.heading_rad[todo]  # (F,)
-    if motion is None:
-        z = _turns(start[:, None], turns, vehicle.dt_s, times)  # (F, C, P) at 1 m/s
-        z *= vehicle.cruise_m_s
-        flown = _time_first((z.real, z.imag))
-    else:  # through the response, from each UAV's motion now (the tail holds the final turn)
-        wide = np.broadcast_to(turns, (len(start), *turns.shape))
-        flown = _time_first(
-            predict_response(
-                start,
-                wide[..., 0],
-                vehicle.cruise_m_s,
-                vehicle.cruise_m_s,
-                motion.of(todo),
-                vehicle.dt_s,
-                CHORDS,
-                times[CHORDS + 1 :],
-                second_rad=wide[..., 1],
-            )
-        )
+    flown = _plans_flown(vehicle, start, turns, None if motion is None else motion.of(todo), times)
     row = np.cumsum(todo.reshape(-1)) - 1  # each UAV's place among them
     mine = paths.of(todo)
     clear, cpa, rank = _clearance(
@@ -826,58 +793,14 @@ def _homeward(
     cfg = dataclasses.replace(cfg, neighbour_horizon_s=cfg.return_neighbour_horizon_s)
     times, split = _times(dt, horizon, (*cuts, cfg.return_neighbour_horizon_s, *_knots(dt, steps)))
     if motion is None:
-        committed = [
-            (
-                arc,
-                _committed_path(
-                    _at_times(
-                        displacements(
-                            swarm.heading_rad,
-                            arc.action[..., None] * a_max,
-                            1.0,
-                            dt,
-                            horizon,
-                            CHORDS,
-                        ),
-                        split,
-                    ),
-                    arc,
-                    swarm,
-                ),
-            )
-            for arc in arcs
+        theirs = [
+            _committed_path(_unit_arcs(swarm, a.action, vehicle, horizon, split), a, swarm)
+            for a in arcs
         ]
-        z = _turns(start[:, None], turns, dt, times) * vehicle.cruise_m_s  # (F, C, P)
-        flown = _time_first((z.real, z.imag))  # (P, F, C)
     else:
-        later = times[CHORDS + 1 :]
-        px, py = predict_response(
-            swarm.heading_rad,
-            np.stack([arc.action for arc in arcs], axis=-1) * a_max,
-            np.stack([arc.first_m_s for arc in arcs], axis=-1),
-            np.stack([swarm.speed_m_s for _ in arcs], axis=-1),
-            motion,
-            dt,
-            CHORDS,
-            later,
-        )  # (B, N, arcs, P)
-        committed = [
-            (arc, (np.moveaxis(px[..., k, :], -1, 0), np.moveaxis(py[..., k, :], -1, 0)))
-            for k, arc in enumerate(arcs)
-        ]
-        flown = _time_first(
-            predict_response(
-                start,
-                turns[..., 0],
-                vehicle.cruise_m_s,
-                vehicle.cruise_m_s,
-                motion.of(away),
-                dt,
-                CHORDS,
-                later,
-                second_rad=turns[..., 1],
-            )
-        )
+        theirs = _responses(swarm, motion, vehicle, None, None, arcs, times[CHORDS + 1 :])
+    committed = list(zip(arcs, theirs, strict=True))
+    flown = _plans_flown(vehicle, start, turns, None if motion is None else motion.of(away), times)
     # a UAV hovering where it arrived is kept clear of over the whole look-ahead, as a static
     # intruder: the turn back heads where the swarm's targets are, and it stays there
     parked = swarm.present & ~swarm.deciding
@@ -899,6 +822,95 @@ def _homeward(
     first = np.zeros((b, n, len(ways)))
     first[away] = turns[..., 0] / a_max
     return Homeward(np.logical_or.reduce(ok, axis=-1), _at(first, pick), _at(cpa, pick))
+
+
+def _unit_arcs(
+    swarm: Swarm, action: FloatArray, vehicle: Vehicle, horizon_s: float, split: list[float]
+) -> tuple[FloatArray, FloatArray]:
+    """(x, y), each (B, N, 1, P): every UAV's arc of ``action`` (B, N), then straight on.
+
+    ``action`` normalised; at 1 m/s, at the points of `_times` (``split``: its cuts in the
+    straight part).
+    """
+    return _at_times(
+        displacements(
+            swarm.heading_rad,
+            action[..., None] * vehicle.max_turn_rad,
+            1.0,
+            vehicle.dt_s,
+            horizon_s,
+            CHORDS,
+        ),
+        split,
+    )
+
+
+def _responses(
+    swarm: Swarm,
+    motion: Motion,
+    vehicle: Vehicle,
+    action: FloatArray | None,
+    first_m_s: FloatArray | None,
+    arcs: list[Commitment],
+    later_s: FloatArray,
+) -> list[tuple[FloatArray, FloatArray]]:
+    """Arcs flown through every UAV's fitted response, in one prediction: (x, y), each (P, B, N).
+
+    ``action`` at ``first_m_s`` then the cruise speed first, where given (a UAV's own
+    candidate), then each of ``arcs`` at its speeds (what the neighbours keep clear of).
+    """
+    cruise = np.full(swarm.heading_rad.shape, vehicle.cruise_m_s)
+    own = [] if action is None or first_m_s is None else [(action, first_m_s, cruise)]
+    each: list[tuple[FloatArray, FloatArray, FloatArray]] = [
+        *own,
+        *((a.action, a.first_m_s, swarm.speed_m_s) for a in arcs),
+    ]
+    px, py = predict_response(
+        swarm.heading_rad,
+        np.stack([e[0] for e in each], axis=-1) * vehicle.max_turn_rad,
+        np.stack([e[1] for e in each], axis=-1),
+        np.stack([e[2] for e in each], axis=-1),
+        motion,
+        vehicle.dt_s,
+        CHORDS,
+        later_s,
+    )  # (B, N, arcs, P)
+    return [
+        (np.moveaxis(px[..., k, :], -1, 0), np.moveaxis(py[..., k, :], -1, 0))
+        for k in range(len(each))
+    ]
+
+
+def _plans_flown(
+    vehicle: Vehicle,
+    start: FloatArray,
+    turns: FloatArray,
+    motion: Motion | None,
+    times: FloatArray,
+) -> tuple[Float32Array, Float32Array]:
+    """(P, F, C) displacements of plans turning by ``turns`` (…, C, S ≥ 2) a step, then straight.
+
+    ``start`` (F,): the headings of the UAVs flying them. The ideal vehicle flies them exactly
+    (`_turns`, at ``times``); a fitted one (``motion``: those UAVs') through its response over
+    the first two steps, then its final heading held (`sim.dynamics.predict_response`).
+    """
+    if motion is None:
+        z = _turns(start[:, None], turns, vehicle.dt_s, times) * vehicle.cruise_m_s
+        return _time_first((z.real, z.imag))
+    wide = np.broadcast_to(turns, (len(start), *turns.shape[-2:]))
+    return _time_first(
+        predict_response(
+            start,
+            wide[..., 0],
+            vehicle.cruise_m_s,
+            vehicle.cruise_m_s,
+            motion,
+            vehicle.dt_s,
+            CHORDS,
+            times[CHORDS + 1 :],
+            second_rad=wide[..., 1],
+        )
+    )
 
 
 def _knots(dt_s: float, steps: int) -> tuple[float, ...]:

@@ -266,6 +266,33 @@ def test_the_recipe_resumes_a_round_with_a_checkpoint_and_skips_a_made_one(tmp_p
     assert missing.returncode == 2 and "no such policy file" in missing.stderr
 
 
+def shipped_copies(tmp_path, monkeypatch):
+    """`ship_generalist` with its zoo in ``tmp_path``: copies of the shipped generalist's eval
+    and policy files. Returns (the module, the shipped eval file's contents)."""
+    import shutil
+
+    from remarl_fc.policy_io import zoo_dir
+
+    ship = tool_module("ship_generalist")
+    shipped = json.loads((zoo_dir() / "generalist.eval.json").read_text())
+    (tmp_path / "generalist.eval.json").write_text(json.dumps(shipped))
+    shutil.copy(zoo_dir() / "generalist.safetensors", tmp_path / "generalist.safetensors")
+    monkeypatch.setattr(ship, "zoo_dir", lambda: tmp_path)
+    return ship, shipped
+
+
+def assert_same_weights(tmp_path):
+    """The copy's tensors are the shipped policy's, bit for bit."""
+    from safetensors.numpy import load_file
+
+    from remarl_fc.policy_io import zoo_dir
+
+    before = load_file(str(zoo_dir() / "generalist.safetensors"))
+    after = load_file(str(tmp_path / "generalist.safetensors"))
+    assert set(before) == set(after)
+    assert all(before[k].tobytes() == after[k].tobytes() for k in before)
+
+
 def test_reshield_rewrites_only_the_shielded_figures_and_refuses_a_changed_policy(
     tmp_path, monkeypatch
 ):
@@ -273,18 +300,10 @@ def test_reshield_rewrites_only_the_shielded_figures_and_refuses_a_changed_polic
     the shielded figures change and nothing else, in the eval file and in the figures the
     policy file carries (its weights bit for bit); an unshielded figure that does not repeat
     stops it before anything is written."""
-    import shutil
-
-    from safetensors.numpy import load_file
-
     from remarl_fc.policy_io import load_policy, zoo_dir
 
-    ship = tool_module("ship_generalist")
-    shipped = json.loads((zoo_dir() / "generalist.eval.json").read_text())
-    (tmp_path / "generalist.eval.json").write_text(json.dumps(shipped))
-    shutil.copy(zoo_dir() / "generalist.safetensors", tmp_path / "generalist.safetensors")
     carried = load_policy(zoo_dir() / "generalist.safetensors").meta["metrics"]
-    monkeypatch.setattr(ship, "zoo_dir", lambda: tmp_path)
+    ship, shipped = shipped_copies(tmp_path, monkeypatch)
 
     def flown(suite, methods, workers, shield):  # every family as shipped, shielded at 0.5
         assert shield.mode == "on"
@@ -327,9 +346,7 @@ def test_reshield_rewrites_only_the_shielded_figures_and_refuses_a_changed_polic
     assert again["training"] == shipped["training"]
     metrics = load_policy(tmp_path / "generalist.safetensors").meta["metrics"]
     assert metrics == carried | {"shielded_success_rate_solvable": 0.5}
-    before = load_file(str(zoo_dir() / "generalist.safetensors"))
-    after = load_file(str(tmp_path / "generalist.safetensors"))
-    assert all(before[k].tobytes() == after[k].tobytes() for k in before)
+    assert_same_weights(tmp_path)
     # a policy that flies differently without the shield is not the one the file records
     written = (tmp_path / "generalist.eval.json").read_text()
     signed = (tmp_path / "generalist.safetensors").read_bytes()
@@ -348,17 +365,9 @@ def test_refly_rewrites_every_figure_and_the_ones_the_policy_file_carries(tmp_pa
     """`ship_generalist.py --refly` on copies of the shipped files, the flights stubbed: every
     family's figures and the means are the new flights', the training and recipe stay, and
     the policy file carries the new means with its weights bit for bit."""
-    import shutil
+    from remarl_fc.policy_io import load_policy
 
-    from safetensors.numpy import load_file
-
-    from remarl_fc.policy_io import load_policy, zoo_dir
-
-    ship = tool_module("ship_generalist")
-    shipped = json.loads((zoo_dir() / "generalist.eval.json").read_text())
-    (tmp_path / "generalist.eval.json").write_text(json.dumps(shipped))
-    shutil.copy(zoo_dir() / "generalist.safetensors", tmp_path / "generalist.safetensors")
-    monkeypatch.setattr(ship, "zoo_dir", lambda: tmp_path)
+    ship, shipped = shipped_copies(tmp_path, monkeypatch)
 
     def flown(suite, methods, workers, shield):  # every family at 0.5 alone, 0.75 shielded
         row = dict.fromkeys(ship.KEPT, 1.0) | {"episodes": 200.0, "solvable_episodes": 200}
@@ -396,7 +405,4 @@ def test_refly_rewrites_every_figure_and_the_ones_the_policy_file_carries(tmp_pa
     assert {k: again[k] for k in metrics} == metrics
     assert again["training"] == shipped["training"] and again["recipe"] == shipped["recipe"]
     assert load_policy(tmp_path / "generalist.safetensors").meta["metrics"] == metrics
-    before = load_file(str(zoo_dir() / "generalist.safetensors"))
-    after = load_file(str(tmp_path / "generalist.safetensors"))
-    assert set(before) == set(after)
-    assert all(before[k].tobytes() == after[k].tobytes() for k in before)
+    assert_same_weights(tmp_path)

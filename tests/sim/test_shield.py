@@ -41,15 +41,16 @@ DENSE = 2000
 """Instants of the dense check over the horizon."""
 
 
-def dense_path(pos, heading, action, speed, horizon_s, vehicle=VEHICLE):
+def dense_path(pos, heading, action, speed, horizon_s, vehicle=VEHICLE, held=1):
     """(..., T, 2) positions of the arc-then-straight motion at `DENSE` instants (midpoint rule
     on a fine grid: an independent integration of the same motion). ``speed`` holds over the
-    arc; the UAV goes on at the cruise speed after it (a slowed step is one step)."""
+    arc; the UAV goes on at the cruise speed after it (a slowed step is one step). ``held``:
+    steps the turn is held for (a held turn of the shield, `ShieldConfig.escape_steps`)."""
     t = np.linspace(0.0, horizon_s, DENSE + 1)
     mid = 0.5 * (t[1:] + t[:-1])
     step = np.diff(t)
     turn = np.asarray(action)[..., None] * vehicle.max_turn_rad
-    frac = np.clip(mid / vehicle.dt_s, 0.0, 1.0)
+    frac = np.clip(mid / vehicle.dt_s, 0.0, held)
     h = np.asarray(heading)[..., None] + turn * frac
     v = np.where(mid < vehicle.dt_s, np.asarray(speed)[..., None], vehicle.cruise_m_s)
     dx = np.cumsum(v * step * np.cos(h), axis=-1)
@@ -60,11 +61,14 @@ def dense_path(pos, heading, action, speed, horizon_s, vehicle=VEHICLE):
     return np.stack([x, y], axis=-1), t
 
 
-def dense_clearance(cfg, swarm, threats, own, uav, action, speed, proposed):
+def dense_clearance(cfg, swarm, threats, own, uav, action, speed, proposed, held=1):
     """Smallest (distance − required) of UAV ``uav`` of environment ``own`` flying (action,
-    speed), against the intruders and the other UAVs on their proposed arcs."""
+    speed), its turn held for ``held`` steps, against the intruders and the other UAVs on their
+    proposed arcs."""
     horizon = cfg.horizon_s
-    me, t = dense_path(swarm.pos_m[own, uav], swarm.heading_rad[own, uav], action, speed, horizon)
+    me, t = dense_path(
+        swarm.pos_m[own, uav], swarm.heading_rad[own, uav], action, speed, horizon, held=held
+    )
     worst = np.inf
     required = VEHICLE.d_col_m + cfg.margin_m
     for m in np.flatnonzero(threats.intruder_known[own]):
@@ -154,6 +158,13 @@ def test_where_some_admissible_action_keeps_separation_the_shielded_one_does(see
             flown = dense_clearance(
                 cfg, swarm, threats, e, i, d.action[e, i], d.speed_m_s[e, i], prop
             )
+            if abs(d.action[e, i]) == 1.0 and d.speed_m_s[e, i] == VEHICLE.cruise_m_s:
+                # a full turn may be the first step of a held one: that plan keeps separation
+                held = dense_clearance(
+                    cfg, swarm, threats, e, i, d.action[e, i], d.speed_m_s[e, i], prop,
+                    held=cfg.escape_steps,
+                )  # fmt: skip
+                flown = max(flown, held)
             if not d.intervened[e, i]:
                 assert flown >= -0.5  # the proposal passed: it keeps separation
                 continue
