@@ -173,7 +173,10 @@ def _restart(
 
 
 def oracle_actions(
-    state: SwarmState, cfg: ScenarioConfig, oracle: OracleConfig | None = None
+    state: SwarmState,
+    cfg: ScenarioConfig,
+    oracle: OracleConfig | None = None,
+    envs: IntArray | None = None,
 ) -> tuple[Float32Array, BoolArray]:
     """The oracle as a controller: plan from this state, fly the plan's first step.
 
@@ -188,29 +191,34 @@ def oracle_actions(
     other). Where arrived UAVs hover on their targets (``arrival = "hover"``) they are
     obstacles at rest to the others.
 
+    ``envs``: plan these environments alone (indices, E of them; None: all B).
+
     Returns:
-        (B, N) the plans' first normalised actions (0 where no plan was found) and (B,) whether
+        (E, N) the plans' first normalised actions (0 where no plan was found) and (E,) whether
         a plan was found.
     """
     oracle = oracle or OracleConfig()
-    park = _parked_uavs(state.pos_m.shape[1])
-    gone = ~state.active[..., None]  # arrived, or the episode is over
-    steps = state.steps.astype(np.int64)
+    pick = np.arange(state.num_envs) if envs is None else np.asarray(envs, dtype=np.intp)
+    pos, active, reached = state.pos_m[pick], state.active[pick], state.reached[pick]
+    park = _parked_uavs(pos.shape[1])
+    gone = ~active[..., None]  # arrived, or the episode is over
+    steps = state.steps[pick].astype(np.int64)
+    appear = state.obstacle_appear_step[pick]
     episodes = EpisodeStart(
-        start_m=np.where(gone, park, state.pos_m),
-        target_m=np.where(gone, park, state.target_m),
-        centre_m=state.centre_m,
-        swarm_vel_m_s=state.swarm_vel_m_s,
-        obstacle_pos_m=state.obstacle_pos_m,
-        obstacle_vel_m_s=state.obstacle_vel_m_s,
-        obstacle_appear_step=np.zeros_like(state.obstacle_appear_step),
-        heading_rad=state.heading_rad.copy(),
+        start_m=np.where(gone, park, pos),
+        target_m=np.where(gone, park, state.target_m[pick]),
+        centre_m=state.centre_m[pick],
+        swarm_vel_m_s=state.swarm_vel_m_s[pick],
+        obstacle_pos_m=state.obstacle_pos_m[pick],
+        obstacle_vel_m_s=state.obstacle_vel_m_s[pick],
+        obstacle_appear_step=np.zeros_like(appear),
+        heading_rad=state.heading_rad[pick].copy(),
     )
-    episodes = _hide(episodes, state.obstacle_appear_step > steps[:, None])
+    episodes = _hide(episodes, appear > steps[:, None])
     obstacles = cfg.obstacles
     if cfg.arrival == "hover":  # arrived UAVs hover on their targets: in the way, at rest
-        episodes, obstacles = _hovering(episodes, state, cfg)
-    left = cfg.max_steps - int(steps[state.active.any(axis=-1)].min(initial=cfg.max_steps))
+        episodes, obstacles = _hovering(episodes, pos, reached, cfg)
+    left = cfg.max_steps - int(steps[active.any(axis=-1)].min(initial=cfg.max_steps))
     ideal = dataclasses.replace(
         cfg,
         max_steps=max(left, 1),
@@ -225,17 +233,18 @@ def oracle_actions(
 
 
 def _hovering(
-    episodes: EpisodeStart, state: SwarmState, cfg: ScenarioConfig
+    episodes: EpisodeStart, pos_m: FloatArray, reached: BoolArray, cfg: ScenarioConfig
 ) -> tuple[EpisodeStart, ObstacleConfig]:
     """``episodes`` with every UAV that arrived added as an obstacle at rest where it hovers.
 
-    One obstacle slot per UAV (the flying ones' parked far away), after the intruders; and the
-    obstacle settings for M + N of them.
+    ``pos_m`` (B, N, 2), ``reached`` (B, N): the UAVs now. One obstacle slot per UAV (the
+    flying ones' parked far away), after the intruders; and the obstacle settings for M + N of
+    them.
     """
-    b, n = state.pos_m.shape[:2]
+    b, n = pos_m.shape[:2]
     spots = _parked_spots(n, first=episodes.obstacle_pos_m.shape[1] + 1, side=-1.0)
     parked = np.broadcast_to(spots, (b, n, 2))
-    hover = np.where(state.reached[..., None], state.pos_m, parked)
+    hover = np.where(reached[..., None], pos_m, parked)
     moved = dataclasses.replace(
         episodes,
         obstacle_pos_m=np.concatenate([episodes.obstacle_pos_m, hover], axis=1),

@@ -29,7 +29,10 @@ collision predicted in the coming step first, then one with an intruder within t
 look-ahead, then one with a neighbour in it; then the largest clearance, the closest approach
 minus what is required). Last, a UAV whose decision points more than ``return_deg`` away from
 its target turns back towards it where that passes (`_homeward`): safe is not enough, a UAV
-that paces an intruder away from its target never arrives.
+that paces an intruder away from its target never arrives. Beyond one decision, where some UAV
+has nothing that passes, its swarm may fly a centralised plan for a few steps
+(``plan_steps``: the swarm planner, `sim.oracle.oracle_actions`, applied by the offline
+evaluation, which keeps the memory a plan held over steps needs).
 Nothing after a UAV reaches its target (its distance over the cruise speed, at least the coming
 step) is checked: it leaves, or hovers where nothing of the swarm is headed; a
 straight line past the target would see conflicts the UAV never flies into.
@@ -199,6 +202,22 @@ class ShieldConfig:
     → 34 → 34 episodes of 7,600, crossing-50u 83 → 86.5 → 86.5 → 86 %, two lines of five
     96 → 97 → 100 → 99.5 %."""
 
+    plan_steps: int = 8
+    """The swarm planner, the last resort: where some UAV of an environment has nothing that
+    passes (not one heading, speed, held turn), every UAV of that environment flies the
+    oracle's plan instead of its controller's (`sim.oracle.oracle_actions`: a centralised
+    prioritised search over the known intruders' straight futures and the swarm's own plans,
+    from where the swarm stands, replanned at every step) for this many decision steps, the
+    step it was stuck included (0: never). The check decides for each UAV against its
+    neighbours' arcs of one step; in a crowd that leaves a UAV boxed in between its neighbours
+    and an intruder, where only the neighbours moving too makes room. Only in the simulator's
+    exact world (every intruder known exactly, the vehicles flying their arcs exactly: the
+    plan is checked by flying it there, `sim.oracle`); not against ADS-B tracks, a fitted
+    response or GPS errors, where its plan would not be exact, and not in `fly`. Applied by
+    the offline evaluation (`remarl_fc.offline.shielding.Shielded`); `shield` itself decides
+    one step and keeps no memory. Measured behind the generalist on the standard suite
+    (docs/MODEL.md §21)."""
+
     @property
     def return_rad(self) -> float:
         """``return_deg`` in radians."""
@@ -244,6 +263,8 @@ class ShieldConfig:
             raise ValueError("shield neighbours must be >= 0")
         if self.passes < 1:
             raise ValueError(f"shield passes must be >= 1, got {self.passes}")
+        if self.plan_steps < 0:
+            raise ValueError(f"shield plan_steps must be >= 0, got {self.plan_steps}")
         if not 1 <= self.escape_steps <= ESCAPE_STEPS_MAX:
             raise ValueError(
                 f"shield escape_steps must be 1 to {ESCAPE_STEPS_MAX}, got {self.escape_steps}"

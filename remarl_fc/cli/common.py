@@ -103,10 +103,11 @@ def progress_bar(*, enabled: bool, unit: str = "steps", digits: int = 0) -> Any:
     )
 
 
-def add_shield_flags(p: Any, default: str) -> None:
+def add_shield_flags(p: Any, default: str, planner: bool = False) -> None:
     """Add ``--shield off|monitor|on`` (default ``default``), its horizons, margin and passes.
 
     The defaults of the horizons, margin and passes are `sim.shield.ShieldConfig`'s.
+    ``planner``: also ``--shield-plan-steps`` (the simulator's evaluation alone applies it).
     """
     from sim.shield import NEIGHBOUR_ARCS, SHIELD_MODES, VEHICLE_MODELS, ShieldConfig
 
@@ -182,6 +183,17 @@ def add_shield_flags(p: Any, default: str) -> None:
         "(--dynamics): with that response, or on the arcs as commanded (default "
         f"{base.vehicle_model})",
     )
+    if planner:
+        p.add_argument(
+            "--shield-plan-steps",
+            type=int,
+            default=base.plan_steps,
+            metavar="STEPS",
+            help="where some UAV has nothing that passes the check, its whole swarm flies the "
+            "oracle's plan for STEPS decisions (default "
+            f"{base.plan_steps}; 0: never; the exact world only: never against ADS-B tracks "
+            "or a fitted vehicle response)",
+        )
 
 
 def shield_from_args(args: argparse.Namespace) -> Any:
@@ -200,6 +212,11 @@ def shield_from_args(args: argparse.Namespace) -> Any:
             return_deg=args.shield_return,
             neighbour_arcs=args.shield_neighbours,
             vehicle_model=args.shield_vehicle_model,
+            **(
+                {"plan_steps": args.shield_plan_steps}
+                if getattr(args, "shield_plan_steps", None) is not None
+                else {}
+            ),
         )
     except ValueError as exc:
         raise ConfigError(f"--shield: {exc}") from exc

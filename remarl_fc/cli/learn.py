@@ -350,7 +350,7 @@ def add_eval(sub: Any) -> None:
         help="episodes (default 1000; with --suite, per family, default the suite's)",
     )
     add_seed(p, default=evaluation_seed(), help="first evaluation seed")
-    add_shield_flags(p, default="off")
+    add_shield_flags(p, default="off", planner=True)
     p.add_argument(
         "--dynamics",
         default=None,

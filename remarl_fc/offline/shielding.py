@@ -4,10 +4,16 @@
 actions, passes them through the shield with what each UAV knows of the simulator state, and
 returns what to fly — heading changes and speeds — while it counts the decisions and the
 interventions (in monitor mode, the ones the shield would have made).
+
+It also applies the shield's last resort, which needs a memory of the steps before: where some
+UAV of an environment has nothing that passes, that environment's swarm flies the oracle's
+plan for `sim.shield.ShieldConfig.plan_steps` decisions (`sim.oracle.oracle_actions`), in the
+simulator's exact world only.
 """
 
 from __future__ import annotations
 
+import time
 from typing import Any
 
 import numpy as np
@@ -16,7 +22,8 @@ from numpy.typing import NDArray
 from sim.arrays import FloatArray
 from sim.config import ScenarioConfig
 from sim.observation import ObservationLayout
-from sim.shield import ShieldConfig, Vehicle, shield_state, vehicle_of
+from sim.oracle import oracle_actions
+from sim.shield import ShieldConfig, ShieldDecision, Vehicle, shield_state, vehicle_of
 from sim.state import SwarmState
 
 
@@ -25,8 +32,10 @@ class Shielded:
 
     Calls return (actions (B, N) float32, speeds (B, N) m/s). Attributes after a run:
     ``decisions`` (UAV decisions shielded), ``interventions`` (of them, those the shield
-    changed or would have changed), ``intervened_envs`` (B,) environments with at least one
-    intervention since `reset`.
+    changed or would have changed), ``planned`` (of them, those flown from the swarm planner's
+    plan), ``plans`` (environment decisions the planner searched for) and ``plan_seconds``
+    (its time), ``intervened_envs`` (B,) environments with at least one intervention since
+    `reset`.
     """
 
     def __init__(self, act: Any, cfg: ShieldConfig) -> None:
@@ -35,7 +44,13 @@ class Shielded:
         self._vehicle: tuple[ScenarioConfig, Vehicle] | None = None
         self.decisions = 0
         self.interventions = 0
+        self.planned = self.plans = 0
+        self.plan_seconds = 0.0
         self.intervened_envs: NDArray[np.bool_] | None = None
+        # per environment: the planned steps still to fly, and the step of the last decision
+        # (a smaller one is a new episode, which starts without a plan)
+        self._plan_left: NDArray[np.int64] | None = None
+        self._last_step: NDArray[np.int64] | None = None
 
     @property
     def layout(self) -> ObservationLayout | None:
@@ -52,23 +67,72 @@ class Shielded:
 
     def reset(self) -> None:
         """Forget the counts (a new batch of episodes)."""
-        self.decisions = self.interventions = 0
+        self.decisions = self.interventions = self.planned = self.plans = 0
+        self.plan_seconds = 0.0
         self.intervened_envs = None
+        self._plan_left = self._last_step = None
 
     def __call__(
         self, obs: NDArray[np.float32], state: SwarmState, cfg: ScenarioConfig
     ) -> tuple[NDArray[np.float32], FloatArray]:
         """(actions, speeds) to fly for the observations (B, N, D) of ``state``."""
         proposed = self.inner(obs, state, cfg)
-        decision = shield_state(self.cfg, cfg, state, proposed, self.vehicle(cfg))
+        vehicle = self.vehicle(cfg)
+        decision = shield_state(self.cfg, cfg, state, proposed, vehicle)
+        action, speed, intervened = decision.action, decision.speed_m_s, decision.intervened
+        if self.cfg.mode == "on" and self.cfg.plan_steps > 0 and _exact(state):
+            action, speed, intervened = self._plan(state, cfg, decision, proposed, vehicle)
         self.decisions += int(state.active.sum())
-        self.interventions += int(decision.intervened.sum())
-        hit: NDArray[np.bool_] = np.asarray(decision.intervened.any(axis=-1))
+        self.interventions += int(intervened.sum())
+        hit: NDArray[np.bool_] = np.asarray(intervened.any(axis=-1))
         if self.intervened_envs is None or len(self.intervened_envs) != len(hit):
             self.intervened_envs = hit
         else:
             self.intervened_envs = self.intervened_envs | hit
-        return decision.action, decision.speed_m_s
+        return action, speed
+
+    def _plan(
+        self,
+        state: SwarmState,
+        cfg: ScenarioConfig,
+        decision: ShieldDecision,
+        proposed: NDArray[np.floating],
+        vehicle: Vehicle,
+    ) -> tuple[NDArray[np.float32], FloatArray, NDArray[np.bool_]]:
+        """The shield's decision, with the swarm planner's where an environment needs it.
+
+        An environment where some flying UAV has nothing that passes flies the oracle's plan
+        (`sim.oracle.oracle_actions`, every UAV of it at the cruise speed) from this step for
+        `ShieldConfig.plan_steps` steps, replanned at each; where the planner finds no plan,
+        the shield's decision stands. Returns (actions, speeds, intervened), as the decision's.
+        """
+        b = state.num_envs
+        steps = state.steps.astype(np.int64)
+        left, last = self._plan_left, self._last_step
+        if left is None or last is None or len(left) != b:
+            left, last = np.zeros(b, dtype=np.int64), steps
+        left = np.where(steps < last, 0, left)  # a new episode
+        stuck = np.logical_or.reduce(state.active & ~decision.safe_exists, axis=-1)
+        left = np.where(stuck, self.cfg.plan_steps, left)
+        envs = np.flatnonzero((left > 0) & np.logical_or.reduce(state.active, axis=-1))
+        self._plan_left, self._last_step = np.maximum(left - 1, 0), steps
+        action, speed, intervened = decision.action, decision.speed_m_s, decision.intervened
+        if not envs.size:
+            return action, speed, intervened
+        t0 = time.perf_counter()
+        plans, found = oracle_actions(state, cfg, envs=envs)
+        self.plan_seconds += time.perf_counter() - t0
+        self.plans += len(envs)
+        envs, plans = envs[found], plans[found]
+        flying = state.active[envs]
+        action, speed = action.copy(), speed.copy()
+        action[envs] = np.where(flying, plans, action[envs])
+        speed[envs] = np.where(flying, vehicle.cruise_m_s, speed[envs])
+        planned = np.zeros_like(intervened)
+        planned[envs] = flying
+        self.planned += int(planned.sum())
+        changed = planned & (action != np.asarray(proposed, dtype=np.float32))
+        return action, speed, intervened | changed
 
     def report(self) -> dict[str, Any]:
         """The shield's figures of the run: mode, rate per UAV decision, episodes touched."""
@@ -78,5 +142,17 @@ class Shielded:
             "shield_interventions": self.interventions,
             "shield_decisions": self.decisions,
             "intervention_rate": self.interventions / self.decisions if self.decisions else 0.0,
+            "shield_planned": self.planned,
+            "shield_plans": self.plans,
+            "shield_plan_seconds": self.plan_seconds,
             "episodes_intervened": float(touched.mean()) if touched is not None else 0.0,
         }
+
+
+def _exact(state: SwarmState) -> bool:
+    """The simulator's exact world, where the swarm planner's plans are checked.
+
+    Every intruder known exactly and every vehicle flying its arcs exactly: no ADS-B tracks,
+    no fitted response, no GPS error.
+    """
+    return state.tracks is None and state.response is None and not state.gps_error_m.any()

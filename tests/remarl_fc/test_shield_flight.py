@@ -488,6 +488,27 @@ def test_the_shield_flags_build_its_config():
         args = build_parser().parse_args([command, "--shield-return", "180"])
         assert shield_from_args(args).return_deg == 180.0
     assert shield_from_args(build_parser().parse_args(["demo"])) == ShieldConfig(mode="on")
+    # the swarm planner: the simulator's evaluation alone applies it, and alone offers the flag
+    args = build_parser().parse_args(["eval", "--shield-plan-steps", "0"])
+    assert shield_from_args(args).plan_steps == 0
+    assert shield_from_args(build_parser().parse_args(["eval"])).plan_steps == 8
+
+
+@pytest.mark.parametrize("command", ["fly", "demo"])
+def test_fly_and_demo_offer_no_swarm_planner(command, capsys):
+    from remarl_fc.cli import build_parser
+
+    base = ["fly", "--connection", "udpin:127.0.0.1:0", "--policy", "3u2o", "--mission",
+            "docs/examples/mission-3u2o.toml"] if command == "fly" else ["demo"]  # fmt: skip
+    build_parser().parse_args(base)
+    with pytest.raises(SystemExit):
+        build_parser().parse_args([*base, "--shield-plan-steps", "0"])
+    assert "unrecognized arguments: --shield-plan-steps" in capsys.readouterr().err
+
+
+def test_a_negative_plan_steps_is_refused(capsys):
+    assert main(["eval", "--policy", "3u2o", "--shield", "on", "--shield-plan-steps", "-1"]) == 2
+    assert "plan_steps must be >= 0" in capsys.readouterr().err
 
 
 # -- closed loop on the mock ---------------------------------------------------------------
