@@ -4,12 +4,13 @@
     python tools/shield_table.py --methods zoo --policy generalist
     python tools/shield_table.py --from results.json             # arrange a saved run
     python tools/shield_table.py --json results.json             # keep the raw figures
+    python tools/shield_table.py --plan-steps 0                  # the shield without its planner
 
 The figures are those of ``remarl-fc eval --suite standard --method ... --shield on``: each
 family flown twice on the same episodes, without the shield and with it (defaults of
-`sim.shield.ShieldConfig`). A cell reads "success without → with (intervention rate)", the
-success over the episodes the oracle proved solvable; the last rows give the means and the
-families where the shield lost anything.
+`sim.shield.ShieldConfig`, ``--plan-steps`` its swarm planner's). A cell reads "success
+without → with (intervention rate)", the success over the episodes the oracle proved
+solvable; the last rows give the means and the families where the shield lost anything.
 """
 
 from __future__ import annotations
@@ -85,6 +86,12 @@ def main() -> None:
     parser.add_argument("--workers", type=int, default=1)
     parser.add_argument("--from", dest="source", default=None, help="a saved --json of eval")
     parser.add_argument("--json", default=None, help="write the raw results here")
+    parser.add_argument(
+        "--plan-steps",
+        type=int,
+        default=ShieldConfig().plan_steps,
+        help="the shield's swarm planner, steps (ShieldConfig.plan_steps; 0: never)",
+    )
     args = parser.parse_args()
     keep_freed_memory()
     if args.source:
@@ -98,7 +105,7 @@ def main() -> None:
             specs,
             episodes=args.episodes,
             workers=args.workers,
-            shield=ShieldConfig(mode="on"),
+            shield=ShieldConfig(mode="on", plan_steps=args.plan_steps),
         )
     if args.json:
         Path(args.json).write_text(json.dumps({"results": results}, indent=1, default=float))

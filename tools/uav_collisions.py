@@ -16,10 +16,12 @@ an episode ends at its first collision). For every episode whose first collision
 two UAVs, it tells whether one of them had already arrived and hovered at its target
 (``arrival = "hover"``), or arrived during that step. A minute for the whole suite on one core.
 
-``--shield`` flies behind the safety shield at its defaults (``remarl-fc eval --shield on``) and
-adds a column: the collisions where, for one of the two UAVs at least, no candidate passed the
-shield's check at that decision (it flew its fallback, the least dangerous candidate). Where
-both had one that passed, a neighbour flew other than the arc it was checked against.
+``--shield`` flies behind the safety shield at its defaults (``remarl-fc eval --shield on``, its
+swarm planner included, `remarl_fc.offline.shielding.Shielded`) and adds a column: the
+collisions where, for one of the two UAVs at least, no candidate passed the shield's check at
+that decision (it flew its fallback, the least dangerous candidate, or the swarm planner's
+plan). Where both had one that passed, a neighbour flew other than the arc it was checked
+against.
 """
 
 from __future__ import annotations
@@ -30,10 +32,11 @@ import numpy as np
 
 from remarl_fc.offline.evaluate import REAL_WORLD_FLOWN, evaluation_scenario, world_overrides
 from remarl_fc.offline.rollout import PolicyFileAct, observe_for
+from remarl_fc.offline.shielding import Shielded
 from remarl_fc.offline.suite import Act, MethodSpec, resolve_method
 from remarl_fc.policy_io import load_policy
 from sim.encounters import Family, sample_family
-from sim.shield import ShieldConfig, shield_state, vehicle_of
+from sim.shield import ShieldConfig
 from sim.state import SwarmState
 from sim.suite import Suite, load_suite
 from sim.swarm import SwarmSim
@@ -49,19 +52,22 @@ def first_collisions(
     """`Counts` of the episodes of ``state`` flown to their first collision or end."""
     cfg = sim.cfg
     rng = np.random.default_rng(0)
-    vehicle = vehicle_of(cfg) if shield is not None else None  # read once, not every step
+    shielded = Shielded(act, shield) if shield is not None else None  # as the suite flies it
     episodes = state.pos_m.shape[0]
     open_ = np.ones(episodes, dtype=bool)  # no collision and not over yet
     uu = hovering = arriving = unsafe = 0
     for _ in range(cfg.max_steps):
         before = state.reached.copy()
-        action = act(observe_for(sim, state, act), state, cfg)
-        assert not isinstance(action, tuple)  # a policy file chooses headings, not speeds
-        speeds, passed = None, np.ones(action.shape, dtype=bool)
-        if shield is not None:
-            decision = shield_state(shield, cfg, state, action, vehicle)
-            action, speeds = decision.action, decision.speed_m_s
-            passed = decision.safe_exists | ~state.active
+        obs = observe_for(sim, state, act)
+        speeds, passed = None, np.ones(state.active.shape, dtype=bool)
+        if shielded is not None:
+            action, speeds = shielded(obs, state, cfg)
+            assert shielded.last is not None
+            passed = shielded.last.safe_exists | ~state.active
+        else:
+            proposed = act(obs, state, cfg)
+            assert not isinstance(proposed, tuple)  # a policy file chooses headings, not speeds
+            action = proposed
         state, r = sim.step(state, action, rng, speeds_m_s=speeds)
         hit = open_ & r.collided_u2u.any(axis=1)
         uu += int(hit.sum())

@@ -35,7 +35,7 @@ class Shielded:
     changed or would have changed), ``planned`` (of them, those flown from the swarm planner's
     plan), ``plans`` (environment decisions the planner searched for) and ``plan_seconds``
     (its time), ``intervened_envs`` (B,) environments with at least one intervention since
-    `reset`.
+    `reset`; ``last``, the shield's own decision at the latest call (before the planner).
     """
 
     def __init__(self, act: Any, cfg: ShieldConfig) -> None:
@@ -51,6 +51,7 @@ class Shielded:
         # (a smaller one is a new episode, which starts without a plan)
         self._plan_left: NDArray[np.int64] | None = None
         self._last_step: NDArray[np.int64] | None = None
+        self.last: ShieldDecision | None = None  # the shield's decision of the latest call
 
     @property
     def layout(self) -> ObservationLayout | None:
@@ -78,7 +79,7 @@ class Shielded:
         """(actions, speeds) to fly for the observations (B, N, D) of ``state``."""
         proposed = self.inner(obs, state, cfg)
         vehicle = self.vehicle(cfg)
-        decision = shield_state(self.cfg, cfg, state, proposed, vehicle)
+        decision = self.last = shield_state(self.cfg, cfg, state, proposed, vehicle)
         action, speed, intervened = decision.action, decision.speed_m_s, decision.intervened
         if self.cfg.mode == "on" and self.cfg.plan_steps > 0 and _exact(state):
             action, speed, intervened = self._plan(state, cfg, decision, proposed, vehicle)
@@ -131,8 +132,10 @@ class Shielded:
         planned = np.zeros_like(intervened)
         planned[envs] = flying
         self.planned += int(planned.sum())
-        changed = planned & (action != np.asarray(proposed, dtype=np.float32))
-        return action, speed, intervened | changed
+        # a planned UAV is intervened on where the plan is not its proposal, whatever the
+        # shield had decided for it
+        changed = action != np.asarray(proposed, dtype=np.float32)
+        return action, speed, np.where(planned, changed, intervened)
 
     def report(self) -> dict[str, Any]:
         """The shield's figures of the run: mode, rate per UAV decision, episodes touched."""

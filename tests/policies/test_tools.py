@@ -164,8 +164,8 @@ def test_uav_collisions_counts_what_the_suite_evaluation_counts():
     # of the first 50 episodes' 19 UAV–UAV collisions, with the policy shipped 2026-11-29)
     episodes, uu, hovering, arriving, _ = real_world_counts("generalist", "10u1o", 50)
     assert episodes == 50 and 0 < hovering <= uu
-    # behind the shield, as `remarl-fc eval --shield on` flies it (dense-10u: 11 of its 200
-    # episodes end in a UAV–UAV collision, each with a UAV for which nothing passed)
+    # behind the shield, as `remarl-fc eval --shield on` flies it, its swarm planner included
+    # (dense-10u: 2 of its 200 episodes end in a UAV–UAV collision, where nothing passed)
     shield = ShieldConfig(mode="on")
     family = suite.family("dense-10u")
     episodes, uu, _, _, unsafe = family_counts("generalist", suite, family, shield)

@@ -193,6 +193,20 @@ def test_the_oracle_as_a_controller_flies_where_straight_flight_collides():
     assert success.all() and planned.all()
 
 
+def test_the_oracle_plans_the_environments_it_is_asked_for_alone():
+    episodes = spawn_episodes(SWARM, np.random.default_rng(0), 4)
+    sim = SwarmSim(SWARM, scored=False)
+    state = sim.start(episodes, np.random.default_rng(1))
+    state, _ = sim.step(
+        state, np.zeros(state.heading_rad.shape, np.float32), np.random.default_rng(1)
+    )
+    every, found = oracle_actions(state, SWARM)
+    assert found.all() and np.abs(every).max() > 0
+    some, found_some = oracle_actions(state, SWARM, envs=np.array([3, 1]))
+    assert some.shape == (2, SWARM.uav.count) and found_some.all()
+    np.testing.assert_array_equal(some, every[[3, 1]])  # the same plans, the others not planned
+
+
 def test_the_oracle_as_a_controller_keeps_a_swarm_apart():
     episodes = spawn_episodes(SWARM, np.random.default_rng(0), 6)
     success, _ = fly_oracle(SWARM, episodes)
