@@ -156,6 +156,6 @@ def _exact(state: SwarmState) -> bool:
     """The simulator's exact world, where the swarm planner's plans are checked.
 
     Every intruder known exactly and every vehicle flying its arcs exactly: no ADS-B tracks,
-    no fitted response, no GPS error.
+    no GPS error (`SwarmState.exactly_sensed` is the state itself), no fitted response.
     """
-    return state.tracks is None and state.response is None and not state.gps_error_m.any()
+    return state.response is None and state.exactly_sensed() is state
