@@ -406,3 +406,59 @@ def test_refly_rewrites_every_figure_and_the_ones_the_policy_file_carries(tmp_pa
     assert again["training"] == shipped["training"] and again["recipe"] == shipped["recipe"]
     assert load_policy(tmp_path / "generalist.safetensors").meta["metrics"] == metrics
     assert_same_weights(tmp_path)
+
+
+def test_sighting_table_asks_the_oracle_where_each_method_stood():
+    """tools/sighting_table.py: at each episode's first sighting of a late intruder, whether a
+    plan exists from the state the method reached. ORCA flies its lines until it sees the
+    intruder, as the oracle does, so its sighting leaves what the suite's labels say; the
+    generalist leaves its lines first, and its sightings leave other episodes."""
+    sighting = tool_module("sighting_table")
+    from remarl_fc.offline.suite import MethodSpec, run_family
+    from sim.suite import load_suite
+
+    assert sighting.first_sighting(np.array([[0, 3], [5, 2], [0, 0]])).tolist() == [3, 2, -1]
+    suite = load_suite("standard")
+    family = suite.family("pop-up-3u")
+    orca = sighting.family_row(suite, family, "orca", None)
+    assert orca["off_line_m"] < 0.5 and orca["at_sighting"] == orca["solvable"] > 0
+    mine = sighting.family_row(suite, family, "policy:generalist", None)
+    row = run_family(suite, family, MethodSpec.from_label("policy:generalist"))
+    assert mine["episodes"] == row["episodes"] == suite.episodes
+    assert mine["success"] == round(row["success_rate"] * row["episodes"])
+    assert mine["success_solvable"] == round(row["success_rate_solvable"] * mine["solvable"])
+    assert mine["off_line_m"] > 5.0 and mine["at_sighting"] > mine["solvable"]
+    assert 0 < mine["lost_no_plan"] <= mine["solvable"] - mine["success_solvable"]
+    assert mine["success_at_sighting"] <= min(mine["at_sighting"], mine["success"])
+
+
+def test_the_generalist_leaves_its_line_before_a_pop_up_without_knowing_it():
+    """The generalist's path until a late intruder appears is the same with the intruder moved
+    1,000 km away: what tools/sighting_table.py measures off the line is a prior it learned,
+    not a leak of what it cannot see."""
+    import dataclasses
+
+    from remarl_fc.offline.rollout import PolicyFileAct, observe_for
+    from remarl_fc.policy_io import load_policy
+    from sim.encounters import sample_family
+    from sim.suite import load_suite
+
+    suite = load_suite("standard")
+    cfg, batch = sample_family(suite.family("pop-up-1u"), suite.seed, range(20))
+    away = dataclasses.replace(batch, obstacle_pos_m=batch.obstacle_pos_m + 1.0e6)
+    act = PolicyFileAct(load_policy("generalist"))
+    appear = batch.obstacle_appear_step[:, 0]
+    late = appear >= 5
+    assert late.sum() >= 10
+    paths = []
+    for episodes in (batch, away):
+        sim = SwarmSim(cfg, scored=False)
+        state, rng = sim.start(episodes, np.random.default_rng(0)), np.random.default_rng(0)
+        path = [state.pos_m]
+        for _ in range(5):
+            state, _ = sim.step(state, act(observe_for(sim, state, act), state, cfg), rng)
+            path.append(state.pos_m)
+        paths.append(np.array(path))
+    for e, step in enumerate(np.minimum(appear, 5)):  # the same until its intruder appears
+        np.testing.assert_array_equal(paths[0][: step + 1, e], paths[1][: step + 1, e])
+    assert np.abs(paths[0][5, late, :, 1]).mean() > 10.0  # off its line (y = 0) by then
