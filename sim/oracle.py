@@ -38,6 +38,7 @@ __all__ = [
     "OraclePlans",
     "fly_plans",
     "oracle_actions",
+    "oracle_plan",
     "plan_episodes",
 ]
 
@@ -180,6 +181,21 @@ def oracle_actions(
 ) -> tuple[Float32Array, BoolArray]:
     """The oracle as a controller: plan from this state, fly the plan's first step.
 
+    `oracle_plan`'s first step: (E, N) normalised actions (0 where no plan was found) and (E,)
+    whether a plan was found.
+    """
+    plans, found = oracle_plan(state, cfg, oracle, envs)
+    return np.ascontiguousarray(plans[:, 0, :]), found
+
+
+def oracle_plan(
+    state: SwarmState,
+    cfg: ScenarioConfig,
+    oracle: OracleConfig | None = None,
+    envs: IntArray | None = None,
+) -> tuple[Float32Array, BoolArray]:
+    """The oracle's whole plan from this state, for the steps the episodes have left.
+
     Replanned at every decision (receding horizon), it is a centralised controller that knows
     every UAV's state and the future of every intruder seen so far (they fly straight): the
     strongest teacher a policy can imitate (`policies.config.GeneralistConfig.teacher`,
@@ -194,8 +210,9 @@ def oracle_actions(
     ``envs``: plan these environments alone (indices, E of them; None: all B).
 
     Returns:
-        (E, N) the plans' first normalised actions (0 where no plan was found) and (E,) whether
-        a plan was found.
+        (E, S, N) the plans' normalised actions, step by step from this one (S: the steps the
+        least advanced of the episodes has left; 0 after a UAV's planned arrival and where no
+        plan was found), and (E,) whether a plan was found.
     """
     oracle = oracle or OracleConfig()
     pick = np.arange(state.num_envs) if envs is None else np.asarray(envs, dtype=np.intp)
@@ -228,7 +245,7 @@ def oracle_actions(
         sensors=SensorConfig(),
     )
     plans = plan_known(ideal, episodes, oracle)
-    actions = np.where(plans.planned[:, None], plans.actions[:, 0, :], 0.0)
+    actions = np.where(plans.planned[:, None, None], plans.actions, 0.0)
     return actions.astype(np.float32), plans.planned
 
 

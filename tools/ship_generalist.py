@@ -19,8 +19,8 @@ flies the shipped ``policies/zoo/NAME.safetensors`` again behind today's shield 
 only what the shield decides in its eval file (every figure under ``shielded``, the
 interventions, the shielded suite mean), after checking that the flights without the shield
 repeat the recorded ones: the shield is not part of the policy, and a change to it leaves the
-policy file and the rest of its evaluation as shipped (the file's metadata keeps the shielded
-mean of its shipping day).
+policy and the rest of its evaluation as shipped (its tensors bit for bit; the policy file's
+metadata takes the new shielded suite mean, as its eval file does, and is signed again).
 
     python tools/ship_generalist.py --refly [--name generalist] [--workers 2]
 

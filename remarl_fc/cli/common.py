@@ -169,6 +169,13 @@ def add_shield_flags(p: Any, default: str, planner: bool = False) -> None:
         f"towards it where that passes the check (default {base.return_deg:g}; 180: never)",
     )
     p.add_argument(
+        "--shield-fly-out",
+        choices=["on", "off"],
+        default="on" if base.fly_out else "off",
+        help="a UAV circling a target its tightest turn never reaches flies straight on for a "
+        f"step where that passes the check (default {'on' if base.fly_out else 'off'})",
+    )
+    p.add_argument(
         "--shield-neighbours",
         choices=list(NEIGHBOUR_ARCS),
         default=base.neighbour_arcs,
@@ -210,6 +217,7 @@ def shield_from_args(args: argparse.Namespace) -> Any:
             passes=args.shield_passes,
             escape_steps=args.shield_escape_steps,
             return_deg=args.shield_return,
+            fly_out=args.shield_fly_out == "on",
             neighbour_arcs=args.shield_neighbours,
             vehicle_model=args.shield_vehicle_model,
             **(

@@ -7,8 +7,9 @@ interventions (in monitor mode, the ones the shield would have made).
 
 It also applies the shield's last resort, which needs a memory of the steps before: where some
 UAV of an environment has nothing that passes, that environment's swarm flies the oracle's
-plan for `sim.shield.ShieldConfig.plan_steps` decisions (`sim.oracle.oracle_actions`), in the
-simulator's exact world only.
+plan for `sim.shield.ShieldConfig.plan_steps` decisions (`sim.oracle.oracle_plan`), in the
+simulator's exact world only; a plan found is held while the swarm flies it, and stands in
+where the search from a later step finds none.
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ from numpy.typing import NDArray
 from sim.arrays import FloatArray
 from sim.config import ScenarioConfig
 from sim.observation import ObservationLayout
-from sim.oracle import oracle_actions
+from sim.oracle import oracle_plan
 from sim.shield import ShieldConfig, ShieldDecision, Vehicle, shield_state, vehicle_of
 from sim.state import SwarmState
 
@@ -44,12 +45,14 @@ class Shielded:
         self._vehicle: tuple[ScenarioConfig, Vehicle] | None = None
         self.decisions = 0
         self.interventions = 0
-        self.planned = self.plans = 0
+        self.planned = self.plans = self.plans_kept = 0
         self.plan_seconds = 0.0
         self.intervened_envs: NDArray[np.bool_] | None = None
         # per environment: the planned steps still to fly, and the step of the last decision
         # (a smaller one is a new episode, which starts without a plan)
         self._plan_left: NDArray[np.int64] | None = None
+        # per environment flown from a plan: the step that plan was found at, and the plan
+        self._held: dict[int, tuple[int, NDArray[np.float32]]] = {}
         self._last_step: NDArray[np.int64] | None = None
         self.last: ShieldDecision | None = None  # the shield's decision of the latest call
 
@@ -68,10 +71,11 @@ class Shielded:
 
     def reset(self) -> None:
         """Forget the counts (a new batch of episodes)."""
-        self.decisions = self.interventions = self.planned = self.plans = 0
+        self.decisions = self.interventions = self.planned = self.plans = self.plans_kept = 0
         self.plan_seconds = 0.0
         self.intervened_envs = None
         self._plan_left = self._last_step = None
+        self._held = {}
 
     def __call__(
         self, obs: NDArray[np.float32], state: SwarmState, cfg: ScenarioConfig
@@ -103,9 +107,10 @@ class Shielded:
         """The shield's decision, with the swarm planner's where an environment needs it.
 
         An environment where some flying UAV has nothing that passes flies the oracle's plan
-        (`sim.oracle.oracle_actions`, every UAV of it at the cruise speed) from this step for
+        (`sim.oracle.oracle_plan`, every UAV of it at the cruise speed) from this step for
         `ShieldConfig.plan_steps` steps, replanned at each; where the planner finds no plan,
-        the shield's decision stands. Returns (actions, speeds, intervened), as the decision's.
+        the plan it found before flies on (`_held_plans`), else the shield's decision stands.
+        Returns (actions, speeds, intervened), as the decision's.
         """
         b = state.num_envs
         steps = state.steps.astype(np.int64)
@@ -117,13 +122,18 @@ class Shielded:
         left = np.where(stuck, self.cfg.plan_steps, left)
         envs = np.flatnonzero((left > 0) & np.logical_or.reduce(state.active, axis=-1))
         self._plan_left, self._last_step = np.maximum(left - 1, 0), steps
+        for env in set(self._held) - set(envs.tolist()):  # flown by its controller now
+            del self._held[env]
         action, speed, intervened = decision.action, decision.speed_m_s, decision.intervened
         if not envs.size:
             return action, speed, intervened
         t0 = time.perf_counter()
-        plans, found = oracle_actions(state, cfg, envs=envs)
+        whole, found = oracle_plan(state, cfg, envs=envs)
         self.plan_seconds += time.perf_counter() - t0
         self.plans += len(envs)
+        plans, kept = self._held_plans(state, envs, whole, found)
+        self.plans_kept += int(kept.sum())
+        found = found | kept
         envs, plans = envs[found], plans[found]
         flying = state.active[envs]
         action, speed = action.copy(), speed.copy()
@@ -137,6 +147,38 @@ class Shielded:
         changed = action != np.asarray(proposed, dtype=np.float32)
         return action, speed, np.where(planned, changed, intervened)
 
+    def _held_plans(
+        self,
+        state: SwarmState,
+        envs: NDArray[np.intp],
+        whole: NDArray[np.float32],
+        found: NDArray[np.bool_],
+    ) -> tuple[NDArray[np.float32], NDArray[np.bool_]]:
+        """This step's plans for ``envs`` (E, N), and (E,) where a held plan stands in.
+
+        A plan the planner found is held, its later steps still flyable while the environment
+        flies it: in the exact world its UAVs fly it as the oracle flew it, and the intruders
+        it knew fly straight. Where the search from a later state finds nothing (a beam search
+        may miss a plan that exists), the held plan's step is flown instead, so long as every
+        step since it was found was flown from a plan and no intruder has appeared since
+        (`_plan` drops the plan of an environment its controller flies).
+        """
+        steps = state.steps.astype(np.int64)
+        appear = state.obstacle_appear_step
+        held, plans = self._held, whole[:, 0, :].copy()
+        kept = np.zeros(len(envs), dtype=bool)
+        for k, env in enumerate(envs.tolist()):
+            now = int(steps[env])
+            if found[k]:
+                held[env] = (now, whole[k])
+                continue
+            since, plan = held.pop(env, (now, whole[k, :0]))
+            ahead = now - since
+            if 0 < ahead < len(plan) and not ((appear[env] > since) & (appear[env] <= now)).any():
+                held[env] = (since, plan)
+                plans[k], kept[k] = plan[ahead], True
+        return plans, kept
+
     def report(self) -> dict[str, Any]:
         """The shield's figures of the run: mode, rate per UAV decision, episodes touched."""
         touched = self.intervened_envs
@@ -147,6 +189,7 @@ class Shielded:
             "intervention_rate": self.interventions / self.decisions if self.decisions else 0.0,
             "shield_planned": self.planned,
             "shield_plans": self.plans,
+            "shield_plans_kept": self.plans_kept,
             "shield_plan_seconds": self.plan_seconds,
             "episodes_intervened": float(touched.mean()) if touched is not None else 0.0,
         }

@@ -111,10 +111,10 @@ def test_the_planner_holds_its_plan_for_its_steps_then_hands_back(monkeypatch):
 
     def planner(state, cfg, oracle=None, envs=None):
         asked.append(list(envs))
-        plans = np.full((len(envs), state.pos_m.shape[1]), 0.5, dtype=np.float32)
+        plans = np.full((len(envs), 8, state.pos_m.shape[1]), 0.5, dtype=np.float32)
         return plans, np.ones(len(envs), dtype=bool)
 
-    monkeypatch.setattr(shielding, "oracle_actions", planner)
+    monkeypatch.setattr(shielding, "oracle_plan", planner)
     shielded = Shielded(lambda obs, state, cfg: np.zeros(state.heading_rad.shape), ShieldConfig(
         mode="on", plan_steps=3))  # fmt: skip
     flown = []
@@ -131,15 +131,18 @@ def test_the_planner_holds_its_plan_for_its_steps_then_hands_back(monkeypatch):
     assert shielded.interventions == 3 * 3  # every planned decision changed the proposal
     stand_in.stuck[6] = (0, 1)
     planner_flies = lambda state, cfg, oracle=None, envs=None: (  # noqa: E731
-        np.zeros((len(envs), state.pos_m.shape[1]), dtype=np.float32),
+        np.zeros((len(envs), 8, state.pos_m.shape[1]), dtype=np.float32),
         np.ones(len(envs), dtype=bool),
     )
-    monkeypatch.setattr(shielding, "oracle_actions", planner_flies)
+    monkeypatch.setattr(shielding, "oracle_plan", planner_flies)
     shielded(None, state, cfg)  # a plan that is the proposal changes nothing
     assert shielded.planned == 3 * 4 and shielded.interventions == 3 * 3
 
 
 def test_the_planner_restarts_with_each_episode_and_yields_where_it_finds_nothing(monkeypatch):
+    """Found at step 1, a plan of two steps; nothing found after. Step 2 flies the plan's
+    second step (held: the swarm flew its first); step 3 is past its end, and the shield's
+    decision stands. A new episode holds nothing."""
     cfg = load_scenario("3u2o")
     swarm, rng = SwarmSim(cfg, scored=False), np.random.default_rng(1)
     start = swarm.initial_state(rng, 2)
@@ -151,20 +154,69 @@ def test_the_planner_restarts_with_each_episode_and_yields_where_it_finds_nothin
     def planner(state, cfg, oracle=None, envs=None):
         asked.append(list(envs))
         found = np.array([e == 0 and len(asked) == 1 for e in envs])
-        return np.full((len(envs), 3), 0.5, dtype=np.float32), found
+        plans = np.zeros((len(envs), 2, 3), dtype=np.float32)
+        plans[:, 0], plans[:, 1] = 0.5, 0.25
+        return np.where(found[:, None, None], plans, 0.0), found
 
-    monkeypatch.setattr(shielding, "oracle_actions", planner)
+    monkeypatch.setattr(shielding, "oracle_plan", planner)
     shielded = Shielded(lambda obs, state, cfg: np.zeros(state.heading_rad.shape), ShieldConfig(
         mode="on", plan_steps=4))  # fmt: skip
     state = start
-    for _ in range(2):
+    flown = []
+    for _ in range(4):
         action, speed = shielded(None, state, cfg)
+        flown.append(action[0].copy())
         state, _ = swarm.step(state, action, rng, speeds_m_s=speed)
-    assert (action[0] == 0.5).all()  # planned at step 1
-    action, _ = shielded(None, state, cfg)
-    assert (action == 0.0).all()  # no plan found at step 2: the shield's decision stands
+    assert (flown[1] == 0.5).all()  # planned at step 1
+    assert (flown[2] == 0.25).all()  # nothing found at step 2: the held plan's next step
+    assert (flown[3] == 0.0).all()  # past its end: the shield's decision stands
+    assert shielded.plans_kept == 1 and shielded.report()["shield_plans_kept"] == 1
     shielded(None, start, cfg)  # a new episode (its step went back to 0): no plan held
-    assert len(asked) == 2
+    assert len(asked) == 3
+
+
+def test_a_held_plan_is_dropped_when_an_intruder_appears_or_the_swarm_leaves_it(monkeypatch):
+    """A plan found at step 1, nothing found after. An intruder that appears at step 2 ends it
+    (the plan did not know it); so does a step flown by the controller (planned for the stuck
+    step alone, stuck again at step 3)."""
+    cfg = load_scenario("3u2o")
+    swarm, rng = SwarmSim(cfg, scored=False), np.random.default_rng(1)
+    stand_in = Stuck()
+    monkeypatch.setattr(shielding, "shield_state", stand_in)
+    asked: list[int] = []
+
+    def planner(state, cfg, oracle=None, envs=None):
+        asked.append(int(state.steps[0]))
+        found = np.full(len(envs), len(asked) == 1)
+        return np.full((len(envs), 8, 3), 0.5, dtype=np.float32) * found[:, None, None], found
+
+    monkeypatch.setattr(shielding, "oracle_plan", planner)
+
+    def flight(plan_steps, stuck, state):
+        asked.clear()
+        stand_in.stuck = stuck
+        shielded = Shielded(lambda obs, state, cfg: np.zeros(state.heading_rad.shape),
+                            ShieldConfig(mode="on", plan_steps=plan_steps))  # fmt: skip
+        flown = []
+        for _ in range(4):
+            action, speed = shielded(None, state, cfg)
+            flown.append(action[0].copy())
+            state, _ = swarm.step(state, action, rng, speeds_m_s=speed)
+        return flown, shielded
+
+    state = swarm.initial_state(rng, 1)
+    appear = state.obstacle_appear_step.copy()
+    appear[0, 0] = 2  # hidden until step 2
+    flown, shielded = flight(
+        4, {1: (0, 0)}, dataclasses.replace(state, obstacle_appear_step=appear)
+    )
+    assert asked[:2] == [1, 2] and (flown[1] == 0.5).all()
+    assert (flown[2] == 0.0).all() and shielded.plans_kept == 0
+    flown, shielded = flight(1, {1: (0, 0), 3: (0, 0)}, swarm.initial_state(rng, 1))
+    assert asked == [1, 3] and (flown[1] == 0.5).all() and (flown[2] == 0.0).all()
+    assert (flown[3] == 0.0).all() and shielded.plans_kept == 0
+    flown, shielded = flight(4, {1: (0, 0)}, swarm.initial_state(rng, 1))  # the control
+    assert (flown[2] == 0.5).all() and (flown[3] == 0.5).all() and shielded.plans_kept == 2
 
 
 @pytest.mark.parametrize("world", ["adsb", "arducopter", "monitor", "off"])
@@ -184,7 +236,7 @@ def test_the_planner_flies_only_the_exact_world_and_only_with_the_shield_on(monk
     def planner(*args, **kwargs):
         raise AssertionError("planned where the plan would not be exact")
 
-    monkeypatch.setattr(shielding, "oracle_actions", planner)
+    monkeypatch.setattr(shielding, "oracle_plan", planner)
     shielded = Shielded(lambda obs, state, cfg: np.zeros(state.heading_rad.shape), ShieldConfig(
         mode=mode, plan_steps=4))  # fmt: skip
     shielded(None, state, cfg)

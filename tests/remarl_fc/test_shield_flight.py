@@ -472,6 +472,8 @@ def test_bad_shield_settings_are_refused(command, capsys):
         main([*base, "--shield", "sometimes"])
     with pytest.raises(SystemExit):
         main([*base, "--shield-neighbours", "guess"])
+    with pytest.raises(SystemExit):
+        main([*base, "--shield-fly-out", "sometimes"])
 
 
 def test_the_shield_flags_build_its_config():
@@ -487,6 +489,8 @@ def test_the_shield_flags_build_its_config():
         assert shield_from_args(args).escape_steps == 1
         args = build_parser().parse_args([command, "--shield-return", "180"])
         assert shield_from_args(args).return_deg == 180.0
+        args = build_parser().parse_args([command, "--shield-fly-out", "off"])
+        assert shield_from_args(args).fly_out is False
     assert shield_from_args(build_parser().parse_args(["demo"])) == ShieldConfig(mode="on")
     # the swarm planner: the simulator's evaluation alone applies it, and alone offers the flag
     args = build_parser().parse_args(["eval", "--shield-plan-steps", "0"])

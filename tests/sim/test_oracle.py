@@ -6,7 +6,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from sim.oracle import OracleConfig, fly_plans, oracle_actions, plan_episodes
+from sim.oracle import OracleConfig, fly_plans, oracle_actions, oracle_plan, plan_episodes
 from sim.scenarios import load_scenario
 from sim.spawn import EpisodeStart, spawn_episodes
 from sim.swarm import SwarmSim
@@ -205,6 +205,26 @@ def test_the_oracle_plans_the_environments_it_is_asked_for_alone():
     some, found_some = oracle_actions(state, SWARM, envs=np.array([3, 1]))
     assert some.shape == (2, SWARM.uav.count) and found_some.all()
     np.testing.assert_array_equal(some, every[[3, 1]])  # the same plans, the others not planned
+
+
+def test_the_oracles_whole_plan_flown_open_loop_arrives_clear():
+    """`oracle_plan` from a state mid-episode: its first step is `oracle_actions`', and its
+    steps flown as they are, without replanning, bring every UAV in without a collision."""
+    episodes = spawn_episodes(SWARM, np.random.default_rng(0), 4)
+    sim, rng = SwarmSim(SWARM, scored=False), np.random.default_rng(1)
+    state = sim.start(episodes, rng)
+    state, _ = sim.step(state, np.zeros(state.heading_rad.shape, np.float32), rng)
+    plans, found = oracle_plan(state, SWARM)
+    assert found.all() and plans.shape[1] == SWARM.max_steps - 1
+    np.testing.assert_array_equal(plans[:, 0], oracle_actions(state, SWARM)[0])
+    done = np.zeros(4, dtype=bool)
+    for step in range(plans.shape[1]):
+        state, result = sim.step(state, plans[:, step], rng)
+        assert not (result.collided_u2u.any() or result.collided_u2o.any())
+        done |= result.terminated
+        if done.all():
+            break
+    assert done.all() and state.reached.all()
 
 
 def test_the_oracle_as_a_controller_keeps_a_swarm_apart():

@@ -570,6 +570,100 @@ def test_a_fitted_vehicle_turns_back_as_its_response_flies_it():
     assert abs(decision.flown_cpa_m[0, 0] - flown) < 1.5
 
 
+FAST = dataclasses.replace(VEHICLE, cruise_m_s=10.0)
+"""The paper's speed: 20 m a step, its tightest turn a circle of 25.5 m radius, wider than d_col."""
+
+
+def circling_uav(target_m: tuple[float, float]) -> Swarm:
+    """One UAV of `FAST` at the origin heading east at 10 m/s, its target at ``target_m``."""
+    return dataclasses.replace(
+        lone_uav(), target_m=np.array([[target_m]]), speed_m_s=np.full((1, 1), 10.0)
+    )
+
+
+def test_a_uav_circling_its_target_out_of_reach_flies_straight_out_of_the_circle():
+    """The target at the centre of the UAV's tightest right turn: turning right (the proposal,
+    towards the target) circles it 25.5 m away. The shield flies straight on instead, which
+    passes; with ``fly_out`` off, or with the target 10 m off the centre (the circle then
+    comes within d_col of it), the proposal stands."""
+    radius = FAST.cruise_m_s * FAST.dt_s / FAST.max_turn_rad
+    none = Threats(
+        np.zeros((1, 0, 2)), np.zeros((1, 0, 2)), np.zeros((1, 0), bool), np.zeros((1, 0))
+    )
+    right = -np.ones((1, 1))
+    swarm = circling_uav((0.0, -radius))
+    decision = shield(ShieldConfig(mode="on"), FAST, swarm, none, right)
+    assert decision.intervened[0, 0] and decision.safe_exists[0, 0]
+    assert decision.action[0, 0] == 0.0 and decision.speed_m_s[0, 0] == FAST.cruise_m_s
+    off = shield(ShieldConfig(mode="on", fly_out=False), FAST, swarm, none, right)
+    assert not off.intervened[0, 0] and off.action[0, 0] == -1.0
+    reached = shield(ShieldConfig(mode="on"), FAST, circling_uav((10.0, -radius)), none, right)
+    assert not reached.intervened[0, 0] and reached.action[0, 0] == -1.0
+    # flying away from the target (a left turn) is not circling it: the turn back's business
+    left = shield(ShieldConfig(mode="on", return_deg=180.0), FAST, swarm, none, -right)
+    assert not left.intervened[0, 0] and left.action[0, 0] == 1.0
+
+
+def test_flying_out_is_checked_like_any_candidate():
+    """An intruder at rest 45 m ahead: straight on passes within d_col of it, the circle does
+    not. The proposal stands."""
+    radius = FAST.cruise_m_s * FAST.dt_s / FAST.max_turn_rad
+    ahead = Threats(
+        np.array([[[45.0, 0.0]]]), np.zeros((1, 1, 2)), np.ones((1, 1), bool), np.zeros((1, 1))
+    )
+    decision = shield(
+        ShieldConfig(mode="on"), FAST, circling_uav((0.0, -radius)), ahead, -np.ones((1, 1))
+    )
+    assert not decision.intervened[0, 0] and decision.action[0, 0] == -1.0
+
+
+def test_a_uav_that_circled_its_target_arrives_once_it_flies_out():
+    """Closed loop, a controller that always turns towards its target at full rate (as the
+    policy circling it does), flown on exact arcs: alone it circles the target for 30 steps,
+    never within d_col; behind the shield it flies one step straight out, and the turn back
+    takes it round to the target (the long way: the target lies inside the circle, though off
+    its centre) by the eighth step."""
+    radius = FAST.cruise_m_s * FAST.dt_s / FAST.max_turn_rad
+    target = np.array([0.0, -radius])
+    none = Threats(
+        np.zeros((1, 0, 2)), np.zeros((1, 0, 2)), np.zeros((1, 0), bool), np.zeros((1, 0))
+    )
+
+    def arc(pos, heading, turn, fraction):
+        """Where an exact arc turning by ``turn`` over the step is at ``fraction`` of it."""
+        chord = FAST.cruise_m_s * FAST.dt_s * fraction * np.sinc(turn * fraction / (2 * math.pi))
+        mid = heading + 0.5 * turn * fraction
+        return pos + chord * np.array([math.cos(mid), math.sin(mid)])
+
+    def closest(cfg: ShieldConfig | None, steps: int) -> tuple[float, int]:
+        """(closest approach to the target, first step within d_col or -1) over ``steps``."""
+        pos, heading, best, when = np.zeros(2), 0.0, np.inf, -1
+        for k in range(steps):
+            gap = target - pos
+            error = math.remainder(math.atan2(gap[1], gap[0]) - heading, math.tau)
+            action = np.array([[np.clip(error / FAST.max_turn_rad, -1.0, 1.0)]])
+            if cfg is not None:
+                swarm = dataclasses.replace(
+                    circling_uav(tuple(target)), pos_m=pos[None, None],
+                    heading_rad=np.array([[heading]]),
+                )  # fmt: skip
+                action = shield(cfg, FAST, swarm, none, action).action
+            turn = float(action[0, 0]) * FAST.max_turn_rad
+            near = min(
+                np.hypot(*(target - arc(pos, heading, turn, f))) for f in np.linspace(0, 1, 41)
+            )
+            best = min(best, float(near))
+            if near < FAST.d_col_m and when < 0:
+                when = k
+            pos, heading = arc(pos, heading, turn, 1.0), heading + turn
+        return best, when
+
+    alone, never = closest(None, 30)
+    assert never == -1 and alone > FAST.d_col_m
+    shielded, step = closest(ShieldConfig(mode="on"), 30)
+    assert 0 < step <= 8 and shielded < FAST.d_col_m
+
+
 def test_the_turn_back_keeps_clear_of_a_flying_neighbour_for_longer():
     """The target 1 km behind, 170° to the left; a UAV of the swarm 60 m behind and 25 m to the
     left flies east on the line the turn back to the left would follow west: they would meet
