@@ -170,7 +170,7 @@ class Shielded:
         for k, env in enumerate(envs.tolist()):
             now = int(steps[env])
             if found[k]:
-                held[env] = (now, whole[k])
+                held[env] = (now, whole[k].copy())  # not a view that keeps the batch's plans
                 continue
             since, plan = held.pop(env, (now, whole[k, :0]))
             ahead = now - since

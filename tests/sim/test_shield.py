@@ -620,9 +620,8 @@ def test_flying_out_is_checked_like_any_candidate():
 def test_a_uav_that_circled_its_target_arrives_once_it_flies_out():
     """Closed loop, a controller that always turns towards its target at full rate (as the
     policy circling it does), flown on exact arcs: alone it circles the target for 30 steps,
-    never within d_col; behind the shield it flies one step straight out, and the turn back
-    takes it round to the target (the long way: the target lies inside the circle, though off
-    its centre) by the eighth step."""
+    never within d_col; behind the shield it flies one step straight out, then turns in, half
+    way round the circle that now comes within d_col of the target, by the fifth step."""
     radius = FAST.cruise_m_s * FAST.dt_s / FAST.max_turn_rad
     target = np.array([0.0, -radius])
     none = Threats(
@@ -661,7 +660,7 @@ def test_a_uav_that_circled_its_target_arrives_once_it_flies_out():
     alone, never = closest(None, 30)
     assert never == -1 and alone > FAST.d_col_m
     shielded, step = closest(ShieldConfig(mode="on"), 30)
-    assert 0 < step <= 8 and shielded < FAST.d_col_m
+    assert 0 < step <= 5 and shielded < FAST.d_col_m
 
 
 def test_the_turn_back_keeps_clear_of_a_flying_neighbour_for_longer():
@@ -691,30 +690,51 @@ def test_the_turn_back_keeps_clear_of_a_flying_neighbour_for_longer():
     assert not decision.intervened[0, 1] and decision.action[0, 1] == 0.0
 
 
-@pytest.mark.parametrize(("beside_m", "way"), [(10.0, 1.0), (24.0, 1.0), (30.0, -1.0)])
-def test_a_target_inside_the_tightest_turn_towards_it_is_reached_the_long_way(beside_m, way):
-    """A target right beside the UAV, behind it to the right: turning right at a_max circles it
-    (a radius of 12.7 m at 5 m/s) where it lies within that circle (its centre 12.7 m to the
-    right: 10 m beside is 2.7 m from it, 24 m is 11.3 m), so the UAV loops back to the left;
-    farther, it turns right. Nothing else around. A fitted vehicle, which only tries the short
-    way, leaves such a target to the policy."""
-    swarm = dataclasses.replace(lone_uav(), target_m=np.array([[[-5.0, -beside_m]]]))
+@pytest.mark.parametrize(
+    ("beside_m", "way", "fitted_turns"),
+    [(25.5, 1.0, False), (40.0, -1.0, False), (60.0, -1.0, True)],
+)
+def test_a_target_its_tightest_turn_circles_out_of_reach_is_reached_the_long_way(
+    beside_m, way, fitted_turns
+):
+    """A target beside the UAV of `FAST`, 5 m behind it on the right, the UAV flying straight
+    away (the proposal): turning right at a_max flies a circle of 25.5 m radius centred 25.5 m
+    to the right. 25.5 m beside, the target is 5 m from that centre: the circle never comes
+    within d_col of it, so the UAV turns back the long way, to the left. 40 m beside (15.3 m
+    from the centre) the circle passes 10 m from it, and 60 m beside outside it: the UAV turns
+    right. Nothing else around. A fitted vehicle, which tries the short way only and turns
+    wider than the circle, turns back only to a target outside it, and leaves the others to
+    the policy."""
+    swarm = circling_uav((-5.0, -beside_m))
     none = Threats(
         np.zeros((1, 0, 2)), np.zeros((1, 0, 2)), np.zeros((1, 0), bool), np.zeros((1, 0))
     )
-    decision = shield(ShieldConfig(mode="on"), VEHICLE, swarm, none, np.zeros((1, 1)))
+    decision = shield(ShieldConfig(mode="on"), FAST, swarm, none, np.zeros((1, 1)))
     assert decision.intervened[0, 0] and decision.action[0, 0] == way
     prof = load_profile("arducopter")
     one = np.ones((1, 1))
     motion = Motion(
-        np.array([[[5.0, 0.0]]]), 0 * one, 5 * one, prof.delay_s * one,
+        np.array([[[10.0, 0.0]]]), 0 * one, 10 * one, prof.delay_s * one,
         prof.velocity_tau_s * one, prof.max_accel_m_s2 * one,
     )  # fmt: skip
     fitted = shield(
-        ShieldConfig(mode="on"), VEHICLE, dataclasses.replace(swarm, motion=motion), none,
+        ShieldConfig(mode="on"), FAST, dataclasses.replace(swarm, motion=motion), none,
         np.zeros((1, 1)),
     )  # fmt: skip
-    assert fitted.intervened[0, 0] == (way == -1.0)
+    assert fitted.intervened[0, 0] == fitted_turns
+    assert fitted.action[0, 0] == (-1.0 if fitted_turns else 0.0)
+
+
+def test_with_a_circle_no_wider_than_d_col_every_target_is_reached_the_short_way():
+    """At 5 m/s the tightest turn's circle (12.7 m) lies within d_col of anything inside it: a
+    target beside the UAV and behind it is turned to the short way, however near."""
+    none = Threats(
+        np.zeros((1, 0, 2)), np.zeros((1, 0, 2)), np.zeros((1, 0), bool), np.zeros((1, 0))
+    )
+    for beside_m in (10.0, 24.0, 30.0):
+        swarm = dataclasses.replace(lone_uav(), target_m=np.array([[[-5.0, -beside_m]]]))
+        decision = shield(ShieldConfig(mode="on"), VEHICLE, swarm, none, np.zeros((1, 1)))
+        assert decision.intervened[0, 0] and decision.action[0, 0] == -1.0
 
 
 def test_a_fitted_vehicle_holds_its_turn_as_its_response_flies_it():
