@@ -584,8 +584,8 @@ def circling_uav(target_m: tuple[float, float]) -> Swarm:
 def test_a_uav_circling_its_target_out_of_reach_flies_straight_out_of_the_circle():
     """The target at the centre of the UAV's tightest right turn: turning right (the proposal,
     towards the target) circles it 25.5 m away. The shield flies straight on instead, which
-    passes; with ``fly_out`` off, or with the target 10 m off the centre (the circle then
-    comes within d_col of it), the proposal stands."""
+    passes; with ``fly_out`` off, with the target 10 m off the centre (the circle then comes
+    within d_col of it), or for a fitted vehicle, the proposal stands."""
     radius = FAST.cruise_m_s * FAST.dt_s / FAST.max_turn_rad
     none = Threats(
         np.zeros((1, 0, 2)), np.zeros((1, 0, 2)), np.zeros((1, 0), bool), np.zeros((1, 0))
@@ -599,6 +599,16 @@ def test_a_uav_circling_its_target_out_of_reach_flies_straight_out_of_the_circle
     assert not off.intervened[0, 0] and off.action[0, 0] == -1.0
     reached = shield(ShieldConfig(mode="on"), FAST, circling_uav((10.0, -radius)), none, right)
     assert not reached.intervened[0, 0] and reached.action[0, 0] == -1.0
+    # a vehicle flown with its fitted response turns later and wider than the circle: left
+    # to the policy
+    prof = load_profile("arducopter")
+    one = np.ones((1, 1))
+    motion = Motion(
+        np.array([[[10.0, 0.0]]]), 0 * one, 10 * one, prof.delay_s * one,
+        prof.velocity_tau_s * one, prof.max_accel_m_s2 * one,
+    )  # fmt: skip
+    fitted = dataclasses.replace(swarm, motion=motion)
+    assert not shield(ShieldConfig(mode="on"), FAST, fitted, none, right).intervened[0, 0]
     # flying away from the target (a left turn) is not circling it: the turn back's business
     left = shield(ShieldConfig(mode="on", return_deg=180.0), FAST, swarm, none, -right)
     assert not left.intervened[0, 0] and left.action[0, 0] == 1.0
