@@ -574,6 +574,16 @@ FAST = dataclasses.replace(VEHICLE, cruise_m_s=10.0)
 """The paper's speed: 20 m a step, its tightest turn a circle of 25.5 m radius, wider than d_col."""
 
 
+def fast_arducopter() -> Motion:
+    """The `Motion` of one fitted ArduCopter flying east at `FAST`'s 10 m/s, steady."""
+    prof = load_profile("arducopter")
+    one = np.ones((1, 1))
+    return Motion(
+        np.array([[[10.0, 0.0]]]), 0 * one, 10 * one, prof.delay_s * one,
+        prof.velocity_tau_s * one, prof.max_accel_m_s2 * one,
+    )  # fmt: skip
+
+
 def circling_uav(target_m: tuple[float, float]) -> Swarm:
     """One UAV of `FAST` at the origin heading east at 10 m/s, its target at ``target_m``."""
     return dataclasses.replace(
@@ -601,12 +611,7 @@ def test_a_uav_circling_its_target_out_of_reach_flies_straight_out_of_the_circle
     assert not reached.intervened[0, 0] and reached.action[0, 0] == -1.0
     # a vehicle flown with its fitted response turns later and wider than the circle: left
     # to the policy
-    prof = load_profile("arducopter")
-    one = np.ones((1, 1))
-    motion = Motion(
-        np.array([[[10.0, 0.0]]]), 0 * one, 10 * one, prof.delay_s * one,
-        prof.velocity_tau_s * one, prof.max_accel_m_s2 * one,
-    )  # fmt: skip
+    motion = fast_arducopter()
     fitted = dataclasses.replace(swarm, motion=motion)
     assert not shield(ShieldConfig(mode="on"), FAST, fitted, none, right).intervened[0, 0]
     # flying away from the target (a left turn) is not circling it: the turn back's business
@@ -721,12 +726,7 @@ def test_a_target_its_tightest_turn_circles_out_of_reach_is_reached_the_long_way
     )
     decision = shield(ShieldConfig(mode="on"), FAST, swarm, none, np.zeros((1, 1)))
     assert decision.intervened[0, 0] and decision.action[0, 0] == way
-    prof = load_profile("arducopter")
-    one = np.ones((1, 1))
-    motion = Motion(
-        np.array([[[10.0, 0.0]]]), 0 * one, 10 * one, prof.delay_s * one,
-        prof.velocity_tau_s * one, prof.max_accel_m_s2 * one,
-    )  # fmt: skip
+    motion = fast_arducopter()
     fitted = shield(
         ShieldConfig(mode="on"), FAST, dataclasses.replace(swarm, motion=motion), none,
         np.zeros((1, 1)),
