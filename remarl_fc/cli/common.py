@@ -173,7 +173,9 @@ def add_shield_flags(p: Any, default: str, planner: bool = False) -> None:
         choices=["on", "off"],
         default="on" if base.fly_out else "off",
         help="a UAV circling a target its tightest turn never reaches flies straight on for a "
-        f"step where that passes the check (default {'on' if base.fly_out else 'off'})",
+        "step where that passes the check; only where the vehicles fly their arcs exactly "
+        "(the simulator's ideal vehicle, --shield-vehicle-model ideal) (default "
+        f"{'on' if base.fly_out else 'off'})",
     )
     p.add_argument(
         "--shield-neighbours",
