@@ -568,15 +568,8 @@ def _decide(
         speeds = [cruise]
         if vehicle.can_slow:
             speeds += [f * cruise for f in cfg.slow_fractions]
-        if motion is None:
-            unit_x, unit_y = _time_first(
-                _at_times(
-                    displacements(
-                        swarm.heading_rad[fails], grid[fails] * a_max, 1.0, dt, horizon, CHORDS
-                    ),
-                    split,
-                )
-            )  # (P, F, K): the F failing UAVs' candidates only
+        if motion is None:  # (P, F, K): the F failing UAVs' candidates only
+            unit_x, unit_y = _unit_candidates(swarm, fails, grid[fails], vehicle, horizon, split)
         else:  # every speed's candidates in one prediction, (P, F, speeds · K)
             k = cfg.headings
             cand_x, cand_y = _time_first(
@@ -662,7 +655,7 @@ def _decide(
     if cfg.fly_out and motion is None:  # the circle is the ideal vehicle's, flown exactly
         circling = deciding & found & (speed == cruise) & ~homed & _circling(swarm, vehicle, turn)
         if circling.any():
-            out, cpa = _fly_out(cfg, vehicle, swarm, paths, circling, (split, later))
+            out, cpa = _fly_out(cfg, vehicle, swarm, paths, circling, split)
             turn = np.where(out, 0.0, turn)
             flown_cpa = np.where(out, cpa, flown_cpa)
 
@@ -767,10 +760,16 @@ class Homeward:
     cpa_m: FloatArray
 
 
+def _to_target(swarm: Swarm, heading_rad: FloatArray) -> FloatArray:
+    """(B, N) each UAV's bearing to its target less ``heading_rad``, (−π, π] (> 0: left)."""
+    gap = swarm.target_m - swarm.pos_m
+    out: FloatArray = wrap_angle(np.arctan2(gap[..., 1], gap[..., 0]) - heading_rad)
+    return out
+
+
 def _off_course(swarm: Swarm, heading_rad: FloatArray) -> FloatArray:
     """(B, N) how far ``heading_rad`` lies from each UAV's bearing to its target, [0, π]."""
-    gap = swarm.target_m - swarm.pos_m
-    out: FloatArray = np.abs(wrap_angle(np.arctan2(gap[..., 1], gap[..., 0]) - heading_rad))
+    out: FloatArray = np.abs(_to_target(swarm, heading_rad))
     return out
 
 
@@ -824,9 +823,7 @@ def _circling(swarm: Swarm, vehicle: Vehicle, turn: FloatArray) -> BoolArray:
     Their decided ``turn`` (normalised) turns towards the target, which their tightest turn
     that way circles without reaching (`_out_of_reach`).
     """
-    gap = swarm.target_m - swarm.pos_m
-    error = wrap_angle(np.arctan2(gap[..., 1], gap[..., 0]) - swarm.heading_rad)
-    side = np.where(error < 0.0, -1.0, 1.0)
+    side = np.where(_to_target(swarm, swarm.heading_rad) < 0.0, -1.0, 1.0)
     out: BoolArray = (turn * side > 0.0) & _out_of_reach(swarm, vehicle, side)
     return out
 
@@ -837,51 +834,53 @@ def _fly_out(
     swarm: Swarm,
     paths: ThreatPaths,
     circling: BoolArray,
-    grid: tuple[list[float], FloatArray],
+    split: list[float],
 ) -> tuple[BoolArray, FloatArray]:
     """Straight on at the cruise speed for the UAVs ``circling`` (B, N), checked.
 
-    Checked like any one-step candidate against the intruders and the neighbours' arcs
-    (``paths``, as `_decide` built them; ``grid``: its cuts of the straight part and the
-    instants after the step, `_times`). Returns (passes, closest approach), (B, N) each.
+    Flown exactly, as the ideal vehicle flies (`_decide` calls it for no other), and checked
+    like any one-step candidate against the intruders and the neighbours' arcs (``paths``, as
+    `_decide` built them; ``split``: its cuts of the straight part, `_times`). Returns
+    (passes, closest approach), (B, N) each.
     """
     b, n = circling.shape
-    split, later = grid
-    dt, cruise = vehicle.dt_s, vehicle.cruise_m_s
     straight = np.zeros((int(circling.sum()), 1))
-    if swarm.motion is None:
-        unit_x, unit_y = _time_first(
-            _at_times(
-                displacements(
-                    swarm.heading_rad[circling],
-                    straight,
-                    1.0,
-                    dt,
-                    max(cfg.horizon_s, dt),
-                    CHORDS,
-                ),
-                split,
-            )
-        )  # (P, F, 1)
-        at = np.float32(cruise)
-        flown = (_flown(unit_x, at, cruise), _flown(unit_y, at, cruise))
-    else:
-        flown = _time_first(
-            predict_response(
-                swarm.heading_rad[circling],
-                straight,
-                np.array([cruise]),
-                cruise,
-                swarm.motion.of(circling),
-                dt,
-                CHORDS,
-                later,
-            )
-        )
+    horizon = max(cfg.horizon_s, vehicle.dt_s)
+    unit_x, unit_y = _unit_candidates(swarm, circling, straight, vehicle, horizon, split)
+    at, cruise = np.float32(vehicle.cruise_m_s), vehicle.cruise_m_s
+    flown = (_flown(unit_x, at, cruise), _flown(unit_y, at, cruise))  # (P, F, 1)
     mine = paths.of(circling)
     row = np.cumsum(circling.reshape(-1)) - 1  # each UAV's place among them
     clear, cpa, _ = _clearance(flown, row[mine.owner], mine, (b, n), vehicle.d_col_m)
     return circling & (clear[..., 0] >= 0.0), cpa[..., 0]
+
+
+def _unit_candidates(
+    swarm: Swarm,
+    uavs: BoolArray,
+    actions: FloatArray,
+    vehicle: Vehicle,
+    horizon_s: float,
+    split: list[float],
+) -> tuple[Float32Array, Float32Array]:
+    """(x, y), each (P, F, K): the F UAVs ``uavs``' one-step candidates at 1 m/s, time first.
+
+    ``actions`` (F, K) normalised heading changes, each an arc over the coming step then
+    straight on to ``horizon_s``, exact at the points of `_times` (``split``: its cuts).
+    """
+    return _time_first(
+        _at_times(
+            displacements(
+                swarm.heading_rad[uavs],
+                actions * vehicle.max_turn_rad,
+                1.0,
+                vehicle.dt_s,
+                horizon_s,
+                CHORDS,
+            ),
+            split,
+        )
+    )
 
 
 def _homeward(
@@ -909,8 +908,7 @@ def _homeward(
     a_max, dt = vehicle.max_turn_rad, vehicle.dt_s
     horizon = max(cfg.horizon_s, dt)
     motion = swarm.motion
-    gap = swarm.target_m - swarm.pos_m
-    error = wrap_angle(np.arctan2(gap[..., 1], gap[..., 0]) - swarm.heading_rad)  # (B, N)
+    error = _to_target(swarm, swarm.heading_rad)  # (B, N)
     side = np.where(error < 0.0, -1.0, 1.0)  # the short way
     ways = [_reachable(swarm, vehicle, side)]
     if motion is None:  # the long way too: a fitted response is predicted over two steps only
