@@ -42,8 +42,10 @@ __all__ = [
     "plan_episodes",
 ]
 
-ORACLE_VERSION = 2
-"""Bumped whenever a change to the oracle can change a label (the label cache checks it)."""
+ORACLE_VERSION = 3
+"""Bumped whenever a change to the oracle can change a label (the label cache checks it).
+3: the random priority orders are the same for every episode of a batch (an episode's label
+had depended on the episodes labelled beside it)."""
 
 PARKED_M = 1.0e7
 """Where the phases' plans keep what the UAVs may not know, metres: hidden intruders (at rest)

@@ -425,7 +425,9 @@ def _orders(cfg: ScenarioConfig, ep: EpisodeStart, count: int, seed: int) -> Int
     Nearest the target first (a formation's front row first, the most threatened within a row
     first), most threatened first (closest approach of its straight flight to an obstacle),
     nearest the target last, then seeded random orders. Alone, with no wide search, they plan
-    1.0, 0.66, 0.08 and 0.35 of 100 50u8o episodes.
+    1.0, 0.66, 0.08 and 0.35 of 100 50u8o episodes. The random orders are the same for every
+    episode (drawn from ``seed`` and N alone), so that an episode's plan and label never depend
+    on which episodes are planned beside it, nor on where it stands among them.
     """
     b, n, s = ep.num_envs, cfg.uav.count, cfg.max_steps
     delta = ep.target_m - ep.start_m
@@ -439,7 +441,7 @@ def _orders(cfg: ScenarioConfig, ep: EpisodeStart, count: int, seed: int) -> Int
     front = np.lexsort((threat, np.round(dist, ROUND_DECIMALS)), axis=-1)
     rng = np.random.default_rng(seed)
     base = [front, np.argsort(threat, axis=-1, kind="stable"), front[:, ::-1]]
-    extra = [rng.permuted(np.broadcast_to(np.arange(n), (b, n)), axis=-1) for _ in range(count)]
+    extra = [np.broadcast_to(rng.permutation(n), (b, n)) for _ in range(count)]
     return np.stack((base + extra)[:count])
 
 

@@ -1,14 +1,16 @@
 """Draw one suite episode that two methods fly differently, side by side.
 
     python tools/versus.py FAMILY [FAMILY ...] [--first policy:generalist] [--second orca]
-        [--suite standard] [--episodes 40] [--out docs/img]
+        [--suite standard] [--episodes 40] [--out docs/img] [--shield]
 
 For each family: the first of its suite episodes (of the first ``--episodes``) that the first
 method fails and the second flies to success, both flights in one frame, written to
 ``OUT/versus-FAMILY.png`` (`remarl_fc.offline.suite_report.draw_versus`). A method is a
 `remarl-fc eval --method` name (orca, potential-field, straight, zoo) or ``policy:NAME`` (a zoo
 name or a policy file). Prints one JSON line per family: both methods' success on the episodes
-looked at, the episode drawn (null: none differs that way) and how each ended.
+looked at, the episode drawn (null: none differs that way) and how each ended. With
+``--shield`` both fly behind the safety shield at its defaults (planner included), as
+``remarl-fc eval --shield on`` flies them, and the picture is ``OUT/versus-FAMILY-shield.png``.
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ from pathlib import Path
 
 from remarl_fc.offline.suite import MethodSpec
 from remarl_fc.offline.suite_report import draw_versus
+from sim.shield import ShieldConfig
 from sim.suite import load_suite
 
 
@@ -31,12 +34,14 @@ def main() -> None:
     parser.add_argument("--suite", default="standard")
     parser.add_argument("--episodes", type=int, default=40, help="episodes looked at")
     parser.add_argument("--out", default="docs/img", help="folder of the pictures")
+    parser.add_argument("--shield", action="store_true", help="both behind the safety shield")
     args = parser.parse_args()
+    shield = ShieldConfig(mode="on") if args.shield else None
     suite = load_suite(args.suite)
     specs = (MethodSpec.from_label(args.first), MethodSpec.from_label(args.second))
     for family in args.families:
-        out = Path(args.out) / f"versus-{family}.png"
-        found = draw_versus(suite, family, specs, out, episodes=args.episodes)
+        out = Path(args.out) / f"versus-{family}{'-shield' if shield else ''}.png"
+        found = draw_versus(suite, family, specs, out, episodes=args.episodes, shield=shield)
         print(json.dumps({**found, "picture": str(out) if found["episode"] is not None else None}))
 
 

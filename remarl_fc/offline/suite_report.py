@@ -12,8 +12,10 @@ from typing import Any
 
 import numpy as np
 
+from remarl_fc.offline.shielding import Shielded
 from remarl_fc.offline.suite import MethodSpec, fly_episodes, resolve_method
 from sim.encounters import sample_family
+from sim.shield import ShieldConfig
 from sim.suite import Suite
 
 PICTURE_MARGIN_M = 60.0
@@ -151,12 +153,16 @@ def draw_versus(
     specs: tuple[MethodSpec, MethodSpec],
     out: Path,
     episodes: int = 40,
+    shield: ShieldConfig | None = None,
 ) -> dict[str, Any]:
     """Draw an episode the first method fails and the second flies, side by side.
 
     The first such episode among the first ``episodes`` of the family's suite stream, both
     flights in the same frame; returns what was found. Draws nothing (and says so:
-    ``episode`` None) where no episode differs that way.
+    ``episode`` None) where no episode differs that way. ``shield``: both methods behind the
+    safety shield, each flight with a shield of its own (it holds plans per environment).
+    The drawn episode is flown again alone; ``outcomes`` are that flight's, and
+    ``same_as_batch`` says whether they are those the episode had among the others.
     """
     import matplotlib
 
@@ -171,7 +177,11 @@ def draw_versus(
         if act is None:
             raise ValueError(f"{spec.label} does not apply to {family_name}: {why}")
         acts.append(act)
-    rows = [fly_episodes(cfg, batch, act).rows for act in acts]
+
+    def flyer(act: Any) -> Any:
+        return act if shield is None else Shielded(act, shield)
+
+    rows = [fly_episodes(cfg, batch, flyer(act)).rows for act in acts]
     success = [np.array([bool(r["success"]) for r in rs]) for rs in rows]
     found = np.flatnonzero(~success[0] & success[1])
     summary: dict[str, Any] = {
@@ -184,18 +194,20 @@ def draw_versus(
         return summary
     k = int(found[0])
     one_cfg, one = sample_family(family, suite.seed, [k])
-    flown = [fly_episodes(one_cfg, one, act, trail=True) for act in acts]
+    flown = [fly_episodes(one_cfg, one, flyer(act), trail=True) for act in acts]
+    outcomes = [_outcome(f.rows[0]) for f in flown]
     low, size = _frame(one, *flown)
     fig, axes = plt.subplots(
         1, 2, figsize=(11, 5.5 * min(2.0, size[1] / size[0])), constrained_layout=True
     )
-    for ax, spec, f, r in zip(axes, specs, flown, rows, strict=True):
-        title = f"{spec.label}: {_outcome(r[k])}"
-        _draw_episode(ax, one_cfg, f, title, (low, size))
-    fig.suptitle(f"{family_name}, episode {k} of suite {suite.name}", fontsize=10)
+    for ax, spec, f, outcome in zip(axes, specs, flown, outcomes, strict=True):
+        _draw_episode(ax, one_cfg, f, f"{spec.label}: {outcome}", (low, size))
+    behind = ", both behind the safety shield" if shield is not None else ""
+    fig.suptitle(f"{family_name}, episode {k} of suite {suite.name}{behind}", fontsize=10)
     _save(fig, out)
     summary["episode"] = k
-    summary["outcomes"] = {s.label: _outcome(r[k]) for s, r in zip(specs, rows, strict=True)}
+    summary["outcomes"] = dict(zip((s.label for s in specs), outcomes, strict=True))
+    summary["same_as_batch"] = outcomes == [_outcome(r[k]) for r in rows]
     return summary
 
 
