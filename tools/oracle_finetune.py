@@ -2,7 +2,7 @@
 
     OMP_NUM_THREADS=1 python tools/oracle_finetune.py [--policy generalist] [--minutes 60]
         [--families 'beyond-20u4o,dense-*,...'] [--teacher oracle|orca-shield|self-shield]
-        [--moving] [--seed 13]
+        [--moving] [--share 0.5] [--seed 13]
         --out tuned.safetensors [--json]
 
 Starts from a generalist policy file (the shipped one by default) and runs DAgger (Ross,
@@ -13,8 +13,8 @@ flies every world (its own action plus N(0, 0.1²) noise, the DAgger phase's); i
 teacher of `policies.generalist_train.teacher_actions`); in every other world the starting
 policy labels its own states, an anchor that keeps what it flies well. After every step of
 every world the actor takes supervised steps (the DAgger phase's `clone_update`, Adam 3·10⁻⁴)
-on minibatches drawn half from the oracle's labels and half from the anchor's. A copy is
-exported to ``--out`` every 15 minutes and at the end: fly it with
+on minibatches drawn half from the oracle's labels and half from the anchor's (``--share``: the
+teacher's share). A copy is exported to ``--out`` every 15 minutes and at the end: fly it with
 ``remarl-fc eval --suite standard --policy tuned.safetensors --json``. Where the oracle finds
 no plan, ORCA through the shield labels, looking as far ahead as a training run's teacher
 (`GeneralistConfig.teacher_horizon_s`). ``--teacher orca-shield`` runs the same fine-tune
@@ -76,7 +76,10 @@ suite's first 10–20 episodes of each: 90–100 % where the generalist flies 3�
 its steps costs under a second on one core (not the 30- and 50-UAV worlds, nor dense-20u)."""
 
 BATCH = 1024
-"""Labels per supervised step (half the oracle's, half the anchor's)."""
+"""Labels per supervised step (by default half the teacher's, half the anchor's)."""
+
+TEACHER_SHARE = 0.5
+"""The teacher's share of each supervised step's labels, the rest the anchor's (``--share``)."""
 
 UPDATES = 20
 """Supervised steps after each step of every world."""
@@ -124,6 +127,12 @@ def main() -> None:
         "--moving",
         action="store_true",
         help="self-shield: the proposals are the student's as it learns, not the start's",
+    )
+    parser.add_argument(
+        "--share",
+        type=float,
+        default=TEACHER_SHARE,
+        help="the teacher's share of each supervised step's labels (the rest the anchor's)",
     )
     parser.add_argument("--seed", type=int, default=13, help="not the training runs' seeds")
     parser.add_argument("--out", type=Path, required=True, help="the tuned policy file")
@@ -190,7 +199,8 @@ def main() -> None:
                 episodes.setdefault(world.family.name, []).append(float(row["success"]))
         sweeps += 1
         for _ in range(UPDATES):
-            half = BATCH // 2 if own.count else BATCH  # every family taught: no anchor rows
+            # every family taught: no anchor rows
+            half = round(BATCH * args.share) if own.count else BATCH
             x1, y1, _ = taught_rows.sample(half, rng)
             x2, y2, _ = own.sample(BATCH - half, rng) if own.count else (x1[:0], y1[:0], None)
             x = torch.from_numpy(np.concatenate([x1, x2]))

@@ -48,6 +48,20 @@ def test_a_zoo_generalist_flies_any_swarm_and_carries_its_suite_results(name):
     assert report["success_rate"] == pytest.approx(policy.meta["metrics"]["success_rate"])
 
 
+@pytest.mark.parametrize("name", [*GENERALISTS, "robust/generalist", "own-separation/generalist"])
+def test_a_zoo_generalists_suite_results_count_todays_solvable_episodes(name):
+    """An eval file is flown against the oracle's current labels: a change to the oracle
+    that moves a label leaves no eval file dividing by the episodes it used to prove."""
+    from sim.suite import cached_labels, load_suite
+
+    suite = load_suite("standard")
+    report = json.loads((zoo_dir() / f"{name}.eval.json").read_text())
+    for family, row in report["families"].items():
+        labels = cached_labels(suite, suite.family(family), int(row["episodes"]))
+        assert labels is not None, f"{family}: stale labels (remarl-fc suite label standard)"
+        assert row["solvable_episodes"] == int(labels.sum()), family
+
+
 def test_the_robust_generalist_carries_its_real_world_results():
     policy = load_policy("robust/generalist")
     report = json.loads((zoo_dir() / "robust" / "generalist.eval.json").read_text())
