@@ -8,8 +8,10 @@ for 60 minutes (DAgger on ORCA through the shield, then PPO), exported; then nin
 DAgger whose teacher is the previous round's policy through the safety shield
 (``--teacher self-shield --dagger-fraction 1 --dagger-lr 3e-4``), each from the previous
 round's export, with the seeds of `ROUNDS` (the seventh flies the crowded families more often,
-`CROWDED`; the ninth charges the separation the student's own view predicts, `OWN_VIEW`).
-Every step is a ``remarl-fc`` command, printed before it runs.
+`CROWDED`; the ninth charges the separation the student's own view predicts, `OWN_VIEW`);
+then 20 minutes of DAgger on the oracle's labels of the late pop-ups, the ninth round labelling
+its own states everywhere else (``python tools/oracle_finetune.py``, `POP_UPS`). Every step is
+a command, printed before it runs.
 
 ``--rollout-processes 1`` flies each round's rollouts in a second process while the first
 learns (`policies.generalist_rollouts`): on a 2-core machine a round does in 13 minutes the
@@ -17,9 +19,12 @@ iterations a one-process round does in 20. ``--start FILE`` begins from a policy
 of training the start (the shipped recipe's start is the generalist of 2026-11-25).
 
 Resumable: a step whose export exists is skipped; a round whose folder holds a checkpoint but
-no export is resumed. ``OUT/recipe.json`` records every step's command and wall minutes, and
-the whole recipe's; the last round's export is ``OUT/round-9.safetensors``, to be judged and
-shipped with ``python tools/ship_generalist.py OUT/round-9 --recipe "…"``.
+no export is resumed (the pop-up fine-tune is not resumable: it starts again). ``OUT/recipe.json``
+records every step's command and wall minutes, and the whole recipe's; the last round's export
+is ``OUT/round-9.safetensors``, the fine-tune's ``OUT/pop-ups.safetensors``, to be judged and
+shipped with ``python tools/ship_generalist.py OUT/pop-ups.safetensors --base NAME`` once
+``OUT/round-9`` is shipped as NAME (``python tools/ship_generalist.py OUT/round-9 --name NAME
+--recipe "…"``).
 """
 
 from __future__ import annotations
@@ -79,6 +84,25 @@ ROUNDS: tuple[tuple[int, tuple[str, ...]], ...] = (
 )
 """(seed, extra flags) of each round, in order: the shipped chain's."""
 
+POP_UPS = (
+    "--families",
+    "pop-up-*",
+    "--teacher",
+    "oracle",
+    "--share",
+    "0.25",
+    "--minutes",
+    "20",
+    "--seed",
+    "22",
+)
+"""The last step: the oracle labels the pop-up families' states (until an intruder appears,
+the route), a quarter of each supervised step's labels (docs/MODEL.md §20, "Flying the route
+until something is seen")."""
+
+FINE_TUNE = Path(__file__).with_name("oracle_finetune.py")
+"""The tool that runs `POP_UPS`."""
+
 ROUND_MINUTES = 20.0
 """A round's budget in one process (the shipped chain's)."""
 
@@ -136,7 +160,17 @@ def steps(
             )
         )
         policy = made
+    made = out / "pop-ups.safetensors"
+    tune = [sys.executable, str(FINE_TUNE), "--policy", str(policy), *POP_UPS, "--out", str(made)]
+    plan.append(("pop-ups", [[*tune, "--json"]], made))
     return plan
+
+
+def shown(command: list[str]) -> str:
+    """A step's command as a user types it."""
+    if command[: len(remarl())] == remarl():
+        return "remarl-fc " + shlex.join(command[len(remarl()) :])
+    return f"OMP_NUM_THREADS=1 python tools/{Path(command[1]).name} " + shlex.join(command[2:])
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -161,7 +195,8 @@ def main(argv: list[str] | None = None) -> int:
         "--rounds",
         type=int,
         default=len(ROUNDS),
-        help=f"the first K rounds only (default all {len(ROUNDS)}); more later go on from them",
+        help=f"the first K rounds only (default all {len(ROUNDS)}, then the pop-up fine-tune); "
+        "more later go on from them",
     )
     p.add_argument("--dry-run", action="store_true", help="print the commands, run nothing")
     args = p.parse_args(argv)
@@ -184,13 +219,15 @@ def main(argv: list[str] | None = None) -> int:
     record["start"] = str(args.start) if args.start else "trained (60 minutes)"
     record["rollout_processes"], record["round_minutes"] = args.rollout_processes, minutes
     plan = steps(args.out, args.start, args.rollout_processes, minutes)
-    for name, commands, made in plan[: len(plan) - len(ROUNDS) + args.rounds]:
+    # the rounds asked for, and the pop-up fine-tune after the last round
+    upto = len(plan) if args.rounds == len(ROUNDS) else len(plan) - 1 - len(ROUNDS) + args.rounds
+    for name, commands, made in plan[:upto]:
         if made.is_file():
             print(f"{name}: {made} is there, skipped", flush=True)
             continue
         began = time.monotonic()
         for command in commands:
-            print("$ remarl-fc", shlex.join(command[len(remarl()) :]), flush=True)
+            print("$", shown(command), flush=True)
             if not args.dry_run:
                 log = (args.out / f"{name}.log").open("a")
                 with log:

@@ -13,6 +13,14 @@ over all and over the solvable episodes, collisions, interventions; with and wit
 shield; per real-world scenario: success and collisions, with and without the shield), and
 exports ``policies/zoo/NAME.safetensors`` again with the suite means in its metadata.
 
+    python tools/ship_generalist.py TUNED.safetensors [--base generalist] [--name generalist]
+        [--recipe "the fine-tune's command"]
+
+ships a policy file made outside a training run, a fine-tune of the zoo's ``--base`` generalist
+(`tools/oracle_finetune.py`): flown as a run's export is, its eval file records the base's
+training and recipe, then the fine-tune's (its policy file's ``reward`` and ``training``, last
+in ``finetunes``, and ``--recipe``).
+
     python tools/ship_generalist.py --reshield [--name generalist] [--workers 2]
 
 flies the shipped ``policies/zoo/NAME.safetensors`` again behind today's shield and rewrites
@@ -34,6 +42,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import shutil
 import tempfile
 from pathlib import Path
 from typing import Any
@@ -42,7 +51,7 @@ from policies.export import remeasure_policy
 from policies.generalist_train import export_generalist_run
 from remarl_fc.offline.evaluate import REAL_WORLD_FLOWN, evaluate_policy, world_overrides
 from remarl_fc.offline.suite import MethodSpec, evaluate_suite
-from remarl_fc.policy_io import zoo_dir
+from remarl_fc.policy_io import load_policy, zoo_dir
 from sim.evaluation import evaluation_seed
 from sim.heap import keep_freed_memory
 from sim.shield import ShieldConfig
@@ -243,7 +252,18 @@ def reshield(name: str, workers: int) -> dict[str, Any]:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("run", nargs="?", help="the --out folder of remarl-fc train --generalist")
+    parser.add_argument(
+        "run",
+        nargs="?",
+        help="the --out folder of remarl-fc train --generalist, or a policy file tuned from the "
+        "zoo's --base (tools/oracle_finetune.py)",
+    )
+    parser.add_argument(
+        "--base",
+        default="generalist",
+        help="a policy file's: the zoo generalist it was tuned from (its training and recipe "
+        "are recorded before the fine-tune's)",
+    )
     parser.add_argument(
         "--reshield",
         action="store_true",
@@ -282,35 +302,78 @@ def main() -> None:
         print(json.dumps(again(args.name, args.workers), indent=2))
         return
     if args.run is None:
-        parser.error("a run folder is required (or --reshield, --refly)")
+        parser.error("a run folder or a policy file is required (or --reshield, --refly)")
     run = Path(args.run)
     suite = load_suite("standard")
+    out = zoo_dir() / args.name
+    if run.is_file():  # a policy file made outside a run: a fine-tune
+        tuned = json.loads((zoo_dir() / f"{args.base}.eval.json").read_text())
+        results, flown = flown_on_suite(run, suite, args.workers, args.real_world_episodes)
+        meta = load_policy(str(run)).meta
+        # the round it was tuned from, and the fine-tunes on top of it, this one last
+        done = [
+            *tuned["training"].get("finetunes", []),
+            {"reward": meta["reward"], **meta["training"]},
+        ]
+        training = {**tuned["training"], "finetunes": done}
+        recipe = f"{tuned['recipe']}; then {args.recipe}" if args.recipe else tuned["recipe"]
+        metrics = write_report(out, suite, None, recipe, training, results, flown)
+        shutil.copyfile(run, out.with_suffix(".safetensors.part"))
+        remeasure_policy(out.with_suffix(".safetensors.part"), metrics)
+        out.with_suffix(".safetensors.part").replace(out.with_suffix(".safetensors"))
+        print(json.dumps(metrics, indent=2))
+        return
     with tempfile.TemporaryDirectory() as tmp:
         policy = Path(tmp) / "generalist.safetensors"
         export_generalist_run(run, policy, checkpoint=args.checkpoint)
-        results = evaluate_suite(
-            suite,
-            [MethodSpec("policy", str(policy))],
-            workers=args.workers,
-            shield=ShieldConfig(mode="on"),
-        )
-        episodes = args.real_world_episodes
-        flown = real_world(policy, episodes, suite) if episodes else {}
+        results, flown = flown_on_suite(policy, suite, args.workers, args.real_world_episodes)
     raw = run / f"suite-{args.checkpoint}.json"  # kept beside the run, whatever happens next
     raw.write_text(json.dumps({"results": results}, indent=1, default=float))
+    config = json.loads((run / "config.json").read_text())["generalist"]
+    # a key a run's config.json predates: not recorded (None), since defaults change (the
+    # teacher and DAgger became the default after the first runs)
+    training = {k: config.get(k) for k in TRAINING_KEPT}
+    metrics = write_report(out, suite, args.checkpoint, args.recipe, training, results, flown)
+    export_generalist_run(
+        run, out.with_suffix(".safetensors"), checkpoint=args.checkpoint, metrics=metrics
+    )
+    print(json.dumps(metrics, indent=2))
+
+
+def flown_on_suite(
+    policy: Path, suite: Suite, workers: int, episodes: int
+) -> tuple[list[dict[str, Any]], dict[str, dict[str, Any]]]:
+    """A policy file on every family of the suite, with and without the shield, and in the real
+    world (``episodes`` of each paper scenario; none: 0)."""
+    results = evaluate_suite(
+        suite, [MethodSpec("policy", str(policy))], workers=workers, shield=ShieldConfig(mode="on")
+    )
+    return results, real_world(policy, episodes, suite) if episodes else {}
+
+
+def write_report(
+    out: Path,
+    suite: Suite,
+    checkpoint: str | None,
+    recipe: str | None,
+    training: dict[str, Any],
+    results: list[dict[str, Any]],
+    flown: dict[str, dict[str, Any]],
+) -> dict[str, Any]:
+    """Write ``out``.eval.json (the zoo name ``out`` relative to the zoo); returns its means.
+
+    ``checkpoint``: the run's checkpoint shipped (None: a policy file, not a run)."""
     families = family_rows(results)
     metrics = suite_metrics(families, flown)
-    config = json.loads((run / "config.json").read_text())["generalist"]
+    name = out.relative_to(zoo_dir()).as_posix()
     report = {
-        "policy": f"{args.name} (policies/zoo/{args.name}.safetensors)",
+        "policy": f"{name} (policies/zoo/{name}.safetensors)",
         "suite": suite.name,
         "suite_version": suite.version,
         "seed": suite.seed,
-        "checkpoint": args.checkpoint,
-        "recipe": args.recipe,
-        # a key a run's config.json predates: not recorded (None), since defaults change (the
-        # teacher and DAgger became the default after the first runs)
-        "training": {k: config.get(k) for k in TRAINING_KEPT},
+        "checkpoint": checkpoint,
+        "recipe": recipe,
+        "training": training,
         **metrics,
         "families": families,
         "real_world": {
@@ -321,13 +384,11 @@ def main() -> None:
             "scenarios": flown,
         },
     }
-    out = zoo_dir() / args.name
     out.parent.mkdir(parents=True, exist_ok=True)  # a new zoo folder (robust/, …)
-    out.with_suffix(".eval.json").write_text(json.dumps(report, indent=2, default=float) + "\n")
-    export_generalist_run(
-        run, out.with_suffix(".safetensors"), checkpoint=args.checkpoint, metrics=metrics
-    )
-    print(json.dumps(metrics, indent=2))
+    path = out.with_suffix(".eval.json")
+    path.with_suffix(".part").write_text(json.dumps(report, indent=2, default=float) + "\n")
+    path.with_suffix(".part").replace(path)
+    return metrics
 
 
 if __name__ == "__main__":

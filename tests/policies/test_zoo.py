@@ -98,6 +98,17 @@ def test_the_default_generalist_records_its_last_round_and_the_recipe_names_it()
     assert "--own-separation-intruder-horizon 10" in report["recipe"]
 
 
+def test_the_default_generalist_records_its_fine_tune_on_the_pop_ups():
+    """The default is that round fine-tuned on the oracle's labels of the late pop-ups: its eval
+    file records the fine-tune after the round, and the recipe names the tool's command."""
+    report = json.loads((zoo_dir() / "generalist.eval.json").read_text())
+    (finetune,) = report["training"]["finetunes"]
+    assert finetune["reward"] == "none (DAgger on oracle from generalist)"
+    assert finetune["seed"] == 22 and report["checkpoint"] is None
+    assert "tools/oracle_finetune.py --policy generalist --families 'pop-up-*'" in report["recipe"]
+    assert "--teacher oracle --share 0.25 --minutes 20 --seed 22" in report["recipe"]
+
+
 def test_the_robust_3u2o_policy_carries_the_world_it_was_trained_in():
     policy = load_policy("robust/3u2o")
     cfg = load_scenario(zoo_dir() / "robust" / "3u2o.toml")
