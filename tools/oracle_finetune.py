@@ -1,4 +1,13 @@
-"""Does the oracle teach the generalist what ORCA could not? DAgger on the oracle, measured.
+"""Fine-tune a generalist by DAgger on a teacher's labels of chosen families (the oracle's).
+
+The shipped generalist's last step (docs/MODEL.md §20, "Flying the route until something is
+seen"; `tools/generalist_recipe.py` runs it):
+
+    OMP_NUM_THREADS=1 python tools/oracle_finetune.py --policy ROUND.safetensors \
+        --families 'pop-up-*' --teacher oracle --share 0.25 --minutes 20 --seed 22 \
+        --out tuned.safetensors
+
+First made to ask whether the oracle teaches the generalist what ORCA could not:
 
     OMP_NUM_THREADS=1 python tools/oracle_finetune.py [--policy generalist] [--minutes 60]
         [--families 'beyond-20u4o,dense-*,...'] [--teacher oracle|orca-shield|self-shield]
