@@ -219,8 +219,9 @@ def main(argv: list[str] | None = None) -> int:
     record["start"] = str(args.start) if args.start else "trained (60 minutes)"
     record["rollout_processes"], record["round_minutes"] = args.rollout_processes, minutes
     plan = steps(args.out, args.start, args.rollout_processes, minutes)
-    # the rounds asked for, and the pop-up fine-tune after the last round
-    upto = len(plan) if args.rounds == len(ROUNDS) else len(plan) - 1 - len(ROUNDS) + args.rounds
+    # up to the last round asked for; after the last of all, the pop-up fine-tune
+    last = "pop-ups" if args.rounds == len(ROUNDS) else f"round-{args.rounds}"
+    upto = [name for name, _, _ in plan].index(last) + 1
     for name, commands, made in plan[:upto]:
         if made.is_file():
             print(f"{name}: {made} is there, skipped", flush=True)

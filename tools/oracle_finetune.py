@@ -147,6 +147,8 @@ def main() -> None:
     parser.add_argument("--out", type=Path, required=True, help="the tuned policy file")
     parser.add_argument("--json", action="store_true", help="print the result as JSON")
     args = parser.parse_args()
+    if not 0.0 < args.share <= 1.0:
+        parser.error(f"--share {args.share}: give the teacher's share, over 0 and at most 1")
     torch.manual_seed(args.seed)
     rng = np.random.default_rng(args.seed)
     net, policy = load_actor(args.policy)

@@ -190,12 +190,9 @@ def _shipped_flown(
     report = json.loads(path.read_text())
     suite = load_suite(report["suite"])
     policy = zoo_dir() / f"{name}.safetensors"
-    results = evaluate_suite(
-        suite, [MethodSpec("policy", str(policy))], workers=workers, shield=ShieldConfig(mode="on")
-    )
     scenarios = report["real_world"]["scenarios"]
     episodes = int(next(iter(scenarios.values()))["episodes"]) if scenarios else 0
-    flown = real_world(policy, episodes, suite) if episodes else {}
+    results, flown = flown_on_suite(policy, suite, workers, episodes)
     return path, report, policy, results, flown
 
 
@@ -307,20 +304,12 @@ def main() -> None:
     suite = load_suite("standard")
     out = zoo_dir() / args.name
     if run.is_file():  # a policy file made outside a run: a fine-tune
-        tuned = json.loads((zoo_dir() / f"{args.base}.eval.json").read_text())
-        results, flown = flown_on_suite(run, suite, args.workers, args.real_world_episodes)
-        meta = load_policy(str(run)).meta
-        # the round it was tuned from, and the fine-tunes on top of it, this one last
-        done = [
-            *tuned["training"].get("finetunes", []),
-            {"reward": meta["reward"], **meta["training"]},
-        ]
-        training = {**tuned["training"], "finetunes": done}
-        recipe = f"{tuned['recipe']}; then {args.recipe}" if args.recipe else tuned["recipe"]
-        metrics = write_report(out, suite, None, recipe, training, results, flown)
-        shutil.copyfile(run, out.with_suffix(".safetensors.part"))
-        remeasure_policy(out.with_suffix(".safetensors.part"), metrics)
-        out.with_suffix(".safetensors.part").replace(out.with_suffix(".safetensors"))
+        base = zoo_dir() / f"{args.base}.eval.json"
+        if not base.is_file():
+            parser.error(
+                f"--base {args.base}: no {base.name} in the zoo to record it as tuned from"
+            )
+        metrics = ship_tuned(run, json.loads(base.read_text()), out, suite, args)
         print(json.dumps(metrics, indent=2))
         return
     with tempfile.TemporaryDirectory() as tmp:
@@ -338,6 +327,25 @@ def main() -> None:
         run, out.with_suffix(".safetensors"), checkpoint=args.checkpoint, metrics=metrics
     )
     print(json.dumps(metrics, indent=2))
+
+
+def ship_tuned(
+    tuned: Path, base: dict[str, Any], out: Path, suite: Suite, args: argparse.Namespace
+) -> dict[str, Any]:
+    """A policy file tuned from the zoo generalist whose eval file is ``base``, flown and
+    shipped as ``out``: its eval file records the base's training and recipe, then this
+    fine-tune (last in ``finetunes``); the zoo copy carries its figures. Returns its means."""
+    results, flown = flown_on_suite(tuned, suite, args.workers, args.real_world_episodes)
+    meta = load_policy(str(tuned)).meta
+    done = [*base["training"].get("finetunes", []), {"reward": meta["reward"], **meta["training"]}]
+    training = {**base["training"], "finetunes": done}
+    recipe = f"{base['recipe']}; then {args.recipe}" if args.recipe else base["recipe"]
+    metrics = write_report(out, suite, None, recipe, training, results, flown)
+    part = out.with_name(out.name + ".safetensors.part")
+    shutil.copyfile(tuned, part)
+    remeasure_policy(part, metrics)  # signed again, with the figures it flew
+    part.replace(out.with_suffix(".safetensors"))
+    return metrics
 
 
 def flown_on_suite(
@@ -386,8 +394,9 @@ def write_report(
     }
     out.parent.mkdir(parents=True, exist_ok=True)  # a new zoo folder (robust/, …)
     path = out.with_suffix(".eval.json")
-    path.with_suffix(".part").write_text(json.dumps(report, indent=2, default=float) + "\n")
-    path.with_suffix(".part").replace(path)
+    part = path.with_name(path.name + ".part")
+    part.write_text(json.dumps(report, indent=2, default=float) + "\n")
+    part.replace(path)
     return metrics
 
 

@@ -559,3 +559,12 @@ def test_a_fine_tuned_policy_file_ships_with_its_base_round_and_its_own_fine_tun
     after = load_policy(tmp_path / "tuned.safetensors")
     assert before.meta["checksum"] != after.meta["checksum"]  # signed again with its figures
     assert not list(tmp_path.glob("*.part"))
+    from safetensors.numpy import load_file
+
+    weights, copied = load_file(str(tuned)), load_file(str(tmp_path / "tuned.safetensors"))
+    assert set(weights) == set(copied)
+    assert all(weights[k].tobytes() == copied[k].tobytes() for k in weights)
+    # a base the zoo does not hold is refused before anything is flown
+    monkeypatch.setattr(sys, "argv", [*argv, "--base", "nowhere"])
+    with pytest.raises(SystemExit):
+        ship.main()

@@ -236,6 +236,28 @@ def test_versus_draws_an_episode_the_first_method_fails_and_the_second_flies(tmp
     assert none["episode"] is None and not (tmp_path / "none.png").exists()
 
 
+def test_versus_behind_the_shield_flies_both_methods_through_it(tmp_path):
+    """`draw_versus(..., shield=...)`: straight flight behind the shield is not straight flight
+    (the shield turns it off its collision courses), and the episode drawn, flown again alone,
+    ends as it did among the others (the planner's plans do not depend on the batch)."""
+    from remarl_fc.offline.suite import MethodSpec
+    from remarl_fc.offline.suite_report import draw_versus
+    from sim.shield import ShieldConfig
+    from sim.suite import load_suite
+
+    suite = load_suite("standard")
+    specs = (MethodSpec("method", "straight"), MethodSpec("method", "orca"))
+    alone = draw_versus(suite, "crossing-3u", specs, tmp_path / "alone.png", episodes=6)
+    out = tmp_path / "shield.png"
+    found = draw_versus(
+        suite, "crossing-3u", specs, out, episodes=6, shield=ShieldConfig(mode="on")
+    )
+    assert found["success"]["straight"] > alone["success"]["straight"]
+    assert found["episode"] is not None and found["same_as_batch"]
+    assert found["outcomes"]["straight"] != "success" and found["outcomes"]["orca"] == "success"
+    assert out.stat().st_size > 5_000
+
+
 @pytest.mark.parametrize("label", ["orca", "zoo", "policy:generalist", "policy:runs/x.safetensors"])
 def test_a_method_label_reads_back_as_its_spec(label):
     from remarl_fc.offline.suite import MethodSpec
