@@ -223,7 +223,7 @@ def test_the_recipe_chains_each_round_from_the_last_export_with_flags_train_take
 
     recipe = recipe_module()
     plan = recipe.steps(tmp_path, None, 1, 13.0)
-    names = ["start"] + [f"round-{k}" for k in range(1, 10)] + ["pop-ups"]
+    names = ["start"] + [f"round-{k}" for k in range(1, 8)] + ["pop-ups"]
     assert [name for name, _, _ in plan] == names
     policy = None
     for number, (name, commands, made) in enumerate(plan[:-1]):
@@ -242,12 +242,12 @@ def test_the_recipe_chains_each_round_from_the_last_export_with_flags_train_take
                 13.0,
                 1,
             )
-            assert bool(cfg.family_weights) == (number == 7)  # the crowded round
+            assert bool(cfg.family_weights) == (number == 5)  # the crowded round
             own_view = (cfg.dagger_separation_weight, cfg.dagger_separation_intruder_horizon_s)
-            assert own_view == ((0.1, 10.0) if number == 9 else (0.0, 0.0))  # the last round
-            assert cfg.dagger_separation_intruders == (number == 9)
+            assert own_view == ((0.1, 10.0) if number == 7 else (0.0, 0.0))  # the last round
+            assert cfg.dagger_separation_intruders == (number == 7)
         policy = made
-    # last, the pop-up fine-tune from the ninth round's export, a flag set the tool takes
+    # last, the pop-up fine-tune from the last round's export, a flag set the tool takes
     (tune,) = plan[-1][1]
     assert (
         tune[1].endswith("oracle_finetune.py") and plan[-1][2] == tmp_path / "pop-ups.safetensors"
@@ -279,10 +279,10 @@ def test_the_recipe_resumes_a_round_with_a_checkpoint_and_skips_a_made_one(tmp_p
     assert f"--init {tmp_path / 'round-2.safetensors'}" in lines[3]  # round 3 from round 2
     assert lines[-1] == (
         f"$ OMP_NUM_THREADS=1 python tools/oracle_finetune.py --policy "
-        f"{tmp_path / 'round-9.safetensors'} --families 'pop-up-*' --teacher oracle --share 0.25 "
+        f"{tmp_path / 'round-7.safetensors'} --families 'pop-up-*' --teacher oracle --share 0.25 "
         f"--minutes 20 --seed 22 --out {tmp_path / 'pop-ups.safetensors'} --json"
     )
-    eight = tool(
+    six = tool(
         "generalist_recipe",
         "--out",
         str(tmp_path),
@@ -290,9 +290,10 @@ def test_the_recipe_resumes_a_round_with_a_checkpoint_and_skips_a_made_one(tmp_p
         str(start),
         "--dry-run",
         "--rounds",
-        "8",
+        "6",
     )
-    assert "oracle_finetune" not in eight.stdout and "round-8" in eight.stdout
+    assert "oracle_finetune" not in six.stdout and "round-6" in six.stdout
+    assert "round-7" not in six.stdout
     missing = tool("generalist_recipe", "--out", str(tmp_path), "--start", str(tmp_path / "x"))
     assert missing.returncode == 2 and "no such policy file" in missing.stderr
 
