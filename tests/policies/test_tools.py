@@ -499,7 +499,7 @@ def test_the_generalist_keeps_its_line_before_a_pop_up_without_knowing_it():
 
 
 def test_a_fine_tuned_policy_file_ships_with_its_base_round_and_its_own_fine_tune(
-    tmp_path, monkeypatch
+    tmp_path, monkeypatch, capsys
 ):
     """`ship_generalist.py TUNED.safetensors --base generalist --name tuned`, the flights
     stubbed: the eval file records the base round's training and recipe, then the fine-tune's,
@@ -566,6 +566,9 @@ def test_a_fine_tuned_policy_file_ships_with_its_base_round_and_its_own_fine_tun
     assert set(weights) == set(copied)
     assert all(weights[k].tobytes() == copied[k].tobytes() for k in weights)
     # a base the zoo does not hold is refused before anything is flown
+    monkeypatch.setattr(ship, "evaluate_suite", lambda *a, **k: pytest.fail("flown"))
     monkeypatch.setattr(sys, "argv", [*argv, "--base", "nowhere"])
-    with pytest.raises(SystemExit):
+    with pytest.raises(SystemExit) as refused:
         ship.main()
+    assert refused.value.code == 2
+    assert "--base nowhere: no nowhere.eval.json in the zoo" in capsys.readouterr().err
