@@ -29,7 +29,9 @@ collision predicted in the coming step first, then one with an intruder within t
 look-ahead, then one with a neighbour in it; then the largest clearance, the closest approach
 minus what is required). Last, a UAV whose decision points more than ``return_deg`` away from
 its target turns back towards it where that passes (`_homeward`): safe is not enough, a UAV
-that paces an intruder away from its target never arrives. Beyond one decision, where some UAV
+that paces an intruder away from its target never arrives. A UAV boxed in by its own swarm
+(nothing passes, but a heading clears every intruder) gets room: its neighbours decide again
+with it held to that heading (``give_way``, `_give_way`). Beyond one decision, where some UAV
 has nothing that passes, its swarm may fly a centralised plan for a few steps
 (``plan_steps``: the swarm planner, `sim.oracle.oracle_actions`, applied by the offline
 evaluation, which keeps the memory a plan held over steps needs).
@@ -68,6 +70,10 @@ NEIGHBOUR_ARCS: tuple[NeighbourArcs, ...] = ("proposals", "straight")
 VehicleModel = Literal["fitted", "ideal"]
 VEHICLE_MODELS: tuple[VehicleModel, ...] = ("fitted", "ideal")
 
+
+GIVE_WAY_ROUNDS = 2
+"""Boxed-in UAVs of one environment that `ShieldConfig.give_way` tries, one after the other
+(each later one with the earlier ones' headings held)."""
 
 ESCAPE_STEPS_MAX = 4
 """The most decision steps `ShieldConfig.escape_steps` may hold the full turn for: four full
@@ -236,6 +242,24 @@ class ShieldConfig:
     (`remarl_fc.offline.shielding.Shielded`); `shield` itself decides one step and keeps no
     memory. Measured behind the generalist on the standard suite (docs/MODEL.md §21)."""
 
+    give_way: int = 6
+    """Give way to a boxed-in UAV: where a UAV has nothing that passes (not one heading,
+    speed or held turn) but some heading of one step clears the intruders, its neighbours make
+    room. Up to this many of those headings, nearest its proposal first, are tried: the UAV
+    committed to the heading, every other UAV of its environment decides again against it (the
+    whole check, ``passes`` and all), and the first heading with which the UAV then passes
+    against what its neighbours fly, and no UAV that had a passing candidate loses it, is
+    flown with the neighbours' new decisions (0: never). A joint decision of one step, made
+    with the check's own prediction (a fitted response, tracked intruders), so `fly` carries
+    it too; `GIVE_WAY_ROUNDS` boxed-in UAVs of an environment at most, one after the other.
+    Where the swarm planner runs (``plan_steps``, the exact world) it comes first, and giving
+    way only where it finds no plan. Measured behind the default generalist on the standard
+    suite (docs/MODEL.md §21): without the planner, as `fly` carries the shield, 98.90 →
+    98.99 %, UAV–UAV collisions in 45 → 41 episodes of 7,600, crossing-50u 86.6 → 87.9 %,
+    no family lower; with it 99.57 → 99.59 % (crossing-50u 95.5 → 96.2 %); in dense-10u it
+    freed 93 of the 126 boxed-in decisions that had a heading clear of the intruders (of 322
+    with nothing that passed). 6 and 22 headings free the same."""
+
     @property
     def return_rad(self) -> float:
         """``return_deg`` in radians."""
@@ -283,6 +307,8 @@ class ShieldConfig:
             raise ValueError(f"shield passes must be >= 1, got {self.passes}")
         if self.plan_steps < 0:
             raise ValueError(f"shield plan_steps must be >= 0, got {self.plan_steps}")
+        if self.give_way < 0:
+            raise ValueError(f"shield give_way must be >= 0, got {self.give_way}")
         if not 1 <= self.escape_steps <= ESCAPE_STEPS_MAX:
             raise ValueError(
                 f"shield escape_steps must be 1 to {ESCAPE_STEPS_MAX}, got {self.escape_steps}"
@@ -474,7 +500,123 @@ def shield(
                     for f in dataclasses.fields(ShieldDecision)
                 }
             )
+    if cfg.give_way:
+        decision = _give_way(cfg, vehicle, swarm, threats, prop, decision)
     return decision
+
+
+def _of_envs(obj: Any, envs: NDArray[np.intp]) -> Any:
+    """A `Swarm` or `Threats` of the environments ``envs`` (E,) alone (repeats allowed)."""
+    picked = {}
+    for f in dataclasses.fields(obj):
+        value = getattr(obj, f.name)
+        if value is not None:
+            picked[f.name] = value.of(envs) if isinstance(value, Motion) else value[envs]
+    return dataclasses.replace(obj, **picked)
+
+
+def _give_way(
+    cfg: ShieldConfig,
+    vehicle: Vehicle,
+    swarm: Swarm,
+    threats: Threats,
+    prop: FloatArray,
+    decision: ShieldDecision,
+) -> ShieldDecision:
+    """``decision`` with the neighbours of boxed-in UAVs making room (`ShieldConfig.give_way`).
+
+    Batched over every (environment, heading) tried; the environments where no heading works
+    keep ``decision``.
+    """
+    inner = dataclasses.replace(cfg, mode="on", give_way=0)
+    # whether a fixed heading passes: the plain check of one pass, nothing substituted
+    check = dataclasses.replace(inner, passes=1, return_deg=180.0, fly_out=False, escape_steps=1)
+    b, n = prop.shape
+    fixed = np.zeros((b, n), dtype=bool)
+    held = prop.copy()  # the headings of the fixed UAVs
+    tried = np.zeros((b, n), dtype=bool)
+    grid = candidate_grid(cfg.headings)
+    everyone = np.ones((b, n), dtype=bool)
+    out = {f.name: getattr(decision, f.name).copy() for f in dataclasses.fields(ShieldDecision)}
+    for _ in range(GIVE_WAY_ROUNDS):
+        stuck = swarm.deciding & ~out["safe_exists"] & ~tried
+        envs = np.flatnonzero(stuck.any(axis=-1))
+        if not envs.size:
+            break
+        e = len(envs)
+        rows = np.arange(e)
+        who = stuck[envs].argmax(axis=-1)  # (E,) the first boxed-in UAV of each
+        tried[envs, who] = True
+        base = np.where(fixed[envs], held[envs], prop[envs])
+        # 1. its headings of one step clear of the intruders alone (no neighbour present)
+        one = np.zeros((e, n), dtype=bool)
+        one[rows, who] = True
+        alone = dataclasses.replace(_of_envs(swarm, envs), deciding=one, present=one)
+        sub_threats = _of_envs(threats, envs)
+        lone = _decide(
+            check, vehicle, alone, sub_threats, base, [Commitment(base, alone.speed_m_s, one)]
+        )
+        own = base[rows, who]
+        values = np.concatenate([np.broadcast_to(grid, (e, len(grid))), own[:, None]], axis=1)
+        clear = np.concatenate(
+            [lone.safe_headings[rows, who], ~lone.intervened[rows, who][:, None]], axis=1
+        )
+        near = np.where(clear, np.abs(values - own[:, None]), np.inf)
+        order = np.argsort(near, axis=1, kind="stable")[:, : cfg.give_way]  # (E, C)
+        pe, pc = np.nonzero(np.isfinite(np.take_along_axis(near, order, axis=1)))
+        if not pe.size:
+            continue
+        # 2. each (environment, heading): the UAV fixed on it, the others decide again
+        hyp = envs[pe]
+        r = np.arange(len(pe))
+        h_swarm = _of_envs(swarm, hyp)
+        h_threats = _of_envs(threats, hyp)
+        h_prop = base[pe].copy()
+        h_prop[r, who[pe]] = np.take_along_axis(values, order, axis=1)[pe, pc]
+        h_fixed = fixed[hyp].copy()
+        h_fixed[r, who[pe]] = True
+        deciding = h_swarm.deciding & ~h_fixed
+        again = shield(
+            inner, vehicle, dataclasses.replace(h_swarm, deciding=deciding), h_threats, h_prop
+        )
+        act = np.where(deciding, again.shield_action, h_prop)
+        first = np.where(deciding, again.shield_speed_m_s, h_swarm.speed_m_s)
+        # 3. every fixed UAV's heading against what the others now fly
+        final = _decide(
+            check,
+            vehicle,
+            dataclasses.replace(h_swarm, deciding=h_fixed & h_swarm.deciding),
+            h_threats,
+            act.astype(np.float64),
+            [Commitment(act.astype(np.float64), first, everyone[hyp])],
+        )
+        passes = ~np.logical_or.reduce(final.intervened & h_fixed, axis=-1)
+        lost = deciding & out["safe_exists"][hyp] & ~again.safe_exists
+        good = passes & ~np.logical_or.reduce(lost, axis=-1)
+        # the first good heading of each environment, in the order tried
+        rank = np.where(good, pc, np.iinfo(np.int64).max)
+        best = np.full(e, np.iinfo(np.int64).max)
+        np.minimum.at(best, pe, rank)
+        take = good & (rank == best[pe])
+        ks = np.flatnonzero(take)  # one per environment at most: its headings differ
+        env, fix = hyp[ks], h_fixed[ks]
+        mine = fix & ~fixed[env]
+        out["action"][env] = out["shield_action"][env] = act[ks]
+        out["speed_m_s"][env] = out["shield_speed_m_s"][env] = first[ks]
+        out["safe_exists"][env] = fix | again.safe_exists[ks]
+        out["intervened"][env] = np.where(
+            fix, act[ks] != prop[env].astype(np.float32), again.intervened[ks]
+        )
+        out["flown_cpa_m"][env] = np.where(fix, final.proposed_cpa_m[ks], again.flown_cpa_m[ks])
+        out["safe_headings"][env] = np.where(
+            mine[..., None], out["safe_headings"][env], again.safe_headings[ks]
+        )
+        held[env] = np.where(fix, act[ks], held[env])
+        fixed[env] = fix
+    if cfg.mode == "monitor":
+        out["action"] = prop.astype(np.float32)
+        out["speed_m_s"] = np.full((b, n), vehicle.cruise_m_s)
+    return ShieldDecision(**out)
 
 
 @dataclass(frozen=True)

@@ -192,6 +192,15 @@ def add_shield_flags(p: Any, default: str, planner: bool = False) -> None:
         "(--dynamics): with that response, or on the arcs as commanded (default "
         f"{base.vehicle_model})",
     )
+    p.add_argument(
+        "--shield-give-way",
+        type=int,
+        default=base.give_way,
+        metavar="N",
+        help="where a UAV is boxed in (nothing passes, but a heading clears the intruders), try "
+        "up to N such headings with its neighbours deciding again to make room (default "
+        f"{base.give_way}; 0: never)",
+    )
     if planner:
         p.add_argument(
             "--shield-plan-steps",
@@ -222,6 +231,7 @@ def shield_from_args(args: argparse.Namespace) -> Any:
             fly_out=args.shield_fly_out == "on",
             neighbour_arcs=args.shield_neighbours,
             vehicle_model=args.shield_vehicle_model,
+            give_way=args.shield_give_way,
             **(
                 {"plan_steps": args.shield_plan_steps}
                 if getattr(args, "shield_plan_steps", None) is not None

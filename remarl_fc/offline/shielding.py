@@ -14,6 +14,7 @@ where the search from a later step finds none.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from typing import Any
 
@@ -83,9 +84,12 @@ class Shielded:
         """(actions, speeds) to fly for the observations (B, N, D) of ``state``."""
         proposed = self.inner(obs, state, cfg)
         vehicle = self.vehicle(cfg)
-        decision = self.last = shield_state(self.cfg, cfg, state, proposed, vehicle)
+        planner = self.cfg.mode == "on" and self.cfg.plan_steps > 0 and _exact(state)
+        # where the planner runs, it is the last resort; giving way only where it finds nothing
+        first = dataclasses.replace(self.cfg, give_way=0) if planner else self.cfg
+        decision = self.last = shield_state(first, cfg, state, proposed, vehicle)
         action, speed, intervened = decision.action, decision.speed_m_s, decision.intervened
-        if self.cfg.mode == "on" and self.cfg.plan_steps > 0 and _exact(state):
+        if planner:
             action, speed, intervened = self._plan(state, cfg, decision, proposed, vehicle)
         self.decisions += int(state.active.sum())
         self.interventions += int(intervened.sum())
@@ -134,6 +138,12 @@ class Shielded:
         plans, kept = self._held_plans(state, envs, whole, found)
         self.plans_kept += int(kept.sum())
         found = found | kept
+        alone = envs[~found]
+        if self.cfg.give_way and alone.size:  # no plan: the neighbours of a boxed-in UAV give way
+            gave = shield_state(self.cfg, cfg, state, proposed, vehicle)  # per environment
+            action, speed, intervened = action.copy(), speed.copy(), intervened.copy()
+            action[alone], speed[alone] = gave.action[alone], gave.speed_m_s[alone]
+            intervened[alone] = gave.intervened[alone]
         envs, plans = envs[found], plans[found]
         flying = state.active[envs]
         action, speed = action.copy(), speed.copy()

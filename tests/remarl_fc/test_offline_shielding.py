@@ -69,20 +69,49 @@ def fly(cfg, batch, shielded):
 
 
 def test_the_swarm_planner_saves_a_swarm_the_shield_leaves_boxed_in():
-    # dense-3u's first episode: behind the shield alone the target-seeking swarm is boxed in
-    # between its own UAVs and the traffic, and collides; the planner flies it through
+    # dense-3u's first episode: behind the shield alone, no neighbour giving way, the
+    # target-seeking swarm is boxed in between its own UAVs and the traffic, and collides; the
+    # planner flies it through, and so does the shield alone where neighbours give way
     suite = load_suite("standard")
     family = next(f for f in suite.families if f.name == "dense-3u")
     cfg, batch = sample_family(family, suite.seed, range(1))
-    alone = Shielded(seek, ShieldConfig(mode="on", plan_steps=0))
+    alone = Shielded(seek, ShieldConfig(mode="on", plan_steps=0, give_way=0))
     success, collided = fly(cfg, batch, alone)
     assert collided.all() and not success.any()
     assert alone.planned == 0
-    planner = Shielded(seek, ShieldConfig(mode="on", plan_steps=4))
+    planner = Shielded(seek, ShieldConfig(mode="on", plan_steps=4, give_way=0))
     success, collided = fly(cfg, batch, planner)
     assert success.all() and not collided.any()
     report = planner.report()
     assert report["shield_planned"] > 0 and report["shield_plans"] > 0
+    giving = Shielded(seek, ShieldConfig(mode="on", plan_steps=0))
+    success, collided = fly(cfg, batch, giving)
+    assert success.all() and not collided.any() and giving.planned == 0
+
+
+@pytest.mark.parametrize("found", [True, False])
+def test_where_the_planner_runs_neighbours_give_way_only_where_it_finds_no_plan(monkeypatch, found):
+    calls: list[int] = []
+    real = shielding.shield_state
+
+    def spy(shield_cfg, cfg, state, proposed, vehicle=None):
+        calls.append(shield_cfg.give_way)
+        return real(shield_cfg, cfg, state, proposed, vehicle)
+
+    def planned(state, cfg, oracle=None, envs=None):
+        e, n = len(envs), state.pos_m.shape[1]
+        return np.zeros((e, 3, n), np.float32), np.full(e, found)
+
+    monkeypatch.setattr(shielding, "shield_state", spy)
+    monkeypatch.setattr(shielding, "oracle_plan", planned)
+    suite = load_suite("standard")
+    family = next(f for f in suite.families if f.name == "dense-3u")
+    cfg, batch = sample_family(family, suite.seed, range(1))
+    shielded = Shielded(seek, ShieldConfig(mode="on", plan_steps=4, give_way=6))
+    fly(cfg, batch, shielded)
+    assert shielded.plans > 0
+    assert calls[0] == 0  # the planner first: the shield decides without giving way
+    assert (6 in calls) is not found  # and gives way only where no plan was found
 
 
 class Stuck:

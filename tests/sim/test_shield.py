@@ -144,9 +144,10 @@ def test_monitor_never_changes_the_action_and_reports_what_on_would_do(seed, n, 
 def test_where_some_admissible_action_keeps_separation_the_shielded_one_does(seed):
     """About three thousand random decisions (100 examples × 16 environments × 1–3 UAVs), each
     UAV's decision checked by the dense simulation, and every admissible candidate too where
-    the shield intervened."""
+    the shield intervened. Against the neighbours' proposals: without giving way, which checks
+    a freed UAV against its neighbours' new arcs instead (its own test)."""
     rng = np.random.default_rng(seed)
-    cfg = ShieldConfig(mode="on", track_growth_m_s=0.0, headings=11)
+    cfg = ShieldConfig(mode="on", track_growth_m_s=0.0, headings=11, give_way=0)
     b, n, m = 16, int(rng.integers(1, 4)), int(rng.integers(1, 4))
     swarm, threats = random_world(rng, b, n, m)
     prop = rng.uniform(-1, 1, (b, n))
@@ -1038,7 +1039,7 @@ def test_straight_neighbours_make_each_decision_the_uavs_own():
     their heading: its decision is the one-pass decision of a swarm whose other UAVs all propose
     to fly straight on, whatever they do propose (so it is a function of what that UAV sees)."""
     straight = ShieldConfig(mode="on", neighbour_arcs="straight")
-    one_pass = ShieldConfig(mode="on", passes=1)
+    one_pass = ShieldConfig(mode="on", passes=1, give_way=0)  # no neighbour makes room
     changed = 0
     for seed in range(12):
         rng = np.random.default_rng(seed)
@@ -1099,3 +1100,87 @@ def test_fitted_vehicles_carry_their_motion_and_a_hovering_one_is_held_where_it_
     ideal = load_scenario("3u1o", arrival="hover")
     shield_state(on, ideal, SwarmSim(ideal, scored=False).initial_state(rng, 1), np.zeros((1, 3)))
     assert seen[-1].motion is None
+
+
+def two_abreast() -> tuple[Swarm, Threats]:
+    """Two fixed-speed UAVs flying east 24 m apart (d_col 20 m), an intruder closing from ahead
+    a little to the left of the right-hand one (A, at the origin; B to its left)."""
+    swarm = Swarm(
+        pos_m=np.array([[[0.0, 0.0], [0.0, 24.0]]]),
+        heading_rad=np.zeros((1, 2)),
+        target_m=np.array([[[1e4, 0.0], [1e4, 24.0]]]),
+        deciding=np.ones((1, 2), bool),
+        present=np.ones((1, 2), bool),
+        speed_m_s=np.full((1, 2), 5.0),
+    )
+    threats = Threats(
+        np.array([[[66.0, 6.0]]]), np.array([[[-4.7, -1.1]]]), np.ones((1, 1), bool),
+        np.zeros((1, 1)),
+    )  # fmt: skip
+    return swarm, threats
+
+
+def test_a_boxed_in_uav_gets_room_from_its_neighbour():
+    """A has nothing that passes: the headings that clear the intruder (left) run into B, who
+    flies on. Giving way, B turns left too and A follows it past the intruder; both decisions
+    checked again by the independent dense simulation against the other's flown arc."""
+    fixed = Vehicle(20.0, 2.0, math.pi / 4, 5.0, can_slow=False)
+    swarm, threats = two_abreast()
+    proposed = np.zeros((1, 2))
+    boxed = ShieldConfig(mode="on", escape_steps=1, give_way=0, track_growth_m_s=0.0)
+    before = shield(boxed, fixed, swarm, threats, proposed)
+    assert not before.safe_exists[0, 0] and before.safe_exists[0, 1]
+    assert before.action[0, 1] == 0.0  # B's proposal passed: it flies on
+    given = dataclasses.replace(boxed, give_way=6)
+    after = shield(given, fixed, swarm, threats, proposed)
+    assert after.safe_exists.all() and after.intervened.all()
+    assert after.action[0, 0] > 0.0 and after.action[0, 1] > 0.0  # both turn left
+    for uav in (0, 1):
+        action = after.action[0, uav]
+        assert dense_clearance(given, swarm, threats, 0, uav, action, 5.0, after.action) >= -0.3
+    # monitor mode records the same decision and flies the proposals
+    watched = shield(dataclasses.replace(given, mode="monitor"), fixed, swarm, threats, proposed)
+    np.testing.assert_array_equal(watched.shield_action, after.shield_action)
+    np.testing.assert_array_equal(watched.action, proposed.astype(np.float32))
+
+
+def test_giving_way_needs_a_neighbour_that_decides():
+    """A neighbour that does not decide (hovering, or another controller's) cannot make room:
+    the decision is the one without giving way."""
+    fixed = Vehicle(20.0, 2.0, math.pi / 4, 5.0, can_slow=False)
+    swarm, threats = two_abreast()
+    swarm = dataclasses.replace(swarm, deciding=np.array([[True, False]]))
+    proposed = np.zeros((1, 2))
+    cfg = ShieldConfig(mode="on", escape_steps=1)
+    without = shield(dataclasses.replace(cfg, give_way=0), fixed, swarm, threats, proposed)
+    with_it = shield(cfg, fixed, swarm, threats, proposed)
+    for f in dataclasses.fields(without):
+        np.testing.assert_array_equal(getattr(with_it, f.name), getattr(without, f.name))
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1))
+def test_giving_way_never_takes_a_passing_candidate_away(seed):
+    """Crowds at random: with giving way, every UAV that had something that passes still
+    has, the proposals that passed are flown unchanged unless a neighbour gave way, and a UAV
+    freed now passes against what its neighbours fly (the dense check)."""
+    rng = np.random.default_rng(seed)
+    swarm, threats = random_world(rng, 3, 6, 3)
+    proposed = rng.uniform(-1.0, 1.0, (3, 6))
+    cfg = ShieldConfig(mode="on", escape_steps=1, horizon_s=10.0, track_growth_m_s=0.0)
+    without = shield(dataclasses.replace(cfg, give_way=0), VEHICLE, swarm, threats, proposed)
+    with_it = shield(cfg, VEHICLE, swarm, threats, proposed)
+    assert not (without.safe_exists & ~with_it.safe_exists).any()
+    unchanged = (with_it.action == without.action).all(axis=-1)
+    freed = with_it.safe_exists & ~without.safe_exists
+    assert (unchanged | freed.any(axis=-1)).all()
+    flown = dataclasses.replace(swarm, speed_m_s=with_it.speed_m_s)  # the neighbours' speeds
+    for env, uav in zip(*np.nonzero(freed), strict=True):
+        action, speed = with_it.action[env, uav], with_it.speed_m_s[env, uav]
+        clear = dense_clearance(cfg, flown, threats, env, uav, action, speed, with_it.action)
+        assert clear >= -0.3
+
+
+def test_give_way_below_zero_is_refused():
+    with pytest.raises(ValueError, match="give_way"):
+        ShieldConfig(give_way=-1)
