@@ -189,8 +189,10 @@ class ShieldConfig:
     instead where that passes the check: full turns at a_max until it points at the target,
     then straight on, or where that does not pass the long way round; checked like any
     candidate over the look-ahead; only the first step is flown (180: never). A vehicle flown
-    with its fitted response turns back the short way over two steps at most (its response
-    is predicted exactly over two), then holds its heading. A UAV that hovers where it arrived
+    with its fitted response turns back over two steps at most (its response is predicted
+    exactly over two), the short way or else the long way round, then holds its heading
+    (the long way too since 2026-12-01, late: the real world 87.45 → 88.75 %, docs/MODEL.md
+    §21). A UAV that hovers where it arrived
     is kept clear of over the whole look-ahead. Why: a policy may pace an intruder that flies
     its way between it and its target, hundreds of metres past the target, until the episode
     runs out of time; nothing is unsafe, so nothing else in the shield intervenes. Measured
@@ -1041,7 +1043,7 @@ def _homeward(
     (`_turns`); where that does not pass, the long way round, turning away first (an intruder
     alongside, between the UAV and its target, may leave no room to turn towards it, and all
     the room to loop the other way behind it). A vehicle flown with its fitted response: the
-    first two steps of the short way through its response, then its final heading held
+    first two steps of either way through its response, then its final heading held
     (`sim.dynamics.predict_response`). Checked like any candidate: against the intruders over
     the look-ahead and the neighbours' arcs over theirs (``arcs``, flown as `_decide` flies
     them); ``cuts``: `_decide`'s, but for the held turns' knots.
@@ -1052,9 +1054,7 @@ def _homeward(
     motion = swarm.motion
     error = _to_target(swarm, swarm.heading_rad)  # (B, N)
     side = np.where(error < 0.0, -1.0, 1.0)  # the short way
-    ways = [_reachable(swarm, vehicle, side)]
-    if motion is None:  # the long way too: a fitted response is predicted over two steps only
-        ways.append(_reachable(swarm, vehicle, -side))
+    ways = [_reachable(swarm, vehicle, side), _reachable(swarm, vehicle, -side)]
     reach = np.stack(ways, axis=-1)  # (B, N, C)
     away = away & np.logical_or.reduce(reach, axis=-1)
     if not away.any():
@@ -1062,8 +1062,8 @@ def _homeward(
         return Homeward(none, np.zeros((b, n)), np.full((b, n), np.inf))
     start = swarm.heading_rad[away]  # (F,)
     short = np.abs(error[away])
-    signs = np.stack([side[away], -side[away]], axis=-1)[:, : len(ways)]  # (F, C)
-    angles = np.stack([short, 2.0 * np.pi - short], axis=-1)[:, : len(ways)]
+    signs = np.stack([side[away], -side[away]], axis=-1)  # (F, 2): the short way, the long
+    angles = np.stack([short, 2.0 * np.pi - short], axis=-1)
     steps = max(2, math.ceil(float(angles.max()) / a_max - 1e-9))
     if motion is not None:  # its response is predicted exactly over two steps
         steps = PREDICTED_STEPS

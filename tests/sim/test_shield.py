@@ -548,9 +548,10 @@ def test_the_turn_back_keeps_clear_of_a_parked_uav_over_the_whole_look_ahead():
 
 def test_a_fitted_vehicle_turns_back_as_its_response_flies_it():
     """The pacing world flown by a fitted ArduCopter: its turn back is predicted through the
-    response over two steps (90°), then its heading held; at 60 and 70 m that passes too close
-    to the intruder and the proposal stands, at 80 m it passes, within the prediction's
-    tolerance of the command stream replayed at 10 ms."""
+    response over two steps (90°), then its heading held; at 60 and 70 m the short way passes
+    too close to the intruder and the UAV turns back the long way, away from it, at 80 m the
+    short way passes, within the prediction's tolerance of the command stream replayed at
+    10 ms."""
     prof = load_profile("arducopter")
     a_max, dt = VEHICLE.max_turn_rad, VEHICLE.dt_s
     t, ref, vel0 = dense_track(prof, 0.0, 0.0, 5.0, -a_max, 5.0, 5.0, dt, 25.0, -a_max)
@@ -559,12 +560,12 @@ def test_a_fitted_vehicle_turns_back_as_its_response_flies_it():
         vel0[None, None], 0 * one, 5 * one, prof.delay_s * one, prof.velocity_tau_s * one,
         prof.max_accel_m_s2 * one,
     )  # fmt: skip
-    for intruder_m, turns_back in ((60.0, False), (70.0, False), (80.0, True)):
+    for intruder_m, way in ((60.0, 1.0), (70.0, 1.0), (80.0, -1.0)):
         swarm, threats = pacing_world(intruder_m)
         swarm = dataclasses.replace(swarm, motion=motion)
         decision = shield(ShieldConfig(mode="on"), VEHICLE, swarm, threats, np.zeros((1, 1)))
-        assert decision.intervened[0, 0] == turns_back
-        assert decision.action[0, 0] == (-1.0 if turns_back else 0.0)
+        assert decision.intervened[0, 0] and decision.action[0, 0] == way
+        assert decision.flown_cpa_m[0, 0] >= VEHICLE.d_col_m + ShieldConfig().margin_m
     other = threats.intruder_pos_m[0, 0] + threats.intruder_vel_m_s[0, 0] * t[:, None]
     flown = np.hypot(*(ref - other).T).min()
     assert flown >= VEHICLE.d_col_m
@@ -707,20 +708,20 @@ def test_the_turn_back_keeps_clear_of_a_flying_neighbour_for_longer():
 
 
 @pytest.mark.parametrize(
-    ("beside_m", "way", "fitted_turns"),
-    [(25.5, 1.0, False), (40.0, -1.0, False), (60.0, -1.0, True)],
+    ("beside_m", "way", "fitted_way"),
+    [(25.5, 1.0, 1.0), (40.0, -1.0, 1.0), (60.0, -1.0, -1.0)],
 )
 def test_a_target_its_tightest_turn_circles_out_of_reach_is_reached_the_long_way(
-    beside_m, way, fitted_turns
+    beside_m, way, fitted_way
 ):
     """A target beside the UAV of `FAST`, 5 m behind it on the right, the UAV flying straight
     away (the proposal): turning right at a_max flies a circle of 25.5 m radius centred 25.5 m
     to the right. 25.5 m beside, the target is 5 m from that centre: the circle never comes
     within d_col of it, so the UAV turns back the long way, to the left. 40 m beside (15.3 m
     from the centre) the circle passes 10 m from it, and 60 m beside outside it: the UAV turns
-    right. Nothing else around. A fitted vehicle, which tries the short way only and turns
-    wider than the circle, turns back only to a target outside it, and leaves the others to
-    the policy."""
+    right. Nothing else around. A fitted vehicle turns later and wider than the circle: a
+    target anywhere inside it counts as out of reach the short way, and it turns back the
+    long way to it; to a target outside the circle, the short way."""
     swarm = circling_uav((-5.0, -beside_m))
     none = Threats(
         np.zeros((1, 0, 2)), np.zeros((1, 0, 2)), np.zeros((1, 0), bool), np.zeros((1, 0))
@@ -732,8 +733,7 @@ def test_a_target_its_tightest_turn_circles_out_of_reach_is_reached_the_long_way
         ShieldConfig(mode="on"), FAST, dataclasses.replace(swarm, motion=motion), none,
         np.zeros((1, 1)),
     )  # fmt: skip
-    assert fitted.intervened[0, 0] == fitted_turns
-    assert fitted.action[0, 0] == (-1.0 if fitted_turns else 0.0)
+    assert fitted.intervened[0, 0] and fitted.action[0, 0] == fitted_way
 
 
 def test_with_a_circle_no_wider_than_d_col_every_target_is_reached_the_short_way():
