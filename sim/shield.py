@@ -535,10 +535,9 @@ def _give_way(
     check = dataclasses.replace(inner, passes=1, return_deg=180.0, fly_out=False, escape_steps=1)
     b, n = prop.shape
     fixed = np.zeros((b, n), dtype=bool)
-    held = prop.copy()  # the headings of the fixed UAVs
+    held = prop.copy()  # the proposals, the fixed UAVs' headings in their place
     tried = np.zeros((b, n), dtype=bool)
     grid = candidate_grid(cfg.headings)
-    everyone = np.ones((b, n), dtype=bool)
     out = {f.name: getattr(decision, f.name).copy() for f in dataclasses.fields(ShieldDecision)}
     for _ in range(GIVE_WAY_ROUNDS):
         stuck = swarm.deciding & ~out["safe_exists"] & ~tried
@@ -549,7 +548,7 @@ def _give_way(
         rows = np.arange(e)
         who = stuck[envs].argmax(axis=-1)  # (E,) the first boxed-in UAV of each
         tried[envs, who] = True
-        base = np.where(fixed[envs], held[envs], prop[envs])
+        base = held[envs]
         # 1. its headings of one step clear of the intruders alone (no neighbour present)
         one = np.zeros((e, n), dtype=bool)
         one[rows, who] = True
@@ -584,23 +583,21 @@ def _give_way(
         act = np.where(deciding, again.shield_action, h_prop)
         first = np.where(deciding, again.shield_speed_m_s, h_swarm.speed_m_s)
         # 3. every fixed UAV's heading against what the others now fly
+        flown = act.astype(np.float64)
         final = _decide(
             check,
             vehicle,
             dataclasses.replace(h_swarm, deciding=h_fixed & h_swarm.deciding),
             h_threats,
-            act.astype(np.float64),
-            [Commitment(act.astype(np.float64), first, everyone[hyp])],
+            flown,
+            [Commitment(flown, first, np.ones_like(h_fixed))],
         )
         passes = ~np.logical_or.reduce(final.intervened & h_fixed, axis=-1)
         lost = deciding & out["safe_exists"][hyp] & ~again.safe_exists
         good = passes & ~np.logical_or.reduce(lost, axis=-1)
-        # the first good heading of each environment, in the order tried
-        rank = np.where(good, pc, np.iinfo(np.int64).max)
-        best = np.full(e, np.iinfo(np.int64).max)
-        np.minimum.at(best, pe, rank)
-        take = good & (rank == best[pe])
-        ks = np.flatnonzero(take)  # one per environment at most: its headings differ
+        # the first good heading of each environment, in the order tried (pe, pc row-major)
+        ks = np.flatnonzero(good)
+        ks = ks[np.unique(pe[ks], return_index=True)[1]]
         env, fix = hyp[ks], h_fixed[ks]
         mine = fix & ~fixed[env]
         out["action"][env] = out["shield_action"][env] = act[ks]
@@ -1054,8 +1051,8 @@ def _homeward(
     motion = swarm.motion
     error = _to_target(swarm, swarm.heading_rad)  # (B, N)
     side = np.where(error < 0.0, -1.0, 1.0)  # the short way
-    ways = [_reachable(swarm, vehicle, side), _reachable(swarm, vehicle, -side)]
-    reach = np.stack(ways, axis=-1)  # (B, N, C)
+    # (B, N, 2): the short way, the long way
+    reach = np.stack([_reachable(swarm, vehicle, side), _reachable(swarm, vehicle, -side)], -1)
     away = away & np.logical_or.reduce(reach, axis=-1)
     if not away.any():
         none = np.zeros((b, n), dtype=bool)
@@ -1069,7 +1066,7 @@ def _homeward(
         steps = PREDICTED_STEPS
     turns = signs[..., None] * np.clip(
         angles[..., None] - a_max * np.arange(steps), 0.0, a_max
-    )  # (F, C, S)
+    )  # (F, 2, S)
     # checked against the neighbours for longer than other candidates: it overrides a decision
     # that passed, so it must not hand a neighbour a conflict just past their 4 s
     cfg = dataclasses.replace(cfg, neighbour_horizon_s=cfg.return_neighbour_horizon_s)
@@ -1099,9 +1096,9 @@ def _homeward(
     clear, cpa, _ = _clearance(
         flown, row[paths.owner], paths, (b, n), vehicle.d_col_m, ranked=False
     )
-    ok = (clear >= 0.0) & reach & away[..., None]  # (B, N, C)
-    pick = np.where(ok[..., 0], 0, len(ways) - 1)  # the short way first
-    first = np.zeros((b, n, len(ways)))
+    ok = (clear >= 0.0) & reach & away[..., None]  # (B, N, 2)
+    pick = np.where(ok[..., 0], 0, 1)  # the short way first
+    first = np.zeros((b, n, 2))
     first[away] = turns[..., 0] / a_max
     return Homeward(np.logical_or.reduce(ok, axis=-1), _at(first, pick), _at(cpa, pick))
 
