@@ -1,7 +1,7 @@
 """Draw one suite episode that two methods fly differently, side by side.
 
     python tools/versus.py FAMILY [FAMILY ...] [--first policy:generalist] [--second orca]
-        [--suite standard] [--episodes 40] [--out docs/img] [--shield]
+        [--suite standard] [--episodes 40] [--out docs/img] [--shield] [--solvable]
 
 For each family: the first of its suite episodes (of the first ``--episodes``) that the first
 method fails and the second flies to success, both flights in one frame, written to
@@ -11,6 +11,8 @@ name or a policy file). Prints one JSON line per family: both methods' success o
 looked at, the episode drawn (null: none differs that way) and how each ended. With
 ``--shield`` both fly behind the safety shield at its defaults (planner included), as
 ``remarl-fc eval --shield on`` flies them, and the picture is ``OUT/versus-FAMILY-shield.png``.
+With ``--solvable`` only the episodes the oracle proves solvable are looked at, those the
+suite's success counts (an episode no plan exists for may still be flown by one method).
 """
 
 from __future__ import annotations
@@ -35,13 +37,18 @@ def main() -> None:
     parser.add_argument("--episodes", type=int, default=40, help="episodes looked at")
     parser.add_argument("--out", default="docs/img", help="folder of the pictures")
     parser.add_argument("--shield", action="store_true", help="both behind the safety shield")
+    parser.add_argument(
+        "--solvable", action="store_true", help="only episodes the oracle proves solvable"
+    )
     args = parser.parse_args()
     shield = ShieldConfig(mode="on") if args.shield else None
     suite = load_suite(args.suite)
     specs = (MethodSpec.from_label(args.first), MethodSpec.from_label(args.second))
     for family in args.families:
         out = Path(args.out) / f"versus-{family}{'-shield' if shield else ''}.png"
-        found = draw_versus(suite, family, specs, out, episodes=args.episodes, shield=shield)
+        found = draw_versus(
+            suite, family, specs, out, episodes=args.episodes, shield=shield, solvable=args.solvable
+        )
         print(json.dumps({**found, "picture": str(out) if found["episode"] is not None else None}))
 
 

@@ -16,7 +16,7 @@ from remarl_fc.offline.shielding import Shielded
 from remarl_fc.offline.suite import MethodSpec, fly_episodes, resolve_method
 from sim.encounters import sample_family
 from sim.shield import ShieldConfig
-from sim.suite import Suite
+from sim.suite import Suite, family_labels
 
 PICTURE_MARGIN_M = 60.0
 """Free space around everything a worst-episode picture shows, metres."""
@@ -154,6 +154,7 @@ def draw_versus(
     out: Path,
     episodes: int = 40,
     shield: ShieldConfig | None = None,
+    solvable: bool = False,
 ) -> dict[str, Any]:
     """Draw an episode the first method fails and the second flies, side by side.
 
@@ -161,6 +162,8 @@ def draw_versus(
     flights in the same frame; returns what was found. Draws nothing (and says so:
     ``episode`` None) where no episode differs that way. ``shield``: both methods behind the
     safety shield, each flight with a shield of its own (it holds plans per environment).
+    ``solvable``: only among the episodes the oracle proves solvable (`sim.suite.family_labels`),
+    those the suite's success counts; the summary adds each method's success over them.
     The drawn episode is flown again alone; ``outcomes`` are that flight's, and
     ``same_as_batch`` says whether they are those the episode had among the others.
     """
@@ -183,13 +186,22 @@ def draw_versus(
 
     rows = [fly_episodes(cfg, batch, flyer(act)).rows for act in acts]
     success = [np.array([bool(r["success"]) for r in rs]) for rs in rows]
-    found = np.flatnonzero(~success[0] & success[1])
+    counted = np.ones(episodes, dtype=bool)
+    if solvable:
+        counted = np.asarray(family_labels(suite, family, episodes), dtype=bool)
+    found = np.flatnonzero(~success[0] & success[1] & counted)
     summary: dict[str, Any] = {
         "family": family_name,
         "episodes": episodes,
         "success": {s.label: float(ok.mean()) for s, ok in zip(specs, success, strict=True)},
         "episode": None,
     }
+    if solvable:
+        summary["solvable_episodes"] = int(counted.sum())
+        summary["success_solvable"] = {
+            s.label: float(ok[counted].mean()) if counted.any() else math.nan
+            for s, ok in zip(specs, success, strict=True)
+        }
     if not found.size:
         return summary
     k = int(found[0])

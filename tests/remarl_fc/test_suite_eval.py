@@ -2,6 +2,7 @@
 
 import json
 
+import numpy as np
 import pytest
 from tiny_policy import write_tiny_generalist
 
@@ -256,6 +257,37 @@ def test_versus_behind_the_shield_flies_both_methods_through_it(tmp_path):
     assert found["episode"] is not None and found["same_as_batch"]
     assert found["outcomes"]["straight"] != "success" and found["outcomes"]["orca"] == "success"
     assert out.stat().st_size > 5_000
+
+
+def test_versus_looks_only_at_solvable_episodes_when_asked(tmp_path, monkeypatch):
+    """`draw_versus(..., solvable=True)` (`tools/versus.py --solvable`): an episode the oracle
+    does not prove solvable is never drawn, however the methods fly it, and each method's
+    success is also counted over the solvable episodes alone, as the suite counts it."""
+    from remarl_fc.offline import suite_report
+    from remarl_fc.offline.suite import MethodSpec
+    from sim.suite import load_suite
+
+    suite = load_suite("standard")
+    specs = (MethodSpec("method", "straight"), MethodSpec("method", "orca"))
+    first = suite_report.draw_versus(suite, "crossing-3u", specs, tmp_path / "a.png", episodes=6)
+    k = first["episode"]
+    assert k is not None and "success_solvable" not in first
+    labels = np.ones(6, dtype=bool)
+    labels[k] = False  # as if the oracle found no plan for the episode drawn
+    monkeypatch.setattr(suite_report, "family_labels", lambda _suite, _family, n: labels[:n])
+    again = suite_report.draw_versus(
+        suite, "crossing-3u", specs, tmp_path / "b.png", episodes=6, solvable=True
+    )
+    assert again["episode"] != k
+    assert again["success"] == first["success"]
+    assert again["solvable_episodes"] == 5
+    # the episode left out: straight flight failed it and ORCA flew it
+    assert again["success_solvable"]["straight"] == pytest.approx(
+        6 * first["success"]["straight"] / 5
+    )
+    assert again["success_solvable"]["orca"] == pytest.approx(
+        (6 * first["success"]["orca"] - 1) / 5
+    )
 
 
 @pytest.mark.parametrize("label", ["orca", "zoo", "policy:generalist", "policy:runs/x.safetensors"])
