@@ -517,6 +517,34 @@ def _of_envs(obj: Any, envs: NDArray[np.intp]) -> Any:
     return dataclasses.replace(obj, **picked)
 
 
+def give_way(
+    cfg: ShieldConfig,
+    vehicle: Vehicle,
+    swarm: Swarm,
+    threats: Threats,
+    proposed: NDArray[np.floating],
+    decision: ShieldDecision,
+    envs: NDArray[np.intp],
+) -> ShieldDecision:
+    """Giving way (`ShieldConfig.give_way`) in the environments ``envs`` (E,) alone.
+
+    ``decision``: `shield`'s without giving way, (B, N) each; returns theirs with it, (E, N)
+    each, as `shield` with ``cfg`` would decide them: the environments are independent. For a
+    caller that gives way only where it needs to (`remarl_fc.offline.shielding.Shielded`, where
+    its swarm planner found no plan).
+    """
+    return _give_way(
+        cfg,
+        vehicle,
+        _of_envs(swarm, envs),
+        _of_envs(threats, envs),
+        np.clip(np.asarray(proposed, dtype=np.float64)[envs], -1.0, 1.0),
+        ShieldDecision(
+            **{f.name: getattr(decision, f.name)[envs] for f in dataclasses.fields(decision)}
+        ),
+    )
+
+
 def _give_way(
     cfg: ShieldConfig,
     vehicle: Vehicle,
@@ -1606,8 +1634,16 @@ def shield_state(
 
     Intruders are what the UAVs know of them: the exact obstacles that are visible, or the
     ADS-B tracks' picture (`sim.sensors.picture`, its reports' age); neighbours are the other
-    UAVs still present (hovering ones at speed 0), on their proposed arcs.
+    UAVs still present (hovering ones at speed 0), on their proposed arcs (`shield_inputs`).
     """
+    swarm, threats = shield_inputs(shield_cfg, cfg, state)
+    return shield(shield_cfg, vehicle or vehicle_of(cfg), swarm, threats, proposed)
+
+
+def shield_inputs(
+    shield_cfg: ShieldConfig, cfg: ScenarioConfig, state: SwarmState
+) -> tuple[Swarm, Threats]:
+    """What `shield_state` checks a simulator state's proposals against: (swarm, threats)."""
     now = (state.steps * cfg.dt_s).astype(np.float64)[:, None]
     if state.tracks is None:
         pos, vel, known = state.obstacle_pos_m, state.obstacle_vel_m_s, state.obstacle_visible
@@ -1640,5 +1676,4 @@ def shield_state(
         speed_m_s=np.where(hovering, 0.0, state.speed_m_s),
         motion=motion,
     )
-    threats = Threats(pos, vel, known, age)
-    return shield(shield_cfg, vehicle or vehicle_of(cfg), swarm, threats, proposed)
+    return swarm, Threats(pos, vel, known, age)

@@ -25,7 +25,15 @@ from sim.arrays import FloatArray
 from sim.config import ScenarioConfig
 from sim.observation import ObservationLayout
 from sim.oracle import oracle_plan
-from sim.shield import ShieldConfig, ShieldDecision, Vehicle, shield_state, vehicle_of
+from sim.shield import (
+    ShieldConfig,
+    ShieldDecision,
+    Vehicle,
+    give_way,
+    shield_inputs,
+    shield_state,
+    vehicle_of,
+)
 from sim.state import SwarmState
 
 
@@ -114,7 +122,9 @@ class Shielded:
         (`sim.oracle.oracle_plan`, every UAV of it at the cruise speed) from this step for
         `ShieldConfig.plan_steps` steps, replanned at each; where the planner finds no plan,
         the plan it found before flies on (`_held_plans`), else the shield's decision stands.
-        Returns (actions, speeds, intervened), as the decision's.
+        In the environments left without a plan the neighbours of a boxed-in UAV give way
+        (`sim.shield.give_way`, on those environments alone). Returns (actions, speeds,
+        intervened), as the decision's.
         """
         b = state.num_envs
         steps = state.steps.astype(np.int64)
@@ -140,10 +150,14 @@ class Shielded:
         found = found | kept
         alone = envs[~found]
         if self.cfg.give_way and alone.size:  # no plan: the neighbours of a boxed-in UAV give way
-            gave = shield_state(self.cfg, cfg, state, proposed, vehicle)  # per environment
+            seen = shield_inputs(self.cfg, cfg, state)
+            gave = give_way(self.cfg, vehicle, *seen, proposed, decision, alone)
             action, speed, intervened = action.copy(), speed.copy(), intervened.copy()
-            action[alone], speed[alone] = gave.action[alone], gave.speed_m_s[alone]
-            intervened[alone] = gave.intervened[alone]
+            action[alone], speed[alone], intervened[alone] = (
+                gave.action,
+                gave.speed_m_s,
+                gave.intervened,
+            )
         envs, plans = envs[found], plans[found]
         flying = state.active[envs]
         action, speed = action.copy(), speed.copy()

@@ -92,17 +92,22 @@ def test_the_swarm_planner_saves_a_swarm_the_shield_leaves_boxed_in():
 @pytest.mark.parametrize("found", [True, False])
 def test_where_the_planner_runs_neighbours_give_way_only_where_it_finds_no_plan(monkeypatch, found):
     calls: list[int] = []
-    real = shielding.shield_state
+    real, real_give_way = shielding.shield_state, shielding.give_way
 
     def spy(shield_cfg, cfg, state, proposed, vehicle=None):
         calls.append(shield_cfg.give_way)
         return real(shield_cfg, cfg, state, proposed, vehicle)
+
+    def spy_give_way(shield_cfg, *args):
+        calls.append(shield_cfg.give_way)
+        return real_give_way(shield_cfg, *args)
 
     def planned(state, cfg, oracle=None, envs=None):
         e, n = len(envs), state.pos_m.shape[1]
         return np.zeros((e, 3, n), np.float32), np.full(e, found)
 
     monkeypatch.setattr(shielding, "shield_state", spy)
+    monkeypatch.setattr(shielding, "give_way", spy_give_way)
     monkeypatch.setattr(shielding, "oracle_plan", planned)
     suite = load_suite("standard")
     family = next(f for f in suite.families if f.name == "dense-3u")
@@ -224,8 +229,9 @@ def test_a_held_plan_is_dropped_when_an_intruder_appears_or_the_swarm_leaves_it(
     def flight(plan_steps, stuck, state):
         asked.clear()
         stand_in.stuck = stuck
+        # the stand-in decides where no plan flies: no giving way on top of it
         shielded = Shielded(lambda obs, state, cfg: np.zeros(state.heading_rad.shape),
-                            ShieldConfig(mode="on", plan_steps=plan_steps))  # fmt: skip
+                            ShieldConfig(mode="on", plan_steps=plan_steps, give_way=0))  # fmt: skip
         flown = []
         for _ in range(4):
             action, speed = shielded(None, state, cfg)
