@@ -348,6 +348,58 @@ def _lag_m(
     return out
 
 
+AT_REST_M_S = 0.1
+"""A braking vehicle slower than this is at rest, m/s (`brake`): a hover's drift."""
+
+
+@dataclass(frozen=True)
+class Braking:
+    """Where K vehicles told to stop are, ``elapsed_s`` after their velocity was known.
+
+    Attributes:
+        disp_m: (K, 2) displacement since then. vel_m_s: (K, 2) velocity now.
+        moving_s: (K,) how long of ``elapsed_s`` each was still moving (faster than
+            `AT_REST_M_S`): after that it holds its place.
+    """
+
+    disp_m: FloatArray
+    vel_m_s: FloatArray
+    moving_s: FloatArray
+
+
+def brake(
+    vel_m_s: FloatArray,
+    delay_s: FloatArray,
+    tau_s: FloatArray,
+    accel_m_s2: FloatArray,
+    elapsed_s: FloatArray,
+) -> Braking:
+    """K vehicles commanded to stop (speed 0), flown with their fitted responses (K,) each.
+
+    The model of the simulator (`fly_response`, an arrived UAV braking) in closed form: for the
+    delay the vehicle flies on at ``vel_m_s`` (K, 2); then the stop command closes its velocity
+    error (`_lag_m` for a command of 0), capped by the acceleration, then to first order.
+    """
+    vel = np.asarray(vel_m_s, dtype=np.float64).reshape(-1, 2)
+    delay, tau, accel, elapsed = (
+        np.asarray(v, dtype=np.float64).reshape(-1) for v in (delay_s, tau_s, accel_m_s2, elapsed_s)
+    )
+    late = np.minimum(elapsed, delay)  # the command in force: flying on
+    s = np.maximum(elapsed - delay, 0.0)
+    stopped = -_lag_m(-vel[:, None], tau[:, None], accel[:, None], s[:, None, None])[:, 0, :, 0]
+    disp = vel * late[:, None] + stopped
+    speed = np.hypot(vel[:, 0], vel[:, 1])
+    capped = np.maximum(speed - accel * tau, 0.0) / accel  # braking at the cap
+    gentle = np.minimum(speed, accel * tau)  # the speed where the first order takes over
+    left = np.where(
+        s <= capped, speed - accel * s, gentle * np.exp(-np.maximum(s - capped, 0.0) / tau)
+    )
+    unit = vel / np.maximum(speed, 1e-12)[:, None]
+    tail = tau * np.log(np.maximum(gentle, AT_REST_M_S) / AT_REST_M_S)
+    moving = np.where(speed > AT_REST_M_S, delay + capped + tail, 0.0)
+    return Braking(disp, unit * left[:, None], np.minimum(moving, elapsed))
+
+
 PREDICTED_STEPS = 2
 """Decision steps `predict_response` flies exactly with the response before its closed-form
 tail (`_lag_m`), at least 2 (an instant inside them lies on the chord between their chords).

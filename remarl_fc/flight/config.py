@@ -188,6 +188,7 @@ class Member:
     events: list[tuple[float, str]] = field(default_factory=list)
     local: bool = True  # flown by this process (else a peer's, known from the swarm bus)
     remote_status: str | None = None  # a peer's status as its process publishes it
+    remote_said: str | None = None  # the last it published (``remote_status`` turns lost)
     ready_ne_m: np.ndarray | None = None  # where it was when it became ready to start
     ready_t: float | None = None  # when (UNIX s): every process derives the same start
 

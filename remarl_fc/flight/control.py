@@ -39,7 +39,7 @@ from remarl_fc.flight.config import Member
 from remarl_fc.flight.status import NEIGHBOUR, OBSTACLE, Status
 from remarl_fc.flight.traffic import TrafficPicture
 from remarl_fc.frames import heading_to_yaw, ne_to_sim, sim_to_ne
-from sim.dynamics import Motion, response_values
+from sim.dynamics import Motion, brake, response_values
 from sim.kinematics import heading_velocity
 from sim.observation import ObservationLayout, build_observations
 from sim.shield import ShieldConfig, ShieldDecision, Threats, shield
@@ -450,6 +450,66 @@ def swarm_picture(rows: Sequence[tuple[Member, Status]]) -> SwarmPicture:
     )
 
 
+TOLD_TO_HOLD = frozenset({Status.HELD, Status.REACHED})
+"""Statuses of a vehicle told to hold (the hold mode, zero-velocity setpoints): it brakes to
+rest and keeps its place (`whereabouts`)."""
+
+
+def told_to_hold(member: Member, status: Status) -> bool:
+    """Whether the vehicle was told to hold.
+
+    This process's word for its own; for a peer's, the last status its own process published
+    (a peer silent since is ``lost`` here, and still holding).
+    """
+    if member.local:
+        return status in TOLD_TO_HOLD
+    return member.remote_said in {s.value for s in TOLD_TO_HOLD}
+
+
+@dataclass(frozen=True)
+class Whereabouts:
+    """Where the mission's vehicles are now, from their last tracks (slot order).
+
+    Attributes:
+        ne_m, vel_ne_m_s: (N, 2) positions and velocities (NaN: no position yet).
+        age_s: (N,) how long each has moved unobserved: now − its last position, or, for a
+            vehicle told to hold, as long of that as it was predicted still moving.
+    """
+
+    ne_m: FloatArray
+    vel_ne_m_s: FloatArray
+    age_s: FloatArray
+
+
+def whereabouts(
+    rows: Sequence[tuple[Member, Status]], responses: FloatArray, now: float
+) -> Whereabouts:
+    """Every vehicle's track predicted to ``now``.
+
+    ``responses`` (N, 3): each one's fitted (delay, time constant, acceleration cap)
+    (`sim.dynamics.response_values`).
+
+    A vehicle still flying is extrapolated at its velocity (a lost one flies its last setpoint).
+    One told to hold (`told_to_hold`) brakes to rest and keeps its place (`sim.dynamics.brake`):
+    a peer whose process ended while its vehicle braked is where that vehicle stopped, not
+    flying on at its last velocity; its uncertainty stops growing once it is at rest.
+    """
+    tracks = [m.track for m, _ in rows]
+    ne = np.array([t.ne_m for t in tracks], dtype=np.float64).reshape(-1, 2)
+    vel = np.array([t.vel_ned_m_s[:2] for t in tracks], dtype=np.float64).reshape(-1, 2)
+    age = np.maximum(now - np.array([t.t_position for t in tracks], dtype=np.float64), 0.0)
+    age = np.where(np.isfinite(age), age, 0.0)
+    holding = np.array([told_to_hold(m, s) for m, s in rows], dtype=bool)
+    pos = ne + vel * age[:, None]
+    if holding.any():
+        r = np.asarray(responses, dtype=np.float64)[holding]
+        stop = brake(vel[holding], r[:, 0], r[:, 1], r[:, 2], age[holding])
+        pos[holding] = ne[holding] + stop.disp_m
+        vel, age = vel.copy(), age.copy()
+        vel[holding], age[holding] = stop.vel_m_s, stop.moving_s
+    return Whereabouts(pos, vel, age)
+
+
 @dataclass(frozen=True)
 class Obstacles:
     """What the policy and the shield must avoid, north/east, predicted to the decision time.
@@ -468,6 +528,7 @@ class Obstacles:
 def obstacle_picture(
     traffic: TrafficPicture,
     rows: Sequence[tuple[Member, Status]],
+    where: Whereabouts,
     now: float,
     band_m: float,
 ) -> Obstacles:
@@ -475,7 +536,7 @@ def obstacle_picture(
 
     The ADS-B intruders within ±``band_m`` of the swarm's mean height (nearest the swarm centre
     first, capped by the picture), and the vehicles no longer flown by the policy (`OBSTACLE`:
-    lost, held, pilot) at their last track extrapolated to ``now``.
+    lost, held, pilot) where ``where`` (`whereabouts`) puts them now.
     """
     tracks = [m.track for m, _ in rows]
     known = [t.ne_m for t in tracks if math.isfinite(t.t_position)]
@@ -487,11 +548,11 @@ def obstacle_picture(
         pos.append(intr.predicted_ne_m(now))
         vel.append(intr.vel_ne_m_s)
         age.append(max(MIN_REPORT_AGE_S, now - intr.t))
-    for m, status in rows:
+    for k, (m, status) in enumerate(rows):
         if status in OBSTACLE and math.isfinite(m.track.t_position):
-            pos.append(m.track.predicted_ne_m(now))
-            vel.append(m.track.vel_ned_m_s[:2])
-            age.append(max(MIN_REPORT_AGE_S, now - m.track.t_position))
+            pos.append(where.ne_m[k])
+            vel.append(where.vel_ne_m_s[k])
+            age.append(max(MIN_REPORT_AGE_S, float(where.age_s[k])))
     if not pos:
         return Obstacles(np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0))
     return Obstacles(np.array(pos), np.array(vel), np.array(age))

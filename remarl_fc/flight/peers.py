@@ -142,7 +142,7 @@ class Peers:
             t.t_position = self.clock.at(got.t_mono)
             if s.ready_ne_m is not None and m.ready_ne_m is None:
                 m.ready_ne_m, m.ready_t = np.array(s.ready_ne_m), s.ready_t
-            m.remote_status = s.status if s.status in STATUSES else None
+            m.remote_status = m.remote_said = s.status if s.status in STATUSES else None
             if now - t.t_position > self.peer_timeout_s * self.clock.speedup:
                 m.remote_status = "lost"
         for sender, got in core.detections.items():

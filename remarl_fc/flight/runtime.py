@@ -47,6 +47,7 @@ from remarl_fc.flight.control import (
     SwarmController,
     obstacle_picture,
     swarm_picture,
+    whereabouts,
 )
 from remarl_fc.flight.core import (
     Command,
@@ -88,6 +89,7 @@ from remarl_fc.mavlink.consts import (
 )
 from remarl_fc.mavlink.link import MavlinkLink, TlogWriter
 from remarl_fc.resource import StackOwner
+from sim.dynamics import response_values
 from sim.sensors import TrackNoise
 from sim.vehicle import VehicleProfile, load_profile
 
@@ -140,6 +142,9 @@ class SwarmRuntime(StackOwner):
             for px4 in (False, True)
         }
         """The profile the shield predicts a vehicle of this process with, by ``is_px4``."""
+        self._responses = np.array([response_values(self.profiles[False])] * len(self.members))
+        """(N, 3) each vehicle's fitted response (`whereabouts`: how one told to hold stops);
+        set from its autopilot once the handshakes are done."""
         self.shield = ShieldTally(cfg.shield.mode)
         """What the safety shield did (`remarl_fc.flight.shielding`)."""
         self.vehicles: dict[int, Vehicle] = {
@@ -279,6 +284,7 @@ class SwarmRuntime(StackOwner):
         # its velocity, its command, whatever its profile)
         profiles = [self.profiles[m.track.is_px4] for m in self.members]
         self.controller.use_profiles(profiles)
+        self._responses = np.array([response_values(p) for p in profiles])
         fitted = self.cfg.shield.mode != "off" and self.cfg.shield.vehicle_model == "fitted"
         for m in mine:
             self._apply(self.vehicles[m.system_id], Status.CONTROLLED, "under control")
@@ -314,9 +320,10 @@ class SwarmRuntime(StackOwner):
         rows, the shield's records (`remarl_fc.flight.shielding`) and the status lines.
         """
         self._sync_peers(now)
-        positions = np.array([m.track.predicted_ne_m(now) for m in self.members])
         rows = self._report_rows()
-        obstacles = obstacle_picture(self.traffic, rows, now, self.cfg.adsb_band_m)
+        where = whereabouts(rows, self._responses, now)
+        positions = where.ne_m
+        obstacles = obstacle_picture(self.traffic, rows, where, now, self.cfg.adsb_band_m)
         t0 = time.perf_counter()
         decision = self.controller.decide(
             now,

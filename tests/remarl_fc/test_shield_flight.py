@@ -30,6 +30,7 @@ from remarl_fc.flight.control import (
     SwarmController,
     SwarmPicture,
     obstacle_picture,
+    whereabouts,
 )
 from remarl_fc.flight.flightlog import read_tlog
 from remarl_fc.flight.mission import Mission, VehiclePlan
@@ -44,6 +45,7 @@ from remarl_fc.policy_io import Policy
 from remarl_fc.sitl.config import DEFAULT_HOME
 from remarl_fc.sitl.traffic import Traffic
 from sim.config import ScenarioConfig
+from sim.dynamics import response_values
 from sim.observation import ObservationLayout
 from sim.scenarios import load_scenario
 from sim.shield import ShieldConfig, shield_state
@@ -286,7 +288,9 @@ def test_the_obstacle_picture_gives_each_reports_age():
     runtime = SwarmRuntime(FlyConfig(("udpin:127.0.0.1:0",), mission), GoToTarget(), SPEC)
     m = runtime.members[0]
     m.track.ne_m, m.track.height_m, m.track.t_position = np.zeros(2), CRUISE_ALT_M, 10.0
-    seen = obstacle_picture(traffic, [(m, Status.CONTROLLED)], 11.0, 50.0)
+    rows = [(m, Status.CONTROLLED)]
+    response = np.array([response_values(load_profile("arducopter"))])
+    seen = obstacle_picture(traffic, rows, whereabouts(rows, response, 11.0), 11.0, 50.0)
     np.testing.assert_allclose(seen.age_s, [3.0])
     np.testing.assert_allclose(seen.ne_m, HEAD_ON[0] + 3.0 * HEAD_ON[1], atol=0.5)
 

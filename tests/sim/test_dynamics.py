@@ -13,11 +13,14 @@ from hypothesis import strategies as st
 
 from sim import dynamics as sim_dynamics
 from sim.dynamics import (
+    AT_REST_M_S,
     INTEGRATION_STEP_S,
     Motion,
     ResponseSpec,
+    brake,
     integration_grid,
     predict_response,
+    response_values,
 )
 from sim.errors import ScenarioError
 from sim.scenarios import load_scenario
@@ -328,3 +331,47 @@ def test_between_the_steps_flown_a_prediction_is_the_chord_and_a_stop_is_braked(
     np.testing.assert_allclose(x[..., 3], 0.5 * (x[..., 2] + x[..., 4]))
     np.testing.assert_allclose(y[..., 3], 0.5 * (y[..., 2] + y[..., 4]))
     assert (np.hypot(x[..., 2], y[..., 2]) > 5.0).all()
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    name=st.sampled_from(["arducopter", "px4", "px4-sluggish", "responsive"]),
+    speed=st.floats(0.0, 15.0),
+    course=st.floats(-math.pi, math.pi),
+    elapsed=st.floats(0.0, 12.0),
+)
+def test_a_vehicle_told_to_stop_brakes_as_the_replayed_model_does(name, speed, course, elapsed):
+    """`brake` in closed form against the stop command replayed through `sim.vehicle.respond`
+    at 10 ms: where it is, how fast, and how long of the time it was still moving."""
+    prof = load_profile(name)
+    v0 = speed * np.array([math.cos(course), math.sin(course)])
+    t, pos, vel = dense_stop(prof, v0, elapsed)
+    got = brake(v0[None], *(np.full(1, x) for x in response_values(prof)), np.full(1, elapsed))
+    # (the replay's command changes on its 10 ms grid: up to a sample of full speed later)
+    np.testing.assert_allclose(got.disp_m[0], pos[-1], atol=0.01 * speed + 0.01)
+    np.testing.assert_allclose(got.vel_m_s[0], vel[-1], atol=0.01 * prof.max_accel_m_s2 + 0.01)
+    moving = np.hypot(vel[:, 0], vel[:, 1]) > AT_REST_M_S
+    last = t[moving][-1] if moving.any() else 0.0
+    assert got.moving_s[0] <= elapsed + 1e-9
+    assert abs(got.moving_s[0] - min(last, elapsed)) < 0.05
+
+
+def dense_stop(prof, v0, elapsed):
+    """(times, positions, velocities) of a stop commanded at 0 from ``v0``, at 10 ms."""
+    t = np.arange(-1.0, elapsed + 0.005, 0.01)
+    cmd = np.where((t < 0)[:, None], v0, 0.0)
+    vel = respond(prof, t, cmd, v0)[t > -0.005]
+    steps = 0.5 * (vel[1:] + vel[:-1]) * 0.01
+    return t[t > -0.005], np.concatenate([np.zeros((1, 2)), np.cumsum(steps, axis=0)]), vel
+
+
+def test_from_full_speed_a_fitted_arducopter_stops_in_23_m():
+    """The figure the runtime relies on for a peer told to hold (`remarl_fc.flight.control`)."""
+    got = brake(
+        np.array([[0.0, 10.0]]),
+        *(np.full(1, x) for x in response_values(load_profile("arducopter"))),
+        np.full(1, 60.0),
+    )
+    np.testing.assert_allclose(got.disp_m, [[0.0, 23.3]], atol=0.05)
+    np.testing.assert_allclose(got.vel_m_s, 0.0, atol=1e-9)
+    assert 4.5 < got.moving_s[0] < 5.5

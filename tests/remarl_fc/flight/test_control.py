@@ -9,16 +9,24 @@ import pytest
 from numpy.typing import NDArray
 
 from remarl_fc.flight.config import Member
-from remarl_fc.flight.control import ControlSpec, SwarmController, SwarmPicture, swarm_picture
+from remarl_fc.flight.control import (
+    ControlSpec,
+    SwarmController,
+    SwarmPicture,
+    swarm_picture,
+    whereabouts,
+)
 from remarl_fc.flight.status import Status
 from remarl_fc.flight.tracking import VehicleTrack
 from remarl_fc.frames import GeoPoint, heading_to_yaw, ne_to_sim, sim_to_ne
 from remarl_fc.policy_io import load_policy
+from sim.dynamics import brake, response_values
 from sim.encounters import Family, sample_family
 from sim.observation import NEIGHBOUR_COLUMNS, ObservationLayout, build_observations
 from sim.scenarios import load_scenario
 from sim.spawn import virtual_centre_and_velocity
 from sim.swarm import SwarmSim
+from sim.vehicle import load_profile
 
 SPEC = ControlSpec(speed_m_s=10.0, dt_s=2.0, max_turn_rad=math.pi / 4, lead_m=40.0, arrival_m=20.0)
 LAYOUT = ObservationLayout(
@@ -471,6 +479,42 @@ def test_swarm_picture_of_the_runtimes_rows():
     np.testing.assert_array_equal(sw.heading_known, [True, True, False, False, True, False])
     np.testing.assert_array_equal(sw.vel_ne_m_s[1], [0.0, 0.0])  # holding at its target
     np.testing.assert_array_equal(sw.vel_ne_m_s[3], [1.0, 2.0])  # a peer's: its telemetry
+
+
+def test_a_vehicle_told_to_hold_is_where_it_stopped_not_flying_on():
+    """A vehicle told to hold (this process's own, or a peer whose process last said so and
+    fell silent) brakes to rest where the fitted response stops it, and its uncertainty stops
+    growing there; one still flying (a peer under control, a lost vehicle on its last setpoint)
+    flies on at its last velocity."""
+
+    def member(slot: int, *, local: bool = True, said: str | None = None) -> Member:
+        m = Member(slot, slot + 1, VehicleTrack(slot + 1, GeoPoint(47.0, 8.0, 400.0)), local=local)
+        m.track.ne_m = np.array([100.0 * slot, 0.0])
+        m.track.vel_ned_m_s = np.array([10.0, 0.0, 0.0])  # north at 10 m/s, 30 s ago
+        m.track.t_position = 10.0
+        m.remote_said = said
+        return m
+
+    rows = [
+        (member(0), Status.REACHED),
+        (member(1), Status.HELD),
+        (member(2, local=False, said="reached"), Status.LOST),  # its process ended
+        (member(3, local=False, said="controlled"), Status.LOST),  # a bus outage
+        (member(4), Status.LOST),  # our own, silent: it flies its last setpoint
+        (member(5, local=False, said="controlled"), Status.CONTROLLED),
+    ]
+    arducopter = response_values(load_profile("arducopter"))
+    where = whereabouts(rows, np.array([arducopter] * len(rows)), 40.0)
+    stop = brake(np.array([[10.0, 0.0]]), *(np.full(1, x) for x in arducopter), np.full(1, 30.0))
+    assert 20.0 < stop.disp_m[0, 0] < 25.0 and stop.moving_s[0] < 6.0
+    for k in range(3):
+        np.testing.assert_allclose(where.ne_m[k], [100.0 * k + stop.disp_m[0, 0], 0.0])
+        np.testing.assert_allclose(where.vel_ne_m_s[k], 0.0, atol=1e-9)
+        assert where.age_s[k] == stop.moving_s[0]
+    for k in range(3, 6):
+        np.testing.assert_allclose(where.ne_m[k], [100.0 * k + 300.0, 0.0])
+        np.testing.assert_allclose(where.vel_ne_m_s[k], [10.0, 0.0])
+        assert where.age_s[k] == 30.0
 
 
 def test_version_2_first_decision_equals_the_simulators():

@@ -14,8 +14,10 @@ from hypothesis import strategies as st
 from mavwire import ADSB_ALL, ORIGIN, QUANTUM_M, adsb, adsb_raw
 
 from remarl_fc.bus.core import Received
-from remarl_fc.bus.schema import Detection, Detections
+from remarl_fc.bus.schema import Detection, Detections, VehicleState
+from remarl_fc.flight.config import Member
 from remarl_fc.flight.peers import Peers
+from remarl_fc.flight.tracking import VehicleTrack
 from remarl_fc.flight.traffic import (
     CONFLICT_BASE_M,
     MAX_ADSB_SPEED_M_S,
@@ -509,6 +511,20 @@ def test_peers_merge_each_batch_once_and_publish_only_our_own_tracks():
     sent = peers._detections(SimpleNamespace(system_id=1), 1.2)
     assert [d.icao for d in sent.items] == [0xD, 0xC]  # ours only, nearest first
     assert sent.id == 1
+
+
+def test_a_silent_peer_is_lost_and_its_last_word_is_kept():
+    """A peer silent past the peer timeout is ``lost``; what its process last said (here: its
+    vehicle reached its target and holds) stays known, for `whereabouts`."""
+    core = SimpleNamespace(states={}, detections={})
+    peer = Member(0, 2, VehicleTrack(2, ORIGIN), local=False)
+    peers = Peers(SimpleNamespace(core=core), [peer], TrafficPicture(ORIGIN), FakeClock(), 1.5, str)
+    state = VehicleState(2, 7, 0.0, (10.0, 0.0), 20.0, (5.0, 0.0, 0.0), 0.0, "reached")
+    core.states[2] = Received(state, 1.0)
+    peers.sync(2.0)
+    assert (peer.remote_status, peer.remote_said) == ("reached", "reached")
+    peers.sync(3.0)  # 2 s since its last state
+    assert (peer.remote_status, peer.remote_said) == ("lost", "reached")
 
 
 # -- the track filter ------------------------------------------------------------------------
