@@ -134,6 +134,14 @@ def add_shield_flags(p: Any, default: str, planner: bool = False) -> None:
         f"fly), seconds (default {base.track_horizon_s:g})",
     )
     p.add_argument(
+        "--shield-track-growth",
+        type=float,
+        default=base.track_growth_m_s,
+        help="growth of the clearance the shield keeps from a tracked intruder per second of "
+        "report age and of prediction, m/s; raise it where ADS-B errors wander (GNSS), not "
+        f"over the swarm bus (default {base.track_growth_m_s:g}; docs/FLYING.md)",
+    )
+    p.add_argument(
         "--shield-neighbour-horizon",
         type=float,
         default=base.neighbour_horizon_s,
@@ -223,6 +231,7 @@ def shield_from_args(args: argparse.Namespace) -> Any:
             mode=args.shield,
             horizon_s=args.shield_horizon,
             track_horizon_s=args.shield_track_horizon,
+            track_growth_m_s=args.shield_track_growth,
             neighbour_horizon_s=args.shield_neighbour_horizon,
             margin_m=args.shield_margin,
             passes=args.shield_passes,

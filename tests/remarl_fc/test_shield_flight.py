@@ -466,6 +466,8 @@ def test_bad_shield_settings_are_refused(command, capsys):
     assert "--shield" in capsys.readouterr().err
     assert main([*base, "--shield-neighbour-horizon", "nan"]) == 2
     assert "neighbour_horizon_s" in capsys.readouterr().err
+    assert main([*base, "--shield-track-growth", "-1"]) == 2
+    assert "track_growth_m_s" in capsys.readouterr().err
     assert main([*base, "--shield-passes", "0"]) == 2
     assert "passes must be >= 1" in capsys.readouterr().err
     assert main([*base, "--shield-escape-steps", "5"]) == 2
@@ -489,6 +491,8 @@ def test_the_shield_flags_build_its_config():
     for command in ("demo", "eval"):
         args = build_parser().parse_args([command, "--shield-neighbour-horizon", "6"])
         assert shield_from_args(args).neighbour_horizon_s == 6.0
+        args = build_parser().parse_args([command, "--shield-track-growth", "1.5"])
+        assert shield_from_args(args).track_growth_m_s == 1.5
         args = build_parser().parse_args([command, "--shield-escape-steps", "1"])
         assert shield_from_args(args).escape_steps == 1
         args = build_parser().parse_args([command, "--shield-return", "180"])
