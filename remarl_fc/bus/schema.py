@@ -75,6 +75,9 @@ class VehicleState:
         yaw_rad; status: a `STATUSES` value.
         ready_ne_m, ready_t: where and when (UNIX s) it became ready to start the swarm
             (None before): every process computes the same swarm start from these.
+        arc: the arc its process commands it now, while it is under control (None
+            otherwise): (course at the arc's start, rad clockwise from north; turn over the
+            arc, rad, clockwise positive; speed, m/s; seconds since the arc started).
     """
 
     id: int
@@ -87,6 +90,14 @@ class VehicleState:
     status: str
     ready_ne_m: tuple[float, float] | None = None
     ready_t: float | None = None
+    arc: tuple[float, float, float, float] | None = None
+
+
+MAX_ARC_TURN_RAD = math.pi
+"""An arc turns by at most this much (a policy's turn is a fraction of it)."""
+
+MAX_ARC_AGE_S = 60.0
+"""An arc is at most this old (one decision step: a few seconds)."""
 
 
 @dataclass(frozen=True)
@@ -152,6 +163,9 @@ def encode_state(s: VehicleState) -> bytes:
     if s.ready_ne_m is not None and s.ready_t is not None:
         body["rne"] = [_r(s.ready_ne_m[0], 2), _r(s.ready_ne_m[1], 2)]
         body["rt"] = round(s.ready_t, 4)
+    if s.arc is not None:
+        course, turn, speed, age = s.arc
+        body["arc"] = [_r(course, 4), _r(turn, 4), _r(speed), _r(age)]
     return json.dumps(body, separators=(",", ":")).encode()
 
 
@@ -225,6 +239,15 @@ def decode_state(payload: bytes, sender: int) -> VehicleState:
     vel = _vec(body, "vel", 3)
     if math.hypot(*vel) > 200.0:
         raise PayloadError("velocity above 200 m/s")
+    arc = _vec(body, "arc", 4) if "arc" in body else None
+    if arc is not None and not (
+        abs(arc[1]) <= MAX_ARC_TURN_RAD
+        and 0.0 <= arc[2] <= 200.0
+        and 0.0 <= arc[3] <= MAX_ARC_AGE_S
+    ):
+        raise PayloadError(
+            f"arc turn beyond ±π, speed outside 0..200 m/s or age outside 0..{MAX_ARC_AGE_S:g} s"
+        )
     return VehicleState(
         id=sender,
         seq=_int(body, "seq"),
@@ -236,6 +259,7 @@ def decode_state(payload: bytes, sender: int) -> VehicleState:
         status=str(status),
         ready_ne_m=None if ready_ne is None else (ready_ne[0], ready_ne[1]),
         ready_t=ready_t,
+        arc=None if arc is None else (arc[0], arc[1], arc[2], arc[3]),
     )
 
 

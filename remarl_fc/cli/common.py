@@ -138,8 +138,8 @@ def add_shield_flags(p: Any, default: str, planner: bool = False) -> None:
         type=float,
         default=base.track_growth_m_s,
         help="growth of the clearance the shield keeps from a tracked intruder per second of "
-        "report age and of prediction, m/s; raise it where ADS-B errors wander (GNSS), not "
-        f"over the swarm bus (default {base.track_growth_m_s:g}; docs/FLYING.md)",
+        "report age and of prediction, m/s; raise it where ADS-B errors wander (GNSS) and "
+        f"the generalist flies (default {base.track_growth_m_s:g}; docs/FLYING.md)",
     )
     p.add_argument(
         "--shield-neighbour-horizon",

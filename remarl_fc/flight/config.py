@@ -189,6 +189,9 @@ class Member:
     local: bool = True  # flown by this process (else a peer's, known from the swarm bus)
     remote_status: str | None = None  # a peer's status as its process publishes it
     remote_said: str | None = None  # the last it published (``remote_status`` turns lost)
+    remote_arc: tuple[float, float, float, float] | None = None
+    """A peer's arc as its process last published it, in this controller's terms: (heading at
+    its start, rad, the simulator's frame; turn, rad; speed, m/s; start, this flight's clock)."""
     ready_ne_m: np.ndarray | None = None  # where it was when it became ready to start
     ready_t: float | None = None  # when (UNIX s): every process derives the same start
 

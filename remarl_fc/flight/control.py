@@ -139,7 +139,8 @@ class SwarmPicture:
             lost, held or pilot-flown vehicle is an obstacle: `obstacle_picture`).
         on_arc: (N,) flying this controller's arcs (its own vehicles under control): their
             velocity is the arc's heading × the arc's speed.
-        heading_known: (N,) whose commanded heading the others know (this controller's own).
+        heading_known: (N,) whose commanded heading the others know (this controller's own,
+            and a peer's whose arc the bus carried).
         vel_ne_m_s: (N, 2) each vehicle's velocity from its telemetry: a peer process's
             vehicles move at it; 0 for one holding at its target; NaN where unknown (a
             vehicle on an arc then moves at the arc's velocity). The shield's prediction of
@@ -150,6 +151,9 @@ class SwarmPicture:
     on_arc: BoolArray
     heading_known: BoolArray
     vel_ne_m_s: FloatArray
+    peer_arc: BoolArray | None = None
+    """(N,) a peer process's vehicles whose arc the bus carried (`SwarmController.follow`):
+    they fly that arc, their commanded heading known; None: none."""
 
     @classmethod
     def everyone(cls, n: int) -> SwarmPicture:
@@ -259,6 +263,24 @@ class SwarmController:
         heading: FloatArray = self.h0 + self.turn * frac
         return heading
 
+    def arc(self, slot: int, now: float) -> tuple[float, float, float, float]:
+        """Vehicle ``slot``'s arc as the swarm bus carries it (`VehicleState.arc`).
+
+        Its course at the start (rad clockwise from north), its turn (clockwise), its speed,
+        and how long ago it started (s).
+        """
+        course = float(heading_to_yaw(self.h0[slot]))
+        turn, speed = -float(self.turn[slot]), float(self.speed_m_s[slot])
+        return course, turn, speed, max(0.0, now - float(self.t0[slot]))
+
+    def follow(self, slot: int, arc: tuple[float, float, float, float]) -> None:
+        """Vehicle ``slot`` (a peer process's) flies ``arc``.
+
+        ``arc``: (heading at its start, turn, speed, start time) in this controller's frame and
+        clock (`Member.remote_arc`).
+        """
+        self.h0[slot], self.turn[slot], self.speed_m_s[slot], self.t0[slot] = arc
+
     def centre_at(self, now: float) -> FloatArray:
         """(N, 2) each vehicle's virtual centre p* (its swarm's), moving with the swarm."""
         out: FloatArray = (self.centre0 + self.swarm_vel * (now - self.t_start))[self.groups]
@@ -333,16 +355,22 @@ class SwarmController:
         wanted = np.full(self.n, cruise) if speed_m_s is None else np.asarray(speed_m_s, float)
         speed = np.clip(np.nan_to_num(wanted, nan=0.0), 0.0, cruise)
         flown = np.asarray(sw.on_arc, dtype=bool) & known
+        peer = np.zeros(self.n, dtype=bool) if sw.peer_arc is None else np.asarray(sw.peer_arc)
         action, checked = proposed, None
         if self.shield.mode != "off":
             age = np.zeros(len(obs_xy)) if obstacle_age_s is None else obstacle_age_s
             obstacles = (obs_xy, obs_v, np.asarray(age, dtype=np.float64).reshape(-1))
-            checked = self._shield(pos, heading, speed, proposed, flown, known, sw, obstacles)
+            checked = self._shield(
+                now, pos, heading, speed, proposed, flown, known, sw, peer, obstacles
+            )
             action = np.where(flown, checked.action[0], proposed).astype(np.float32)
             speed = np.where(flown, np.minimum(speed, checked.speed_m_s[0]), speed)
         turn = action.astype(np.float64) * self.spec.max_turn_rad
-        self.h0, self.turn, self.t0[:] = heading, turn, now
-        self.speed_m_s = speed
+        # a peer's vehicle keeps the arc its own process commands (until the bus says more)
+        self.h0 = np.where(peer, self.h0, heading)
+        self.turn = np.where(peer, self.turn, turn)
+        self.t0 = np.where(peer, self.t0, now)
+        self.speed_m_s = np.where(peer, self.speed_m_s, speed)
         return Decision(
             now,
             flat[0],
@@ -359,6 +387,7 @@ class SwarmController:
 
     def _shield(
         self,
+        now: float,
         pos: FloatArray,
         heading: FloatArray,
         speed: FloatArray,
@@ -366,6 +395,7 @@ class SwarmController:
         flown: BoolArray,
         known: BoolArray,
         sw: SwarmPicture,
+        peer: BoolArray,
         obstacles: tuple[FloatArray, FloatArray, FloatArray],
     ) -> ShieldDecision:
         """`sim.shield.shield` on this decision (simulator frame, B = 1).
@@ -373,25 +403,30 @@ class SwarmController:
         It decides for the vehicles flown here (``flown``) and keeps them clear of the
         obstacles (each report's age widening the clearance) and of the swarm's present
         vehicles: those flown here on their proposed arcs at their commanded speeds (as the
-        simulator's adapter `sim.shield.shield_state` does), a peer's vehicle straight on at
-        its telemetry's velocity, one holding at its target at rest.
+        simulator's adapter `sim.shield.shield_state` does); a peer's vehicle on the rest of
+        the arc its process commands (``peer``: the bus carried it) — the turn it has left,
+        over the coming step — or else straight on at its telemetry's velocity; one holding
+        at its target at rest.
         """
         on_arc = np.asarray(sw.on_arc, dtype=bool)
         told = ne_to_sim(np.nan_to_num(np.asarray(sw.vel_ne_m_s, dtype=np.float64)))
         told_speed = np.hypot(told[:, 0], told[:, 1])
-        moving = ~on_arc & (told_speed > MOVING_M_S)
+        moving = ~on_arc & ~peer & (told_speed > MOVING_M_S)
         course = np.where(moving, np.arctan2(told[:, 1], told[:, 0]), heading)
+        frac = np.clip((now - self.t0) / self.spec.dt_s, 0.0, 1.0)
+        left = np.where(peer, self.turn * (1.0 - frac) / self.spec.max_turn_rad, 0.0)
+        own = on_arc | peer  # flying a known arc
         motion = None
         if self.response is not None and self.shield.vehicle_model == "fitted":
             # on an arc: from its telemetry's velocity (the arc's where unknown), after the arc
             # in force now; a peer's (or one at rest) flies on at its velocity, its command
             raw = ne_to_sim(np.asarray(sw.vel_ne_m_s, dtype=np.float64))
             arc = heading_velocity(heading, self.speed_m_s[:, None])
-            now_vel = np.where(np.isfinite(raw), raw, np.where(on_arc[:, None], arc, 0.0))
+            now_vel = np.where(np.isfinite(raw), raw, np.where(own[:, None], arc, 0.0))
             motion = Motion(
                 now_vel[None],
-                np.where(on_arc, self.turn, 0.0)[None],
-                np.where(on_arc, self.speed_m_s, told_speed)[None],
+                np.where(on_arc, self.turn, left * self.spec.max_turn_rad)[None],
+                np.where(own, self.speed_m_s, told_speed)[None],
                 self.response[None, :, 0],
                 self.response[None, :, 1],
                 self.response[None, :, 2],
@@ -402,7 +437,7 @@ class SwarmController:
             target_m=self.targets_xy[None],
             deciding=flown[None],
             present=(np.asarray(sw.present, dtype=bool) & known)[None],
-            speed_m_s=np.where(on_arc, speed, told_speed)[None],
+            speed_m_s=np.where(on_arc, speed, np.where(peer, self.speed_m_s, told_speed))[None],
             motion=motion,
         )
         obs_xy, obs_v, ages = obstacles
@@ -412,7 +447,7 @@ class SwarmController:
             intruder_known=np.asarray(np.isfinite(obs_xy).all(axis=-1))[None],
             intruder_age_s=np.maximum(ages, 0.0)[None],
         )
-        committed = np.where(on_arc, proposed, 0.0)
+        committed = np.where(on_arc, proposed, left)
         return shield(self.shield, self.shield_vehicle, swarm, threats, committed[None])
 
     def setpoint(self, slot: int, now: float) -> tuple[float, float, float]:
@@ -432,21 +467,24 @@ def swarm_picture(rows: Sequence[tuple[Member, Status]]) -> SwarmPicture:
 
     Neighbours: under control or holding at their targets, with a known position. This
     process's own vehicles under control fly its arcs, and their headings are known; a peer
-    process's vehicles move as their telemetry says, their headings unknown; a vehicle holding
-    at its target is at rest.
+    process's vehicles move as their telemetry says, on the arc their process published where
+    the bus carried it (their headings then known, else unknown); a vehicle holding at its
+    target is at rest.
     """
-    present, on_arc, known, vel = [], [], [], []
+    present, on_arc, known, vel, peer = [], [], [], [], []
     for m, status in rows:
         flying = status == Status.CONTROLLED
         present.append(status in NEIGHBOUR and math.isfinite(m.track.t_position))
         on_arc.append(m.local and flying)
-        known.append(m.local and status in NEIGHBOUR)
+        peer.append(not m.local and flying and m.remote_arc is not None)
+        known.append((m.local and status in NEIGHBOUR) or peer[-1])
         vel.append(m.track.vel_ned_m_s[:2] if flying else np.zeros(2))
     return SwarmPicture(
         np.array(present, dtype=bool),
         np.array(on_arc, dtype=bool),
         np.array(known, dtype=bool),
         np.array(vel, dtype=np.float64).reshape(-1, 2),
+        np.array(peer, dtype=bool),
     )
 
 

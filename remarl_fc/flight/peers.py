@@ -23,6 +23,7 @@ import numpy as np
 from remarl_fc.bus.core import SwarmBus
 from remarl_fc.bus.schema import STATUSES, Detection, Detections, VehicleState
 from remarl_fc.flight.traffic import TrafficPicture
+from remarl_fc.frames import yaw_to_heading
 
 if TYPE_CHECKING:
     from remarl_fc.flight.config import Member
@@ -56,6 +57,9 @@ class Peers:
         clock: the runtime's clock.
         peer_timeout_s: a remote vehicle silent this long is lost.
         status_of: the status name to publish for a local member.
+        arc_of: the arc its controller commands a local member now (``VehicleState.arc``:
+            course and turn clockwise from north, speed, seconds since its start), None
+            when it flies none.
     """
 
     def __init__(
@@ -66,10 +70,11 @@ class Peers:
         clock: ClockLike,
         peer_timeout_s: float,
         status_of: Callable[[Member], str],
+        arc_of: Callable[[Member], tuple[float, float, float, float] | None] = lambda m: None,
     ) -> None:
         self.bus, self.members, self.traffic, self.clock = bus, members, traffic, clock
         self.peer_timeout_s = peer_timeout_s
-        self.status_of = status_of
+        self.status_of, self.arc_of = status_of, arc_of
         self._seq = 0
         self._merged: dict[int, tuple[int, float]] = {}  # sender → (seq, t_mono) merged last
 
@@ -91,6 +96,7 @@ class Peers:
             status=self.status_of(m),
             ready_ne_m=(float(m.ready_ne_m[0]), float(m.ready_ne_m[1])) if ready else None,  # type: ignore[index]
             ready_t=m.ready_t if ready else None,
+            arc=self.arc_of(m),
         )
 
     def _detections(self, m: Member, now: float) -> Detections:
@@ -143,8 +149,14 @@ class Peers:
             if s.ready_ne_m is not None and m.ready_ne_m is None:
                 m.ready_ne_m, m.ready_t = np.array(s.ready_ne_m), s.ready_t
             m.remote_status = m.remote_said = s.status if s.status in STATUSES else None
+            m.remote_arc = None
+            if s.arc is not None and s.status == "controlled":
+                course, turn, speed, age = s.arc
+                heading = float(yaw_to_heading(course))
+                m.remote_arc = (heading, -turn, speed, t.t_position - age)
             if now - t.t_position > self.peer_timeout_s * self.clock.speedup:
                 m.remote_status = "lost"
+                m.remote_arc = None
         for sender, got in core.detections.items():
             batch = got.value
             assert isinstance(batch, Detections)

@@ -131,7 +131,7 @@ class SwarmRuntime(StackOwner):
         self.bus: SwarmBus = bus or MemoryBus(MemoryBroker(), bus_core(cfg, local))
         self.peers = Peers(
             self.bus, self.members, self.traffic, self.clock, cfg.peer_timeout_s,
-            lambda m: self.vehicles[m.system_id].status.value,
+            lambda m: self.vehicles[m.system_id].status.value, self._arc_of,
         )  # fmt: skip
         self.controller = SwarmController(
             policy, spec, mission.targets_ne_m(), shield=cfg.shield, groups=mission.groups()
@@ -464,6 +464,12 @@ class SwarmRuntime(StackOwner):
 
     # -- logs ---------------------------------------------------------------------------
 
+    def _arc_of(self, m: Member) -> tuple[float, float, float, float] | None:
+        """The arc a vehicle of this process flies now, for the bus (None: none)."""
+        if self.vehicles[m.system_id].status != Status.CONTROLLED:
+            return None
+        return self.controller.arc(m.slot, self.clock.now())
+
     def _sync_peers(self, now: float) -> None:
         """Bring the remote vehicles' rows up to date from the swarm bus.
 
@@ -479,6 +485,8 @@ class SwarmRuntime(StackOwner):
             if status != v.status:
                 self._event(m, f"peer: {status.value}")
                 self.vehicles[m.system_id] = replace(v, status=status)
+            if m.remote_arc is not None and status == Status.CONTROLLED:
+                self.controller.follow(m.slot, m.remote_arc)
 
     def _event(self, m: Member, text: str) -> None:
         now = self.clock.now()

@@ -9,9 +9,12 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from remarl_fc.demo import free_udp_port
+from remarl_fc.policy_io import load_policy
+from sim.observation import NEIGHBOUR_COLUMNS
 
 pytestmark = [pytest.mark.network, pytest.mark.timeout(300)]
 
@@ -51,7 +54,9 @@ def wait_for_logs(logs, done, what: str, timeout_s: float = 120.0) -> None:
         time.sleep(0.05)
 
 
-def fly_swarm(tmp_path: Path, broker, speedup: float, outage=None) -> tuple[list, dict]:
+def fly_swarm(
+    tmp_path: Path, broker, speedup: float, outage=None, policy: str = "3u2o"
+) -> tuple[list, dict]:
     """Three fly processes, one mock; returns (their summaries, the mock's ground truth)."""
     port = consecutive_udp_ports(3)
     truth = tmp_path / "truth.json"
@@ -69,7 +74,7 @@ def fly_swarm(tmp_path: Path, broker, speedup: float, outage=None) -> tuple[list
                 "--connection",
                 f"udpin:127.0.0.1:{port + i}",
                 "--policy",
-                "3u2o",
+                policy,
                 "--mission",
                 str(MISSION),
                 "--takeoff",
@@ -109,8 +114,9 @@ def fly_swarm(tmp_path: Path, broker, speedup: float, outage=None) -> tuple[list
     return summaries, json.loads(truth.read_text())
 
 
-def test_three_processes_fly_the_swarm_over_mqtt(tmp_path, mosquitto):
-    summaries, truth = fly_swarm(tmp_path, mosquitto, speedup=4.0)
+@pytest.mark.parametrize("policy", ["3u2o", "generalist"])
+def test_three_processes_fly_the_swarm_over_mqtt(tmp_path, mosquitto, policy):
+    summaries, truth = fly_swarm(tmp_path, mosquitto, speedup=4.0, policy=policy)
     for k, s in enumerate(summaries):
         mine = [v for v in s["vehicles"] if v["local"]]
         assert [v["system_id"] for v in mine] == [k + 1]
@@ -120,6 +126,24 @@ def test_three_processes_fly_the_swarm_over_mqtt(tmp_path, mosquitto):
     assert truth["reached_targets"] == 3
     assert truth["collisions_vehicle_intruder"] == 0 == truth["collisions_vehicle_vehicle"]
     assert truth["min_vehicle_intruder_m"] >= truth["d_col_m"]
+    if policy == "generalist":  # its neighbour rows: the peers' headings, from their arcs
+        assert peers_headings_known(tmp_path / "log1" / "decisions.jsonl")
+
+
+def peers_headings_known(log: Path) -> bool:
+    """Whether vehicle 1's first decision sees a neighbour and knows each one's heading (its
+    neighbours are all other processes' vehicles: known only from the arcs on the bus)."""
+    layout = load_policy("generalist").layout
+    blocks = layout.blocks()
+    for line in log.read_text().splitlines():
+        row = json.loads(line)
+        if "obs" not in row or row["system_id"] != 1:
+            continue
+        obs = np.array(row["obs"], dtype=np.float32)
+        mask = obs[blocks["neighbour_mask"]] > 0
+        rows = obs[blocks["neighbours"]].reshape(layout.max_neighbours, NEIGHBOUR_COLUMNS)
+        return bool(mask.any() and (rows[mask, -1] == 1.0).all())
+    raise AssertionError(f"no decision of vehicle 1 in {log}")
 
 
 def test_broker_outage_mid_flight(tmp_path, mosquitto):

@@ -59,8 +59,15 @@ finite = st.floats(-1e4, 1e4, allow_nan=False)
 
 @given(finite, finite, finite, st.floats(-3, 3), st.integers(0, 2**31))
 def test_state_round_trip(n, e, h, yaw, seq):
-    s = state(seq=seq, ne_m=(n, e), height_m=h, yaw_rad=yaw, ready_ne_m=(n, e), ready_t=1.5)
+    arc = (yaw, -0.5, 10.0, 1.25)
+    s = state(
+        seq=seq, ne_m=(n, e), height_m=h, yaw_rad=yaw, ready_ne_m=(n, e), ready_t=1.5, arc=arc
+    )
     back = decode_state(encode_state(s), 2)
+    assert back.arc is not None and all(
+        math.isclose(a, b, abs_tol=1e-3) for a, b in zip(back.arc, arc, strict=True)
+    )
+    assert decode_state(encode_state(state()), 2).arc is None  # optional: none, none back
     assert back.seq == seq and back.status == "controlled"
     assert math.isclose(back.ne_m[0], n, abs_tol=0.01) and math.isclose(
         back.height_m, h, abs_tol=0.01
@@ -101,6 +108,11 @@ def test_malformed_payloads_are_refused(payload, reason):
         ({"seq": True}, "seq"),
         ({"vel": [500, 0, 0]}, "200"),
         ({"rt": 1.0}, "rne and rt"),
+        ({"arc": [0.0, 0.5, 10.0]}, "arc"),
+        ({"arc": [0.0, 4.0, 10.0, 1.0]}, "arc turn"),
+        ({"arc": [0.0, 0.5, -1.0, 1.0]}, "arc turn"),
+        ({"arc": [0.0, 0.5, 10.0, 3600.0]}, "arc turn"),
+        ({"arc": [0.0, 0.5, 10.0, None]}, "arc"),
     ],
 )
 def test_bad_fields_are_refused(change, reason):

@@ -24,6 +24,7 @@ from sim.dynamics import brake, response_values
 from sim.encounters import Family, sample_family
 from sim.observation import NEIGHBOUR_COLUMNS, ObservationLayout, build_observations
 from sim.scenarios import load_scenario
+from sim.shield import ShieldConfig
 from sim.spawn import virtual_centre_and_velocity
 from sim.swarm import SwarmSim
 from sim.vehicle import load_profile
@@ -456,6 +457,40 @@ def test_a_peer_processes_vehicle_moves_as_its_telemetry_says_heading_unknown():
     np.testing.assert_allclose(row[2:4], [-1.0, -0.5], atol=1e-6)
     np.testing.assert_array_equal(row[5:], [0.0, 0.0, 0.0])  # heading unknown
     assert neighbour_rows(LAYOUT_V2, d.obs)[1, 0, 7] == 1.0  # vehicle 0's is known
+
+
+def test_a_peers_arc_from_the_bus_is_its_known_heading_and_what_the_shield_predicts():
+    """A peer process's vehicle 30 m east flies north beside ours; its process has commanded a
+    45° turn to the left, across our track. Known from the bus, the turn is its commanded
+    heading in our neighbour row and the shield turns ours away; unknown, the peer flies
+    straight on at its velocity and nothing is in the way. The peer keeps its own arc."""
+    start = np.array([[0.0, 0.0], [0.0, 30.0]])
+    targets = start + np.array([300.0, 0.0])
+    north = np.array([[10.0, 0.0], [10.0, 0.0]])
+
+    def decide(arc_known: bool):
+        c = SwarmController(
+            ConstantPolicy(0.0, LAYOUT_V2), SPEC, targets, shield=ShieldConfig(mode="on")
+        )
+        c.start(start, 0.0)
+        c.follow(1, (math.pi / 2, math.pi / 4, 10.0, 0.0))  # north, turning left over 2 s
+        swarm = SwarmPicture(
+            present=np.array([True, True]),
+            on_arc=np.array([True, False]),
+            heading_known=np.array([True, arc_known]),
+            vel_ne_m_s=north,
+            peer_arc=np.array([False, arc_known]),
+        )
+        return c, c.decide(0.0, start, NO_OBSTACLES, NO_OBSTACLES, swarm=swarm)
+
+    c, known = decide(True)
+    assert known.shield is not None and known.shield.intervened[0, 0]
+    row = neighbour_rows(LAYOUT_V2, known.obs)[0, 0]
+    np.testing.assert_allclose(row[5:], [1.0, 0.0, 1.0], atol=1e-6)  # ahead of ours, known
+    assert c.turn[1] == math.pi / 4 and c.t0[1] == 0.0  # its own arc, not our decision's
+    np.testing.assert_allclose(c.heading_at(1.0)[1], math.pi / 2 + math.pi / 8)
+    _, unknown = decide(False)
+    assert unknown.shield is not None and not unknown.shield.intervened[0, 0]
 
 
 def test_swarm_picture_of_the_runtimes_rows():

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 import random
 import tracemalloc
+from dataclasses import replace
 from types import SimpleNamespace
 
 import numpy as np
@@ -525,6 +526,28 @@ def test_a_silent_peer_is_lost_and_its_last_word_is_kept():
     assert (peer.remote_status, peer.remote_said) == ("reached", "reached")
     peers.sync(3.0)  # 2 s since its last state
     assert (peer.remote_status, peer.remote_said) == ("lost", "reached")
+
+
+def test_a_peers_arc_is_taken_in_this_controllers_terms_while_it_flies_it():
+    """The bus's arc (course and turn clockwise from north, seconds since its start) becomes
+    the simulator's heading (counter-clockwise from east), turn and a start on this clock; a
+    peer not under control, or silent, flies none."""
+    core = SimpleNamespace(states={}, detections={})
+    peer = Member(0, 2, VehicleTrack(2, ORIGIN), local=False)
+    peers = Peers(SimpleNamespace(core=core), [peer], TrafficPicture(ORIGIN), FakeClock(), 1.5, str)
+    arc = (0.0, 0.25, 8.0, 0.5)  # north, turning right, 0.5 s ago
+    state = VehicleState(2, 7, 0.0, (10.0, 0.0), 20.0, (8.0, 0.0, 0.0), 0.0, "controlled", arc=arc)
+    core.states[2] = Received(state, 4.0)
+    peers.sync(4.1)
+    assert peer.remote_arc is not None
+    heading, turn, speed, start = peer.remote_arc
+    assert math.isclose(heading, math.pi / 2) and (turn, speed, start) == (-0.25, 8.0, 3.5)
+    core.states[2] = Received(replace(state, status="held"), 4.2)
+    peers.sync(4.3)
+    assert peer.remote_arc is None
+    core.states[2] = Received(state, 5.0)
+    peers.sync(7.0)  # silent past the peer timeout
+    assert peer.remote_status == "lost" and peer.remote_arc is None
 
 
 # -- the track filter ------------------------------------------------------------------------
