@@ -415,11 +415,13 @@ class SwarmController:
         course = np.where(moving, np.arctan2(told[:, 1], told[:, 0]), heading)
         frac = np.clip((now - self.t0) / self.spec.dt_s, 0.0, 1.0)
         left = np.where(peer, self.turn * (1.0 - frac) / self.spec.max_turn_rad, 0.0)
+        left = np.clip(left, -1.0, 1.0)  # an action: a bus arc may turn more than ours
         own = on_arc | peer  # flying a known arc
         motion = None
         if self.response is not None and self.shield.vehicle_model == "fitted":
             # on an arc: from its telemetry's velocity (the arc's where unknown), after the arc
-            # in force now; a peer's (or one at rest) flies on at its velocity, its command
+            # in force now; a peer's on a known arc after the turn it has left; any other
+            # (or one at rest) flies on at its velocity, its command
             raw = ne_to_sim(np.asarray(sw.vel_ne_m_s, dtype=np.float64))
             arc = heading_velocity(heading, self.speed_m_s[:, None])
             now_vel = np.where(np.isfinite(raw), raw, np.where(own[:, None], arc, 0.0))
