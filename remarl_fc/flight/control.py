@@ -250,7 +250,8 @@ class SwarmController:
         vehicle on this controller's arcs with its profile's response, from its telemetry's
         velocity and after its current arc (`sim.dynamics.predict_response`), as the
         simulator's shield does; an ideal profile is the arc as commanded. A peer's vehicle
-        flies straight on at its velocity either way.
+        flies the rest of the arc the bus carried (`follow`), or else straight on at its
+        velocity.
         """
         if len(profiles) != self.n:
             raise ValueError(f"{len(profiles)} vehicle profiles for {self.n} vehicles")
