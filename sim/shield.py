@@ -508,7 +508,7 @@ def shield(
 
 
 def _of_envs(obj: Any, envs: NDArray[np.intp]) -> Any:
-    """A `Swarm` or `Threats` of the environments ``envs`` (E,) alone (repeats allowed)."""
+    """A `Swarm`, `Threats` or `ShieldDecision` of the environments ``envs`` (E,) alone."""
     picked = {}
     for f in dataclasses.fields(obj):
         value = getattr(obj, f.name)
@@ -539,9 +539,7 @@ def give_way(
         _of_envs(swarm, envs),
         _of_envs(threats, envs),
         np.clip(np.asarray(proposed, dtype=np.float64)[envs], -1.0, 1.0),
-        ShieldDecision(
-            **{f.name: getattr(decision, f.name)[envs] for f in dataclasses.fields(decision)}
-        ),
+        _of_envs(decision, envs),
     )
 
 

@@ -42,6 +42,7 @@ from remarl_fc.frames import heading_to_yaw, ne_to_sim, sim_to_ne
 from sim.dynamics import Motion, brake, response_values
 from sim.kinematics import heading_velocity
 from sim.observation import ObservationLayout, build_observations
+from sim.sensors import extrapolate
 from sim.shield import ShieldConfig, ShieldDecision, Threats, shield
 from sim.shield import Swarm as ShieldSwarm
 from sim.shield import Vehicle as ShieldVehicle
@@ -495,6 +496,8 @@ TOLD_TO_HOLD = frozenset({Status.HELD, Status.REACHED})
 """Statuses of a vehicle told to hold (the hold mode, zero-velocity setpoints): it brakes to
 rest and keeps its place (`whereabouts`)."""
 
+_TOLD_TO_HOLD_SAID = frozenset(s.value for s in TOLD_TO_HOLD)
+
 
 def told_to_hold(member: Member, status: Status) -> bool:
     """Whether the vehicle was told to hold.
@@ -504,7 +507,7 @@ def told_to_hold(member: Member, status: Status) -> bool:
     """
     if member.local:
         return status in TOLD_TO_HOLD
-    return member.remote_said in {s.value for s in TOLD_TO_HOLD}
+    return member.remote_said in _TOLD_TO_HOLD_SAID
 
 
 @dataclass(frozen=True)
@@ -538,15 +541,14 @@ def whereabouts(
     tracks = [m.track for m, _ in rows]
     ne = np.array([t.ne_m for t in tracks], dtype=np.float64).reshape(-1, 2)
     vel = np.array([t.vel_ned_m_s[:2] for t in tracks], dtype=np.float64).reshape(-1, 2)
-    age = np.maximum(now - np.array([t.t_position for t in tracks], dtype=np.float64), 0.0)
-    age = np.where(np.isfinite(age), age, 0.0)
+    t_pos = np.array([t.t_position for t in tracks], dtype=np.float64)
+    pos = extrapolate(ne, vel, t_pos, now)  # at its velocity, never backwards
+    age = np.nan_to_num(np.maximum(now - t_pos, 0.0))  # no position yet: its NaN stays
     holding = np.array([told_to_hold(m, s) for m, s in rows], dtype=bool)
-    pos = ne + vel * age[:, None]
     if holding.any():
         r = np.asarray(responses, dtype=np.float64)[holding]
         stop = brake(vel[holding], r[:, 0], r[:, 1], r[:, 2], age[holding])
         pos[holding] = ne[holding] + stop.disp_m
-        vel, age = vel.copy(), age.copy()
         vel[holding], age[holding] = stop.vel_m_s, stop.moving_s
     return Whereabouts(pos, vel, age)
 

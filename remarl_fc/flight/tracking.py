@@ -179,12 +179,6 @@ class VehicleTrack:
         flags = self.ekf_flags
         return flags & EKF_POSITION_OK == EKF_POSITION_OK and not flags & EkfFlag.CONST_POS_MODE
 
-    def predicted_ne_m(self, now: float) -> FloatArray:
-        """Position extrapolated at constant velocity to ``now`` (for stale vehicles)."""
-        age = max(0.0, self.position_age_s(now))
-        out: FloatArray = self.ne_m + self.vel_ned_m_s[:2] * age
-        return out
-
     def last_text(self, since: float) -> str:
         """The most recent STATUSTEXT received at or after ``since`` ("" if none)."""
         for t, _, text in reversed(self.texts):

@@ -22,6 +22,9 @@ from mavwire import (
     wire,
 )
 
+from remarl_fc.flight.config import Member
+from remarl_fc.flight.control import whereabouts
+from remarl_fc.flight.status import Status
 from remarl_fc.flight.tracking import (
     DISAGREEMENT_UNTRUSTED_M,
     MAX_SPEED_M_S,
@@ -339,13 +342,19 @@ def test_only_recent_texts_are_kept():
 
 
 def test_predicted_position_at_constant_velocity():
+    """A flying vehicle's track, predicted by `remarl_fc.flight.control.whereabouts`."""
+
+    def predicted(t: VehicleTrack, now: float) -> np.ndarray:
+        rows = [(Member(0, t.system_id, t), Status.CONTROLLED)]
+        return whereabouts(rows, np.array([[0.3, 0.5, 2.5]]), now).ne_m[0]
+
     t = track()
     t.update(position(100.0, -50.0, 20.0, (2.0, -1.0, 0.5)), 10.0)
-    np.testing.assert_allclose(t.predicted_ne_m(10.0), [100.0, -50.0], atol=QUANTUM_M)
-    np.testing.assert_allclose(t.predicted_ne_m(12.5), [105.0, -52.5], atol=QUANTUM_M)
+    np.testing.assert_allclose(predicted(t, 10.0), [100.0, -50.0], atol=QUANTUM_M)
+    np.testing.assert_allclose(predicted(t, 12.5), [105.0, -52.5], atol=QUANTUM_M)
     # never extrapolated backwards
-    np.testing.assert_allclose(t.predicted_ne_m(9.0), t.ne_m)
-    assert np.isnan(track().predicted_ne_m(1.0)).all()  # nothing known, nothing predicted
+    np.testing.assert_allclose(predicted(t, 9.0), t.ne_m)
+    assert np.isnan(predicted(track(), 1.0)).all()  # nothing known, nothing predicted
 
 
 # -- trust ----------------------------------------------------------------------------------
