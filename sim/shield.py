@@ -418,9 +418,10 @@ class Swarm:
     Attributes:
         pos_m: (B, N, 2) positions. heading_rad: commanded headings. target_m: (B, N, 2).
         deciding: the UAVs this decision is for (flying). present: the UAVs the others must
-        keep clear of (flying, or hovering where they arrived). speed_m_s: each UAV's speed
-        along its committed arc (0 while hovering). motion: (B, N) each UAV's velocity, last
-        command and fitted response, where its motion is predicted with the response
+        keep clear of: flying (deciding, or decided elsewhere: a peer process's vehicle in
+        `fly`), or hovering where they arrived (not deciding, at speed 0). speed_m_s: each
+        UAV's speed along its committed arc (0 while hovering). motion: (B, N) each UAV's
+        velocity, last command and fitted response, where its motion is predicted with the response
         (`ShieldConfig.vehicle_model` "fitted"); None: every UAV flies its arcs exactly.
     """
 
@@ -1107,8 +1108,10 @@ def _homeward(
     committed = list(zip(arcs, theirs, strict=True))
     flown = _plans_flown(vehicle, start, turns, None if motion is None else motion.of(away), times)
     # a UAV hovering where it arrived is kept clear of over the whole look-ahead, as a static
-    # intruder: the turn back heads where the swarm's targets are, and it stays there
-    parked = swarm.present & ~swarm.deciding
+    # intruder: the turn back heads where the swarm's targets are, and it stays there. One
+    # that flies, decided elsewhere (a peer process's, `fly` over the swarm bus), is a
+    # neighbour on its arc like any other
+    parked = swarm.present & ~swarm.deciding & (swarm.speed_m_s == 0.0)
     mine = dataclasses.replace(swarm, deciding=away, present=swarm.present & ~parked)
     if parked.any():
         threats = Threats(

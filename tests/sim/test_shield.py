@@ -547,6 +547,34 @@ def test_the_turn_back_keeps_clear_of_a_parked_uav_over_the_whole_look_ahead():
     assert decision.intervened[0, 0] and decision.action[0, 0] == 1.0
 
 
+def test_the_turn_back_keeps_a_uav_decided_elsewhere_on_its_arc_not_parked():
+    """The parked world above, but the other UAV flies: another process decides it (`fly`
+    over the swarm bus, where only this process's vehicles decide here), heading 170° at the
+    cruise speed, the way the turn back to the left goes and as fast. It is a neighbour on its
+    arc, gone ahead by the time the UAV follows: the turn to the left passes. Taken for parked
+    where it is now, it would block it."""
+    bearing = math.radians(170.0)
+    ahead = [-60.0 + 1e3 * math.cos(bearing), 25.0 + 1e3 * math.sin(bearing)]
+    swarm = Swarm(
+        pos_m=np.array([[[0.0, 0.0], [-60.0, 25.0]]]),
+        heading_rad=np.array([[0.0, bearing]]),
+        target_m=np.array([[[1e3 * math.cos(bearing), 1e3 * math.sin(bearing)], ahead]]),
+        deciding=np.array([[True, False]]),
+        present=np.array([[True, True]]),
+        speed_m_s=np.array([[5.0, 5.0]]),
+    )
+    none = Threats(
+        np.zeros((1, 0, 2)), np.zeros((1, 0, 2)), np.zeros((1, 0), bool), np.zeros((1, 0))
+    )
+    cfg = ShieldConfig(mode="on")
+    decision = shield(cfg, VEHICLE, swarm, none, np.zeros((1, 2)))
+    assert decision.intervened[0, 0] and decision.action[0, 0] == 1.0
+    assert decision.flown_cpa_m[0, 0] >= VEHICLE.d_col_m + cfg.margin_m
+    stopped = dataclasses.replace(swarm, speed_m_s=np.array([[5.0, 0.0]]))
+    parked = shield(cfg, VEHICLE, stopped, none, np.zeros((1, 2)))
+    assert parked.intervened[0, 0] and parked.action[0, 0] == -1.0
+
+
 def test_a_fitted_vehicle_turns_back_as_its_response_flies_it():
     """The pacing world flown by a fitted ArduCopter: its turn back is predicted through the
     response over two steps (90°), then its heading held; at 60 and 70 m the short way passes
