@@ -362,6 +362,12 @@ def step_world(
     return transitions, ended
 
 
+TEACHER_TRACK_GROWTH_M_S = 0.5
+"""The growth of an ADS-B track's required clearance the teachers' shield keeps, m/s
+(`sim.shield.ShieldConfig.track_growth_m_s`): the shield's default when the shipped generalist
+was taught, and what `tools/generalist_recipe.py`'s three hours are measured with. Flights keep
+1.5 m/s behind it since 2026-12-02 (docs/MODEL.md §21); a teacher at 1.5 is not measured."""
+
 TEACHER_NOISE = 0.1
 """Std of the Gaussian noise on the teacher's normalised actions while it flies for cloning:
 states a little off its own path, so the clone learns to come back to it."""
@@ -442,7 +448,8 @@ def shielded(
     """Proposed actions (B, N) through the safety shield, turning only.
 
     A teacher commands no speed: the default `ShieldConfig` but for ``neighbour_arcs``,
-    ``vehicle`` (`teacher_vehicle` of ``cfg`` where None; a `World` holds its own).
+    ``vehicle`` (`teacher_vehicle` of ``cfg`` where None; a `World` holds its own) and the
+    track growth (`TEACHER_TRACK_GROWTH_M_S`).
     """
     return teacher_decision(state, cfg, proposed, vehicle, neighbour_arcs).action
 
@@ -456,7 +463,9 @@ def teacher_decision(
 ) -> ShieldDecision:
     """The shield's whole decision behind `shielded` and `shielded_sets`."""
     vehicle = vehicle or teacher_vehicle(cfg)
-    shield_cfg = ShieldConfig(mode="on", neighbour_arcs=neighbour_arcs)
+    shield_cfg = ShieldConfig(
+        mode="on", neighbour_arcs=neighbour_arcs, track_growth_m_s=TEACHER_TRACK_GROWTH_M_S
+    )
     return shield_state(shield_cfg, cfg, state, proposed, vehicle)
 
 

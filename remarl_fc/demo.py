@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 
 from remarl_fc.errors import ConfigError
-from remarl_fc.flight.config import FlyConfig
+from remarl_fc.flight.config import FLY_SHIELD, FlyConfig
 from remarl_fc.flight.control import ControlSpec
 from remarl_fc.flight.mission import Geofence, Mission
 from remarl_fc.flight.runtime import SwarmRuntime
@@ -40,7 +40,7 @@ from remarl_fc.sitl.fleet import SitlFleet
 from sim.config import ScenarioConfig
 from sim.encounters import DISTRIBUTIONS, Family, Formation, sample_family
 from sim.scenarios import load_scenario
-from sim.shield import ShieldConfig
+from sim.shield import ShieldConfig, track_growth_behind
 from sim.spawn import EpisodeStart
 
 CRUISE_ALT_M = 20.0
@@ -225,7 +225,8 @@ async def fly_on_mock(
         sitl_options: extra `SitlConfig` fields (e.g. ``px4=Px4Params(...)``).
         quick_start: skip ArduCopter's slow start (EKF ready after 5 s instead of 39 s, the
             climb at once after the take-off ACK): for tests that do not exercise the start.
-        shield: the safety shield behind the policy; None: `FlyConfig`'s (on).
+        shield: the safety shield behind the policy; None: `FlyConfig`'s (on), with the track
+            growth for the policy (`sim.shield.track_growth_behind`), as `remarl-fc demo`.
         vehicles: fly this many vehicles and ``intruders`` intruders drawn from ``seed``
             (`drawn_encounter`) instead of ``scenario``, for at most the drawn family's step
             limit under control (``max_flight_s`` = max_steps × dt, as the simulator's episodes
@@ -244,8 +245,10 @@ async def fly_on_mock(
     else:
         cfg, episode = drawn_encounter(vehicles, intruders, seed, spec)
         fly_options = {"max_flight_s": cfg.max_steps * cfg.dt_s, **(fly_options or {})}
-    if shield is not None:
-        fly_options = {"shield": shield, **(fly_options or {})}
+    if shield is None:  # FlyConfig's, keeping the policy's track growth
+        growth = track_growth_behind(pol.sees_neighbours)
+        shield = dataclasses.replace(FLY_SHIELD, track_growth_m_s=growth)
+    fly_options = {"shield": shield, **(fly_options or {})}
     mission = Mission.from_scenario(cfg, DEFAULT_HOME, CRUISE_ALT_M, episode=episode)
     mission.check_policy(pol.uav_range, spec.speed_m_s, spec.dt_s, spec.arrival_m)
     # held until the runtime binds it: the fleet's own sockets take ephemeral ports, and one

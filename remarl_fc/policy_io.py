@@ -168,6 +168,15 @@ class Policy:
         """The observation layout the policy expects (version 2, with k, for a generalist)."""
         return observation_layout(self.meta)
 
+    @property
+    def sees_neighbours(self) -> bool:
+        """Whether its observation holds neighbouring UAVs (version 2 with k > 0).
+
+        A zoo scenario policy sees none (the shield's track growth behind it:
+        `sim.shield.track_growth_behind`).
+        """
+        return self.layout.max_neighbours > 0
+
     def _check_uavs(self, n: int) -> None:
         """Raise `PolicySpecMismatch` unless the policy flies ``n`` UAVs."""
         if not self.generalist:

@@ -29,9 +29,10 @@ from pathlib import Path
 from typing import Any
 
 from remarl_fc.offline.evaluate import REAL_WORLD_FLOWN, evaluate_policy, world_overrides
+from remarl_fc.policy_io import load_policy
 from sim.evaluation import evaluation_seed
 from sim.heap import keep_freed_memory
-from sim.shield import ShieldConfig
+from sim.shield import ShieldConfig, track_growth_behind
 
 VARIANTS: dict[str, dict[str, Any]] = {
     "as flown": {},
@@ -68,7 +69,8 @@ def main() -> None:
     parser.add_argument("--json", default=None, help="write every result to this file")
     args = parser.parse_args()
     keep_freed_memory()  # the simulator's steps reuse their temporaries
-    shield = ShieldConfig(mode="on") if args.shield == "on" else None
+    growth = track_growth_behind(load_policy(args.policy).sees_neighbours)
+    shield = ShieldConfig(mode="on", track_growth_m_s=growth) if args.shield == "on" else None
     rows: list[dict[str, Any]] = []
     print("| ADS-B | " + " | ".join(args.scenarios) + " | mean |")
     print("|---|" + "---:|" * (len(args.scenarios) + 1))

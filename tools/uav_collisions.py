@@ -36,7 +36,7 @@ from remarl_fc.offline.shielding import Shielded
 from remarl_fc.offline.suite import Act, MethodSpec, resolve_method
 from remarl_fc.policy_io import load_policy
 from sim.encounters import Family, sample_family
-from sim.shield import ShieldConfig
+from sim.shield import ShieldConfig, track_growth_behind
 from sim.state import SwarmState
 from sim.suite import Suite, load_suite
 from sim.swarm import SwarmSim
@@ -115,7 +115,8 @@ def main() -> None:
     p.add_argument("--shield", action="store_true", help="behind the shield (its defaults)")
     args = p.parse_args()
     suite = load_suite(args.suite)
-    shield = ShieldConfig(mode="on") if args.shield else None
+    growth = track_growth_behind(load_policy(args.policy).sees_neighbours)
+    shield = ShieldConfig(mode="on", track_growth_m_s=growth) if args.shield else None
     if args.real_world:  # the paper scenarios, as tools/ship_generalist.py flies them
         names = suite.paper_scenarios()
     else:

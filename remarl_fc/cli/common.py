@@ -109,7 +109,13 @@ def add_shield_flags(p: Any, default: str, planner: bool = False) -> None:
     The defaults of the horizons, margin and passes are `sim.shield.ShieldConfig`'s.
     ``planner``: also ``--shield-plan-steps`` (the simulator's evaluation alone applies it).
     """
-    from sim.shield import NEIGHBOUR_ARCS, SHIELD_MODES, VEHICLE_MODELS, ShieldConfig
+    from sim.shield import (
+        BLIND_TRACK_GROWTH_M_S,
+        NEIGHBOUR_ARCS,
+        SHIELD_MODES,
+        VEHICLE_MODELS,
+        ShieldConfig,
+    )
 
     base = ShieldConfig()
     p.add_argument(
@@ -136,10 +142,11 @@ def add_shield_flags(p: Any, default: str, planner: bool = False) -> None:
     p.add_argument(
         "--shield-track-growth",
         type=float,
-        default=base.track_growth_m_s,
+        default=None,
         help="growth of the clearance the shield keeps from a tracked intruder per second of "
-        "report age and of prediction, m/s; raise it where ADS-B errors wander (GNSS) and "
-        f"the generalist flies (default {base.track_growth_m_s:g}; docs/FLYING.md)",
+        f"report age and of prediction, m/s (default {base.track_growth_m_s:g}, "
+        f"{BLIND_TRACK_GROWTH_M_S:g} behind a policy blind to its neighbours, the zoo's "
+        "scenario policies; docs/FLYING.md)",
     )
     p.add_argument(
         "--shield-neighbour-horizon",
@@ -222,16 +229,22 @@ def add_shield_flags(p: Any, default: str, planner: bool = False) -> None:
         )
 
 
-def shield_from_args(args: argparse.Namespace) -> Any:
-    """The `sim.shield.ShieldConfig` of ``--shield*``; a bad value is a `ConfigError`."""
-    from sim.shield import ShieldConfig
+def shield_from_args(args: argparse.Namespace, sees_neighbours: bool = True) -> Any:
+    """The `sim.shield.ShieldConfig` of ``--shield*``; a bad value is a `ConfigError`.
 
+    ``sees_neighbours``: whether the policy behind it does (`Policy.sees_neighbours`), which
+    sets the track growth where ``--shield-track-growth`` is not given
+    (`sim.shield.track_growth_behind`).
+    """
+    from sim.shield import ShieldConfig, track_growth_behind
+
+    growth = args.shield_track_growth
     try:
         return ShieldConfig(
             mode=args.shield,
             horizon_s=args.shield_horizon,
             track_horizon_s=args.shield_track_horizon,
-            track_growth_m_s=args.shield_track_growth,
+            track_growth_m_s=track_growth_behind(sees_neighbours) if growth is None else growth,
             neighbour_horizon_s=args.shield_neighbour_horizon,
             margin_m=args.shield_margin,
             passes=args.shield_passes,

@@ -292,7 +292,7 @@ def cmd_fly(args: argparse.Namespace) -> int:
     mission.check_policy(policy.uav_range, spec.speed_m_s, spec.dt_s, spec.arrival_m)
     signing = SigningConfig(load_signing_key(args.signing_key)) if args.signing_key else None
     by_mission = args.takeoff is not None and math.isnan(args.takeoff)
-    shield = shield_from_args(args)
+    shield = shield_from_args(args, policy.sees_neighbours)
     try:
         cfg = FlyConfig(
             connections=tuple(args.connection),
@@ -413,10 +413,11 @@ def track_filter_of(args: argparse.Namespace) -> bool:
 
 def cmd_demo(args: argparse.Namespace) -> int:
     """Mock fleet + runtime in one process; plot and ground truth at the end."""
-    from remarl_fc.demo import fly_on_mock
+    from remarl_fc.demo import demo_policy, fly_on_mock
     from remarl_fc.errors import ConfigError
     from remarl_fc.flight.flightlog import plot_flight
     from remarl_fc.flight.shielding import summary_line
+    from remarl_fc.policy_io import load_policy
     from remarl_fc.sitl.groundtruth import write_json_atomic
 
     if args.vehicles is not None and args.scenario is not None:
@@ -425,13 +426,14 @@ def cmd_demo(args: argparse.Namespace) -> int:
         raise ConfigError("demo: --intruders goes with --vehicles (a scenario has its own)")
     scenario = args.scenario or DEMO_SCENARIO
     intruders = DEFAULT_DEMO_INTRUDERS if args.intruders is None else args.intruders
-    shield = shield_from_args(args)
+    flown = args.policy or demo_policy(scenario)
+    shield = shield_from_args(args, load_policy(flown).sees_neighbours)
     with tempfile.TemporaryDirectory(prefix="remarl-demo-") as tmp:
         log_dir = Path(args.log) if args.log else Path(tmp)
         flight = asyncio.run(
             fly_on_mock(
                 scenario,
-                args.policy,
+                flown,
                 flavour=args.flavour,
                 speedup=args.speedup,
                 log_dir=log_dir,

@@ -668,11 +668,12 @@ def cmd_eval(args: argparse.Namespace) -> int:
     if not args.policy:
         raise ConfigError("eval: give --policy NAME|PATH (or --suite NAME with --method/--policy)")
     from remarl_fc.offline.evaluate import evaluate_policy, plot_episode, world_overrides
+    from remarl_fc.policy_io import load_policy
 
     episodes = args.episodes or DEFAULT_EVAL_EPISODES
     track_filter = None if args.track_filter is None else args.track_filter == "on"
     world = world_overrides(args.dynamics, args.sensors, args.arrival, track_filter)
-    shield = shield_from_args(args)
+    shield = shield_from_args(args, load_policy(args.policy).sees_neighbours)
     policy, result = evaluate_policy(args.policy, args.scenario, episodes, args.seed, world, shield)
     result["shield_settings"] = dataclasses.asdict(shield)  # as eval --suite records them
     if args.plot:

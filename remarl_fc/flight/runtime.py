@@ -23,7 +23,7 @@ import asyncio
 import contextlib
 import time
 from collections.abc import Callable
-from dataclasses import replace
+from dataclasses import asdict, replace
 from typing import Any
 
 import numpy as np
@@ -517,6 +517,7 @@ class SwarmRuntime(StackOwner):
             "traffic": traffic,
             "anomalies": anomalies(rows, link, traffic),
             "shield": self.shield.summary([m.system_id for m in self.local_members()]),
+            "shield_settings": asdict(self.cfg.shield),  # as eval records them
             "vehicles": vehicles,
             "reached": [v["system_id"] for v in vehicles if reached_on_trusted_telemetry(v)],
         }

@@ -15,6 +15,7 @@ import pytest
 from remarl_fc.demo import free_udp_port
 from remarl_fc.policy_io import load_policy
 from sim.observation import NEIGHBOUR_COLUMNS
+from sim.shield import BLIND_TRACK_GROWTH_M_S, ShieldConfig
 
 pytestmark = [pytest.mark.network, pytest.mark.timeout(300)]
 
@@ -126,6 +127,9 @@ def test_three_processes_fly_the_swarm_over_mqtt(tmp_path, mosquitto, policy):
     assert truth["reached_targets"] == 3
     assert truth["collisions_vehicle_intruder"] == 0 == truth["collisions_vehicle_vehicle"]
     assert truth["min_vehicle_intruder_m"] >= truth["d_col_m"]
+    # the track growth follows what the policy sees: the zoo's 3u2o is blind to its neighbours
+    growth = BLIND_TRACK_GROWTH_M_S if policy == "3u2o" else ShieldConfig().track_growth_m_s
+    assert all(s["shield_settings"]["track_growth_m_s"] == growth for s in summaries)
     if policy == "generalist":  # its neighbour rows: the peers' headings, from their arcs
         assert peers_headings_known(tmp_path / "log1" / "decisions.jsonl")
 

@@ -12,6 +12,7 @@ import pytest
 
 from remarl_fc.cli import main
 from remarl_fc.demo import free_udp_port
+from sim.shield import ShieldConfig
 
 pytestmark = [pytest.mark.network, pytest.mark.timeout(240)]
 
@@ -106,6 +107,10 @@ def test_demo_command(tmp_path, capsys):
     assert result["ground_truth"]["reached_targets"] == 3
     assert result["plot"]["intruders"] == 2 and out.stat().st_size > 10_000
     assert json.loads((tmp_path / "t.json").read_text())["finished"] is True
+    # the generalist sees its neighbours: the shield's default track growth behind it
+    settings = result["runtime"]["shield_settings"]
+    assert settings["mode"] == "on"
+    assert settings["track_growth_m_s"] == ShieldConfig().track_growth_m_s
 
 
 def test_demo_with_noisy_adsb_and_filtered_tracks(tmp_path, capsys):

@@ -51,6 +51,7 @@ class StandInGeneralist:
     uav_range = (1, 50)
     checksum = ""  # written by no file
     summary = Policy.summary  # what a flight's summary says of it, as of a loaded file
+    sees_neighbours = Policy.sees_neighbours  # the shield's track growth behind it
 
     def __init__(self, seed: int = 0, *, straight: bool = False, hidden: int = 8) -> None:
         self.source = f"stand-in generalist {seed}"

@@ -48,7 +48,7 @@ from sim.config import ScenarioConfig
 from sim.dynamics import response_values
 from sim.observation import ObservationLayout
 from sim.scenarios import load_scenario
-from sim.shield import ShieldConfig, shield_state
+from sim.shield import BLIND_TRACK_GROWTH_M_S, ShieldConfig, shield_state
 from sim.swarm import SwarmSim
 from sim.vehicle import load_profile
 
@@ -102,11 +102,15 @@ HEAD_ON = (np.array([[0.0, 150.0]]), np.array([[0.0, -10.0]]))
 """An intruder 150 m east of a vehicle at the origin, flying west at 10 m/s (north/east)."""
 
 
-def head_on_controller(mode: str) -> SwarmController:
-    """One vehicle at the origin, its target 400 m east: straight at `HEAD_ON`'s intruder."""
-    c = SwarmController(
-        GoToTarget(), SPEC, np.array([[0.0, 400.0]]), shield=ShieldConfig(mode=mode)
-    )
+def head_on_controller(mode: str, growth: float | None = None) -> SwarmController:
+    """One vehicle at the origin, its target 400 m east: straight at `HEAD_ON`'s intruder.
+
+    ``growth``: the shield's track growth (None: its default).
+    """
+    shield = ShieldConfig(mode=mode)
+    if growth is not None:
+        shield = replace(shield, track_growth_m_s=growth)
+    c = SwarmController(GoToTarget(), SPEC, np.array([[0.0, 400.0]]), shield=shield)
     c.start(np.zeros((1, 2)), 0.0)
     return c
 
@@ -138,17 +142,21 @@ def test_off_computes_nothing():
     assert d.shield is None and d.action[0] == d.proposed_action[0] == 0.0
 
 
-def test_an_old_report_widens_the_clearance_the_shield_keeps():
-    """An intruder passing 27 m abeam in 7.5 s: clear of d_col + margin + the uncertainty of a
-    fresh report over 7.5 s (21 + 0.5 × 7.5 m); a 10 s old report adds 0.5 m/s × 10 s more,
-    and the shield acts."""
-    passing = (np.array([[27.0, 150.0]]), np.array([[0.0, -10.0]]))
-    fresh = head_on_controller("on").decide(
-        0.0, np.zeros((1, 2)), *passing, obstacle_age_s=np.array([MIN_REPORT_AGE_S])
-    )
-    old = head_on_controller("on").decide(
-        0.0, np.zeros((1, 2)), *passing, obstacle_age_s=np.array([10.0])
-    )
+@pytest.mark.parametrize("growth", [ShieldConfig().track_growth_m_s, BLIND_TRACK_GROWTH_M_S])
+def test_an_old_report_widens_the_clearance_the_shield_keeps(growth):
+    """An intruder passing abeam in 7.5 s, 1 m more than d_col + margin + the uncertainty of a
+    fresh report over the track look-ahead (21 + G × 10 + 1 m: 37 m at the default growth G
+    of 1.5 m/s, 27 m behind a policy blind to its neighbours; a segment of the prediction
+    requires what its end does, and 7.5 s lies in the last, to 10 s): clear of it; a 10 s old
+    report adds G × 10 s more, and the shield acts."""
+    cfg = ShieldConfig()
+    abeam = SPEC.arrival_m + cfg.margin_m + growth * cfg.track_horizon_s + 1.0
+    passing = (np.array([[abeam, 150.0]]), np.array([[0.0, -10.0]]))
+    decided = []
+    for age in (MIN_REPORT_AGE_S, 10.0):
+        c = head_on_controller("on", growth)
+        decided.append(c.decide(0.0, np.zeros((1, 2)), *passing, obstacle_age_s=np.array([age])))
+    fresh, old = decided
     assert fresh.shield is not None and old.shield is not None
     assert not fresh.shield.intervened[0, 0] and old.shield.intervened[0, 0]
 
@@ -491,8 +499,13 @@ def test_the_shield_flags_build_its_config():
     for command in ("demo", "eval"):
         args = build_parser().parse_args([command, "--shield-neighbour-horizon", "6"])
         assert shield_from_args(args).neighbour_horizon_s == 6.0
-        args = build_parser().parse_args([command, "--shield-track-growth", "1.5"])
-        assert shield_from_args(args).track_growth_m_s == 1.5
+        args = build_parser().parse_args([command, "--shield-track-growth", "0.7"])
+        assert shield_from_args(args).track_growth_m_s == 0.7
+        assert shield_from_args(args, sees_neighbours=False).track_growth_m_s == 0.7
+        args = build_parser().parse_args([command])
+        assert shield_from_args(args).track_growth_m_s == ShieldConfig().track_growth_m_s
+        blind = shield_from_args(args, sees_neighbours=False)
+        assert blind.track_growth_m_s == BLIND_TRACK_GROWTH_M_S
         args = build_parser().parse_args([command, "--shield-escape-steps", "1"])
         assert shield_from_args(args).escape_steps == 1
         args = build_parser().parse_args([command, "--shield-return", "180"])
