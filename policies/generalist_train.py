@@ -365,8 +365,9 @@ def step_world(
 TEACHER_TRACK_GROWTH_M_S = 0.5
 """The growth of an ADS-B track's required clearance the teachers' shield keeps, m/s
 (`sim.shield.ShieldConfig.track_growth_m_s`): the shield's default when the shipped generalist
-was taught, and what `tools/generalist_recipe.py`'s three hours are measured with. Flights keep
-1.5 m/s behind it since 2026-12-02 (docs/MODEL.md §21); a teacher at 1.5 is not measured."""
+was taught, and what `tools/generalist_recipe.py`'s three hours are measured with. Since
+2026-12-02 the shield behind a flying generalist keeps 1.5 m/s (docs/MODEL.md §21); a teacher
+at 1.5 m/s is not measured."""
 
 TEACHER_NOISE = 0.1
 """Std of the Gaussian noise on the teacher's normalised actions while it flies for cloning:

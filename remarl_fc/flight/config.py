@@ -31,7 +31,9 @@ HoldMode = Literal["brake", "loiter"]
 
 FLY_SHIELD = ShieldConfig(mode="on")
 """The safety shield a flight flies behind unless told otherwise (`FlyConfig.shield`): on, with
-`sim.shield.ShieldConfig`'s horizon, margin and candidates."""
+`sim.shield.ShieldConfig`'s horizon, margin and candidates, and its track growth for a policy
+that sees its neighbours; `remarl-fc fly`, `demo` and `remarl_fc.demo.fly_on_mock` keep the
+growth for the policy flown (`sim.shield.track_growth_behind`)."""
 
 ARDUPILOT_PROFILE = "arducopter"
 """The vehicle profile the shield predicts an ArduPilot vehicle with unless told otherwise:

@@ -471,7 +471,12 @@ def test_the_teacher_is_orca_through_the_shield():
 
 
 def test_a_privileged_teacher_reads_the_truth_where_the_uavs_sense_adsb():
-    from policies.generalist_train import World, teacher_actions, with_layout
+    from policies.generalist_train import (
+        TEACHER_TRACK_GROWTH_M_S,
+        World,
+        teacher_actions,
+        with_layout,
+    )
     from sim.orca import orca_actions
     from sim.scenarios import REAL_WORLD, load_scenario
     from sim.shield import ShieldConfig, shield_state, vehicle_of
@@ -485,9 +490,10 @@ def test_a_privileged_teacher_reads_the_truth_where_the_uavs_sense_adsb():
     world = World(None, cfg, True, sim, state, sim.observe(state).flat(), 32)  # type: ignore[arg-type]
     straight_only = dataclasses.replace(vehicle_of(cfg), can_slow=False)
 
-    def through_shield(seen):
+    def through_shield(seen):  # the teachers' shield: its own track growth
         orca = orca_actions(state, cfg)
-        return shield_state(ShieldConfig(mode="on"), cfg, seen, orca, straight_only)
+        shield = ShieldConfig(mode="on", track_growth_m_s=TEACHER_TRACK_GROWTH_M_S)
+        return shield_state(shield, cfg, seen, orca, straight_only)
 
     sensed, truth = through_shield(state), through_shield(state.exactly_sensed())
     np.testing.assert_array_equal(teacher_actions(world, "orca-shield"), sensed.action)

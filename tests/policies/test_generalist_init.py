@@ -15,6 +15,7 @@ from policies.generalist_dagger import label_of
 from policies.generalist_init import INIT_FILE
 from policies.generalist_ppo import PPONets
 from policies.generalist_train import (
+    TEACHER_TRACK_GROWTH_M_S,
     RunBook,
     shielded,
     train_generalist,
@@ -79,9 +80,8 @@ def test_with_safe_sets_the_self_shield_teacher_gives_each_label_its_set(
         np.testing.assert_allclose(
             label_of(taught), shielded(world.state, world.cfg, proposed), atol=1e-5
         )
-        decision = shield_state(
-            ShieldConfig(mode="on"), world.cfg, world.state, proposed, world.teacher_vehicle
-        )
+        teachers = ShieldConfig(mode="on", track_growth_m_s=TEACHER_TRACK_GROWTH_M_S)
+        decision = shield_state(teachers, world.cfg, world.state, proposed, world.teacher_vehicle)
         want = decision.safe_headings
         if side:
             want = passing_side(want, decision.action)
