@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Sequence
 
 import numpy as np
 import pytest
@@ -520,25 +521,45 @@ def test_with_no_room_to_turn_towards_the_target_the_uav_loops_the_other_way():
     assert not boxed.intervened[0, 0] and boxed.action[0, 0] == 0.0
 
 
+BACK_DEG = 170.0
+"""The bearing of the turn-back worlds' target, 1 km away, degrees (the UAV heads east)."""
+
+OTHER_M = (-60.0, 25.0)
+"""Where the turn-back worlds' other UAV is: 60 m behind the first and 25 m to its left."""
+
+
+def no_intruders() -> Threats:
+    """One environment without intruders."""
+    return Threats(
+        np.zeros((1, 0, 2)), np.zeros((1, 0, 2)), np.zeros((1, 0), bool), np.zeros((1, 0))
+    )
+
+
+def turn_back_world(
+    heading_rad: float, target_m: Sequence[float], *, deciding: bool, speed_m_s: float
+) -> Swarm:
+    """A UAV at the origin heading east, its target 1 km away at `BACK_DEG`, and another UAV
+    at `OTHER_M` heading ``heading_rad`` to ``target_m`` at ``speed_m_s`` (0: hovering where it
+    arrived), decided in this decision or not (``deciding``: elsewhere, or parked)."""
+    bearing = math.radians(BACK_DEG)
+    return Swarm(
+        pos_m=np.array([[[0.0, 0.0], OTHER_M]]),
+        heading_rad=np.array([[0.0, heading_rad]]),
+        target_m=np.array([[[1e3 * math.cos(bearing), 1e3 * math.sin(bearing)], target_m]]),
+        deciding=np.array([[True, deciding]]),
+        present=np.ones((1, 2), dtype=bool),
+        speed_m_s=np.array([[5.0, speed_m_s]]),
+    )
+
+
 def test_the_turn_back_keeps_clear_of_a_parked_uav_over_the_whole_look_ahead():
     """The target 1 km behind, 170° to the left; a UAV hovers where it arrived 60 m behind and
     25 m to the left, on the way back, reached some 20 s after the turn: past the 4 s the
     shield checks the swarm's flying UAVs over, inside the look-ahead. It is kept clear of as
     a static intruder: the turn to the left does not pass, and the UAV loops back to the right
     instead. Without it, the UAV turns back to the left."""
-    bearing = math.radians(170.0)
-    target = [1e3 * math.cos(bearing), 1e3 * math.sin(bearing)]
-    swarm = Swarm(
-        pos_m=np.array([[[0.0, 0.0], [-60.0, 25.0]]]),
-        heading_rad=np.zeros((1, 2)),
-        target_m=np.array([[target, [-60.0, 25.0]]]),
-        deciding=np.array([[True, False]]),
-        present=np.array([[True, True]]),
-        speed_m_s=np.array([[5.0, 0.0]]),
-    )
-    none = Threats(
-        np.zeros((1, 0, 2)), np.zeros((1, 0, 2)), np.zeros((1, 0), bool), np.zeros((1, 0))
-    )
+    swarm = turn_back_world(0.0, OTHER_M, deciding=False, speed_m_s=0.0)
+    none = no_intruders()
     cfg = ShieldConfig(mode="on")
     parked = shield(cfg, VEHICLE, swarm, none, np.zeros((1, 2)))
     assert parked.intervened[0, 0] and parked.action[0, 0] == -1.0
@@ -553,19 +574,10 @@ def test_the_turn_back_keeps_a_uav_decided_elsewhere_on_its_arc_not_parked():
     cruise speed, the way the turn back to the left goes and as fast. It is a neighbour on its
     arc, gone ahead by the time the UAV follows: the turn to the left passes. Taken for parked
     where it is now, it would block it."""
-    bearing = math.radians(170.0)
-    ahead = [-60.0 + 1e3 * math.cos(bearing), 25.0 + 1e3 * math.sin(bearing)]
-    swarm = Swarm(
-        pos_m=np.array([[[0.0, 0.0], [-60.0, 25.0]]]),
-        heading_rad=np.array([[0.0, bearing]]),
-        target_m=np.array([[[1e3 * math.cos(bearing), 1e3 * math.sin(bearing)], ahead]]),
-        deciding=np.array([[True, False]]),
-        present=np.array([[True, True]]),
-        speed_m_s=np.array([[5.0, 5.0]]),
-    )
-    none = Threats(
-        np.zeros((1, 0, 2)), np.zeros((1, 0, 2)), np.zeros((1, 0), bool), np.zeros((1, 0))
-    )
+    bearing = math.radians(BACK_DEG)
+    ahead = [OTHER_M[0] + 1e3 * math.cos(bearing), OTHER_M[1] + 1e3 * math.sin(bearing)]
+    swarm = turn_back_world(bearing, ahead, deciding=False, speed_m_s=5.0)
+    none = no_intruders()
     cfg = ShieldConfig(mode="on")
     decision = shield(cfg, VEHICLE, swarm, none, np.zeros((1, 2)))
     assert decision.intervened[0, 0] and decision.action[0, 0] == 1.0
@@ -628,9 +640,7 @@ def test_a_uav_circling_its_target_out_of_reach_flies_straight_out_of_the_circle
     passes; with ``fly_out`` off, with the target 10 m off the centre (the circle then comes
     within d_col of it), or for a fitted vehicle, the proposal stands."""
     radius = FAST.cruise_m_s * FAST.dt_s / FAST.max_turn_rad
-    none = Threats(
-        np.zeros((1, 0, 2)), np.zeros((1, 0, 2)), np.zeros((1, 0), bool), np.zeros((1, 0))
-    )
+    none = no_intruders()
     right = -np.ones((1, 1))
     swarm = circling_uav((0.0, -radius))
     decision = shield(ShieldConfig(mode="on"), FAST, swarm, none, right)
@@ -670,9 +680,7 @@ def test_a_uav_that_circled_its_target_arrives_once_it_flies_out():
     way round the circle that now comes within d_col of the target, by the fifth step."""
     radius = FAST.cruise_m_s * FAST.dt_s / FAST.max_turn_rad
     target = np.array([0.0, -radius])
-    none = Threats(
-        np.zeros((1, 0, 2)), np.zeros((1, 0, 2)), np.zeros((1, 0), bool), np.zeros((1, 0))
-    )
+    none = no_intruders()
 
     def arc(pos, heading, turn, fraction):
         """Where an exact arc turning by ``turn`` over the step is at ``fraction`` of it."""
@@ -715,18 +723,8 @@ def test_the_turn_back_keeps_clear_of_a_flying_neighbour_for_longer():
     some 10 s on. Checked over the 4 s of any other candidate, the turn to the left passes
     (its predicted closest approach to that UAV a few metres); over the turn back's own 12 s it
     does not, and the UAV loops back to the right, clear of it."""
-    bearing = math.radians(170.0)
-    swarm = Swarm(
-        pos_m=np.array([[[0.0, 0.0], [-60.0, 25.0]]]),
-        heading_rad=np.zeros((1, 2)),
-        target_m=np.array([[[1e3 * math.cos(bearing), 1e3 * math.sin(bearing)], [1e4, 25.0]]]),
-        deciding=np.ones((1, 2), bool),
-        present=np.ones((1, 2), bool),
-        speed_m_s=np.full((1, 2), 5.0),
-    )
-    none = Threats(
-        np.zeros((1, 0, 2)), np.zeros((1, 0, 2)), np.zeros((1, 0), bool), np.zeros((1, 0))
-    )
+    swarm = turn_back_world(0.0, [1e4, OTHER_M[1]], deciding=True, speed_m_s=5.0)
+    none = no_intruders()
     short = ShieldConfig(mode="on", return_neighbour_horizon_s=4.0)
     brief = shield(short, VEHICLE, swarm, none, np.zeros((1, 2)))
     assert brief.action[0, 0] == 1.0 and brief.flown_cpa_m[0, 0] < VEHICLE.d_col_m
@@ -752,9 +750,7 @@ def test_a_target_its_tightest_turn_circles_out_of_reach_is_reached_the_long_way
     target anywhere inside it counts as out of reach the short way, and it turns back the
     long way to it; to a target outside the circle, the short way."""
     swarm = circling_uav((-5.0, -beside_m))
-    none = Threats(
-        np.zeros((1, 0, 2)), np.zeros((1, 0, 2)), np.zeros((1, 0), bool), np.zeros((1, 0))
-    )
+    none = no_intruders()
     decision = shield(ShieldConfig(mode="on"), FAST, swarm, none, np.zeros((1, 1)))
     assert decision.intervened[0, 0] and decision.action[0, 0] == way
     motion = fast_arducopter()
@@ -768,9 +764,7 @@ def test_a_target_its_tightest_turn_circles_out_of_reach_is_reached_the_long_way
 def test_with_a_circle_no_wider_than_d_col_every_target_is_reached_the_short_way():
     """At 5 m/s the tightest turn's circle (12.7 m) lies within d_col of anything inside it: a
     target beside the UAV and behind it is turned to the short way, however near."""
-    none = Threats(
-        np.zeros((1, 0, 2)), np.zeros((1, 0, 2)), np.zeros((1, 0), bool), np.zeros((1, 0))
-    )
+    none = no_intruders()
     for beside_m in (10.0, 24.0, 30.0):
         swarm = dataclasses.replace(lone_uav(), target_m=np.array([[[-5.0, -beside_m]]]))
         decision = shield(ShieldConfig(mode="on"), VEHICLE, swarm, none, np.zeros((1, 1)))
